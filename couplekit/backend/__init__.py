@@ -1,0 +1,180 @@
+"""Backends: run one kernel source on a GPU (cuda), on the CPU (cpu, host build) or not at all (numpy).
+
+>>> from couplekit.backend import get_backend
+>>> be = get_backend("auto")          # cuda -> cpu -> numpy
+>>> print(be.name, "-", be.reason)
+>>> mod = be.module("selfcheck.cu", defines={"SOME_EFFECT": 1})
+>>> mod.function("scale")(n, x, 2.0)  # arrays of be.xp, checked against the C signature
+
+``COUPLEKIT_BACKEND`` overrides ``auto``; a backend asked for by name that cannot run here is an error
+(:class:`BackendUnavailableError`) that says why, never a silent fallback.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+from dataclasses import dataclass, field
+from types import ModuleType
+from typing import Any
+
+import numpy as np
+
+from .errors import BackendUnavailableError, KernelArgumentError, KernelBuildError
+from .host import cache_dir, compiler_version, find_compiler
+
+__all__ = [
+    "Backend",
+    "BackendUnavailableError",
+    "KernelArgumentError",
+    "KernelBuildError",
+    "BACKENDS",
+    "cuda_status",
+    "get_backend",
+]
+
+BACKENDS = ("cuda", "cpu", "numpy")
+
+
+def cuda_status() -> tuple[bool, str]:
+    """(usable, why): whether CuPy imports and finds a CUDA device."""
+    try:
+        import cupy
+    except Exception as exc:  # ImportError, or a broken CUDA install
+        return False, f"CuPy is not importable ({type(exc).__name__}: {exc}); install couplekit[cuda]"
+    try:
+        count = cupy.cuda.runtime.getDeviceCount()
+    except Exception as exc:
+        return False, f"CuPy {cupy.__version__} finds no usable CUDA device ({exc})"
+    if count < 1:
+        return False, f"CuPy {cupy.__version__} finds no CUDA device"
+    name = cupy.cuda.runtime.getDeviceProperties(0)["name"]
+    name = name.decode() if isinstance(name, bytes) else name
+    return True, f"CUDA device 0: {name} (CuPy {cupy.__version__})"
+
+
+def cpu_status() -> tuple[bool, str]:
+    """(usable, why): whether a host C++ compiler with OpenMP is present."""
+    cxx = find_compiler()
+    if cxx is None:
+        return False, "no host C++ compiler found (set CXX or install g++)"
+    return True, f"host build with {compiler_version(cxx)}"
+
+
+@dataclass
+class Backend:
+    """A place to run solver stages: array module ``xp`` plus, for cuda/cpu, compiled kernel modules."""
+
+    name: str
+    reason: str
+    threads: int | None = None
+    _modules: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def xp(self) -> ModuleType:
+        """The array module of this backend: ``cupy`` for cuda, ``numpy`` otherwise."""
+        if self.name == "cuda":
+            import cupy
+
+            return cupy
+        return np
+
+    @property
+    def has_kernels(self) -> bool:
+        """True when stages run as compiled kernels (cuda, cpu); False for the NumPy reference."""
+        return self.name != "numpy"
+
+    def module(self, source: str, defines: dict[str, Any] | None = None):
+        """The compiled kernel module for ``source`` (a file in ``kernels/``) and ``defines``, built once."""
+        if not self.has_kernels:
+            raise BackendUnavailableError(
+                "the numpy backend runs the NumPy reference ops and compiles no kernels; "
+                "use backend='cpu' or 'cuda' for kernels"
+            )
+        key = (source, tuple(sorted((defines or {}).items())))
+        if key not in self._modules:
+            if self.name == "cuda":
+                from .cuda import CudaModule
+
+                self._modules[key] = CudaModule(source, defines)
+            else:
+                from .host import HostModule
+
+                self._modules[key] = HostModule(source, defines, threads=self.threads)
+        return self._modules[key]
+
+    def asarray(self, a, dtype=None):
+        """Copy/convert ``a`` to this backend's array type (C-contiguous)."""
+        return self.xp.ascontiguousarray(self.xp.asarray(a, dtype=dtype))
+
+    def to_host(self, a) -> np.ndarray:
+        """A NumPy copy of a backend array."""
+        if self.name == "cuda":
+            return a.get()
+        return np.array(a, copy=True)
+
+    def synchronize(self) -> None:
+        """Wait for queued GPU work (no-op on the CPU); call before timing."""
+        if self.name == "cuda":
+            import cupy
+
+            cupy.cuda.Device().synchronize()
+
+    def describe(self) -> str:
+        """One line: the backend, and why it was chosen."""
+        return f"backend: {self.name} ({self.reason})"
+
+
+def _threads_from(threads: int | None) -> int | None:
+    if threads is not None:
+        if int(threads) < 1:
+            raise ValueError(f"threads must be >= 1, got {threads}")
+        return int(threads)
+    env = os.environ.get("OMP_NUM_THREADS")
+    if env:
+        try:
+            return max(1, int(env.split(",")[0]))
+        except ValueError:
+            raise ValueError(f"OMP_NUM_THREADS={env!r} is not a whole number") from None
+    return None
+
+
+def get_backend(name: str | None = "auto", threads: int | None = None) -> Backend:
+    """Choose a backend.
+
+    ``name``: ``"auto"`` (cuda, else cpu, else numpy), ``"cuda"``, ``"cpu"`` or ``"numpy"``; ``None`` or
+    ``"auto"`` defer to ``$COUPLEKIT_BACKEND`` when it is set. ``threads``: OpenMP threads of the cpu
+    backend (default: ``$OMP_NUM_THREADS``, else all cores).
+    """
+    source = "argument"
+    if name in (None, "auto") and os.environ.get("COUPLEKIT_BACKEND"):
+        name, source = os.environ["COUPLEKIT_BACKEND"].strip().lower(), "COUPLEKIT_BACKEND"
+    name = (name or "auto").lower()
+    threads = _threads_from(threads)
+    checks = {"cuda": cuda_status, "cpu": cpu_status, "numpy": lambda: (True, "NumPy reference ops")}
+    if name == "auto":
+        skipped = []
+        for candidate in BACKENDS:
+            ok, why = checks[candidate]()
+            if ok:
+                reason = f"auto: {why}" + (f"; skipped {'; '.join(skipped)}" if skipped else "")
+                return Backend(candidate, reason, threads)
+            skipped.append(f"{candidate}: {why}")
+        raise AssertionError("unreachable: the numpy backend is always available")
+    if name not in checks:
+        raise ValueError(f"unknown backend {name!r} (from {source}); choose one of auto, {', '.join(BACKENDS)}")
+    ok, why = checks[name]()
+    if not ok:
+        raise BackendUnavailableError(f"backend {name!r} was requested ({source}) but cannot run here: {why}")
+    return Backend(name, f"requested by {source}: {why}", threads)
+
+
+def host_tools() -> dict[str, str]:
+    """Versions of the tools the runtime can use, for ``couplekit info``."""
+    cxx = find_compiler()
+    nvcc = shutil.which("nvcc")
+    return {
+        "host compiler": f"{cxx} ({compiler_version(cxx)})" if cxx else "not found",
+        "nvcc": nvcc or "not found",
+        "kernel cache": str(cache_dir()),
+    }

@@ -1,0 +1,13 @@
+"""Errors raised by the kernel runtime."""
+
+
+class BackendUnavailableError(RuntimeError):
+    """A backend was asked for by name (argument or COUPLEKIT_BACKEND) but cannot run here; says why."""
+
+
+class KernelBuildError(RuntimeError):
+    """A kernel failed to compile; the message holds the command and the compiler's output."""
+
+
+class KernelArgumentError(TypeError):
+    """A kernel was called with arguments that do not match its C signature."""

@@ -1,0 +1,176 @@
+"""The cpu backend: kernel sources compiled by the host C++ compiler with OpenMP and loaded with ctypes."""
+
+from __future__ import annotations
+
+import ctypes
+import functools
+import os
+import platform
+import shlex
+import shutil
+import subprocess
+import tempfile
+import threading
+from pathlib import Path
+
+import numpy as np
+
+from .errors import KernelBuildError
+from .signature import Signature, check_args, parse_kernels
+from .sources import kernel_path, source_digest
+
+HOST_FLAGS = ("-std=c++17", "-O3", "-march=native", "-fopenmp", "-shared", "-fPIC", "-x", "c++")
+
+_CTYPES = {
+    np.dtype(np.float32): ctypes.c_float,
+    np.dtype(np.float64): ctypes.c_double,
+    np.dtype(np.int32): ctypes.c_int32,
+    np.dtype(np.uint32): ctypes.c_uint32,
+    np.dtype(np.int64): ctypes.c_int64,
+    np.dtype(np.uint8): ctypes.c_uint8,
+    np.dtype(np.int8): ctypes.c_int8,
+}
+
+
+def find_compiler() -> str | None:
+    """The host C++ compiler: ``$CXX`` if set, else the first of g++, c++, clang++ on the PATH."""
+    cxx = os.environ.get("CXX")
+    if cxx:
+        return shutil.which(cxx) or None
+    for name in ("g++", "c++", "clang++"):
+        path = shutil.which(name)
+        if path:
+            return path
+    return None
+
+
+@functools.lru_cache(maxsize=None)
+def compiler_version(cxx: str) -> str:
+    """First line of ``cxx --version``."""
+    out = subprocess.run([cxx, "--version"], capture_output=True, text=True, check=False)
+    return (out.stdout or out.stderr).splitlines()[0].strip() if (out.stdout or out.stderr) else "unknown"
+
+
+@functools.lru_cache(maxsize=None)
+def _cpu_model() -> str:
+    # -march=native: a library built on one CPU may not run on another, so the CPU is part of the cache key
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith(("model name", "flags")):
+                return line
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def cache_dir() -> Path:
+    """Where built kernel libraries are kept: ``$COUPLEKIT_CACHE_DIR``, else ``$XDG_CACHE_HOME/couplekit``."""
+    env = os.environ.get("COUPLEKIT_CACHE_DIR")
+    if env:
+        return Path(env).expanduser()
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "couplekit" / "kernels"
+
+
+def define_flags(defines: dict[str, int | float | str | bool] | None) -> list[str]:
+    """``-D`` definitions in a stable order (the same for the host and the NVRTC path)."""
+    flags = []
+    for key in sorted(defines or {}):
+        value = defines[key]
+        if not key.isidentifier():
+            raise ValueError(f"kernel define {key!r} is not a C identifier")
+        if isinstance(value, bool):
+            value = int(value)
+        flags.append(f"-D{key}={value}")
+    return flags
+
+
+class HostBuild:
+    """Outcome of one build: the library path and whether it came from the cache."""
+
+    def __init__(self, library: Path, command: list[str], cached: bool):
+        self.library = library
+        self.command = command
+        self.cached = cached
+
+
+_build_lock = threading.Lock()
+
+
+def build_library(source: Path, defines: dict | None = None, cxx: str | None = None) -> HostBuild:
+    """Compile ``source`` into a shared library in the cache, or reuse the cached one.
+
+    The cache key hashes the source, every local header it includes, the flags, the compiler version and
+    the CPU. Builds go to a temporary name in the cache directory and are renamed into place atomically,
+    so concurrent processes never load a half-written library.
+    """
+    cxx = cxx or find_compiler()
+    if cxx is None:
+        raise KernelBuildError("no C++ compiler found (set CXX, or install g++)")
+    flags = [*HOST_FLAGS, *define_flags(defines), f"-I{source.parent}"]
+    key = source_digest(source, "\n".join([*flags, compiler_version(cxx), _cpu_model()]))
+    out_dir = cache_dir()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    library = out_dir / f"{source.stem}-{key[:20]}.so"
+    command = [cxx, *flags, str(source), "-o", str(library)]
+    if library.is_file():
+        return HostBuild(library, command, cached=True)
+    with _build_lock:
+        fd, tmp = tempfile.mkstemp(prefix=f".{library.stem}-", suffix=".so.tmp", dir=out_dir)
+        os.close(fd)
+        try:
+            cmd = [cxx, *flags, str(source), "-o", tmp]
+            proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
+            if proc.returncode != 0:
+                raise KernelBuildError(
+                    f"building {source.name} failed (exit {proc.returncode}).\n"
+                    f"command: {shlex.join(cmd)}\n{proc.stderr.strip() or proc.stdout.strip()}"
+                )
+            os.replace(tmp, library)
+        finally:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+    return HostBuild(library, command, cached=False)
+
+
+class HostFunction:
+    """A kernel of a host library, called as ``fn(n, *args)`` with NumPy arrays and scalars."""
+
+    def __init__(self, cfunc, sig: Signature):
+        self._cfunc = cfunc
+        self.signature = sig
+        cfunc.restype = None
+        cfunc.argtypes = [ctypes.c_void_p if p.pointer else _CTYPES[p.dtype] for p in sig.params]
+
+    def __call__(self, n: int, *args) -> None:
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
+            raise TypeError(f"{self.signature.name}: n must be a non-negative integer, got {n!r}")
+        checked = check_args(self.signature, args, np.ndarray, "numpy.ndarray")
+        cargs = [a.ctypes.data if isinstance(a, np.ndarray) else a for a in checked]
+        self._cfunc(int(n), *cargs)  # ctypes releases the GIL for the call
+
+
+class HostModule:
+    """One kernel source compiled for the host with one set of defines."""
+
+    def __init__(self, name: str, defines: dict | None = None, threads: int | None = None):
+        self.source = kernel_path(name)
+        self.defines = dict(defines or {})
+        self.build = build_library(self.source, self.defines)
+        self._lib = ctypes.CDLL(str(self.build.library))
+        self.signatures = parse_kernels(self.source.read_text(), self.source.name)
+        if threads:
+            self._lib.couplekit_set_num_threads(ctypes.c_int(int(threads)))
+        self._functions: dict[str, HostFunction] = {}
+
+    def function(self, name: str) -> HostFunction:
+        """The kernel ``name``; a KeyError listing the available kernels if there is none."""
+        if name not in self._functions:
+            if name not in self.signatures:
+                raise KeyError(f"{self.source.name} has no kernel {name!r} (has: {', '.join(self.signatures)})")
+            self._functions[name] = HostFunction(getattr(self._lib, name), self.signatures[name])
+        return self._functions[name]
+
+    def num_threads(self) -> int:
+        """OpenMP threads the host kernels run on."""
+        return int(self._lib.couplekit_get_num_threads())

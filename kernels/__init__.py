@@ -1,0 +1,1 @@
+"""CUDA C kernel sources (``*.cu``, ``*.cuh``), shared by the cuda and cpu backends; no Python code."""

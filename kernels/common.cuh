@@ -1,0 +1,138 @@
+// couplekit portability header: one kernel source for CUDA (nvcc / NVRTC) and for the host C++ compiler
+// with OpenMP.  Every file in kernels/ includes it first.
+//
+// Conventions (checked by couplekit.backend when a kernel is called):
+//   * a kernel is `KERNEL void name(const long long n, ...)`; `n` is the number of work items, the runtime
+//     sizes the CUDA launch from it and the host path ignores it except inside the loop macros;
+//   * parameters are pointers to float/double/int/unsigned int/long long/unsigned char (optionally const and
+//     RESTRICT) or scalars of float/double/int/unsigned int/long long;
+//   * one stage per kernel; no shared memory and no __syncthreads (the host path has no equivalent).
+//
+// Loops:
+//   FOR_EACH(i, n)                       i in [0, n): grid-stride loop on CUDA, `omp parallel for` on host.
+//   FOR_EACH_CELL(x, y, z, nx, ny, nz)   every cell of an nx*ny*nz box (launch with n = nx*ny*nz): one
+//                                        thread per cell on CUDA; on the host (z, y) rows run in parallel
+//                                        and the inner x loop is an `omp simd` loop, so x must be the
+//                                        contiguous index (linear index x + nx*(y + ny*z)).
+//   REDUCE_SUM_BEGIN(i, n, acc) { acc += ...; } REDUCE_SUM_END(out, acc)
+//                                        adds sum_i(...) in double to *out.  On the host the per-thread
+//                                        partials are combined in thread order, so for a fixed thread count
+//                                        the result is bitwise reproducible.
+// Atomics: atomic_add(float*|double*|int*|unsigned int*, value).
+// Tables:  CONSTANT float W[27] = {...};   (__constant__ on CUDA, static constexpr on the host)
+#pragma once
+
+#if defined(__CUDACC__)
+// ---------------------------------------------------------------------------------------------- CUDA
+// NVRTC has no host headers: nothing may be included here (math functions are built in).
+#define KERNEL extern "C" __global__
+#define DEVICE __device__ __forceinline__
+#define CONSTANT __constant__ const
+#define RESTRICT __restrict__
+#define CK_ON_GPU 1
+
+#define CK_THREAD_INDEX ((long long)blockIdx.x * (long long)blockDim.x + (long long)threadIdx.x)
+#define CK_THREAD_STRIDE ((long long)blockDim.x * (long long)gridDim.x)
+
+#define FOR_EACH(i, n) for (long long i = CK_THREAD_INDEX; i < (long long)(n); i += CK_THREAD_STRIDE)
+
+#define FOR_EACH_CELL(x, y, z, nx, ny, nz)                                                               \
+    for (long long ck_cell_ = CK_THREAD_INDEX, ck_ncell_ = (long long)(nx) * (long long)(ny) * (nz);      \
+         ck_cell_ < ck_ncell_; ck_cell_ += CK_THREAD_STRIDE)                                              \
+        for (int x = (int)(ck_cell_ % (nx)), y = (int)((ck_cell_ / (nx)) % (ny)),                        \
+                 z = (int)(ck_cell_ / ((long long)(nx) * (ny))), ck_once_ = 1;                            \
+             ck_once_; ck_once_ = 0)
+
+DEVICE void atomic_add(float* addr, float v) { atomicAdd(addr, v); }
+DEVICE void atomic_add(double* addr, double v) { atomicAdd(addr, v); }
+DEVICE void atomic_add(int* addr, int v) { atomicAdd(addr, v); }
+DEVICE void atomic_add(unsigned int* addr, unsigned int v) { atomicAdd(addr, v); }
+
+DEVICE double ck_warp_sum(double v) {
+    for (int offset = 16; offset > 0; offset >>= 1) v += __shfl_down_sync(0xffffffffu, v, offset);
+    return v;
+}
+
+#define REDUCE_SUM_BEGIN(i, n, acc) \
+    {                               \
+        double acc = 0.0;           \
+        FOR_EACH(i, n)
+
+// every thread leaves the grid-stride loop before the warp shuffle, so the whole warp takes part
+#define REDUCE_SUM_END(out, acc)                             \
+        acc = ck_warp_sum(acc);                              \
+        if ((threadIdx.x & 31u) == 0u) atomicAdd((out), acc); \
+    }
+
+#else
+// ---------------------------------------------------------------------------------------------- host
+#include <cmath>
+#include <cstdint>
+#include <omp.h>
+
+#define KERNEL extern "C" __attribute__((visibility("default")))
+#define DEVICE static inline
+#define CONSTANT static constexpr
+#define RESTRICT __restrict__
+#define CK_ON_GPU 0
+#define CK_MAX_THREADS 1024
+
+#define CK_PRAGMA(x) _Pragma(#x)
+
+#define FOR_EACH(i, n) CK_PRAGMA(omp parallel for schedule(static)) for (long long i = 0; i < (long long)(n); ++i)
+
+#define FOR_EACH_CELL(x, y, z, nx, ny, nz)                                   \
+    CK_PRAGMA(omp parallel for collapse(2) schedule(static))                 \
+    for (int z = 0; z < (int)(nz); ++z)                                      \
+        for (int y = 0; y < (int)(ny); ++y)                                  \
+            CK_PRAGMA(omp simd) for (int x = 0; x < (int)(nx); ++x)
+
+DEVICE void atomic_add(float* addr, float v) {
+    CK_PRAGMA(omp atomic)
+    *addr += v;
+}
+DEVICE void atomic_add(double* addr, double v) {
+    CK_PRAGMA(omp atomic)
+    *addr += v;
+}
+DEVICE void atomic_add(int* addr, int v) {
+    CK_PRAGMA(omp atomic)
+    *addr += v;
+}
+DEVICE void atomic_add(unsigned int* addr, unsigned int v) {
+    CK_PRAGMA(omp atomic)
+    *addr += v;
+}
+
+#define REDUCE_SUM_BEGIN(i, n, acc)                              \
+    {                                                            \
+        double ck_partial_[CK_MAX_THREADS];                      \
+        int ck_nthreads_ = 1;                                    \
+        CK_PRAGMA(omp parallel num_threads(ck_reduce_threads_())) \
+        {                                                        \
+            double acc = 0.0;                                    \
+            CK_PRAGMA(omp for schedule(static))                  \
+            for (long long i = 0; i < (long long)(n); ++i)
+
+#define REDUCE_SUM_END(out, acc)                                     \
+            ck_partial_[omp_get_thread_num()] = acc;                 \
+            CK_PRAGMA(omp single) ck_nthreads_ = omp_get_num_threads(); \
+        }                                                            \
+        double ck_total_ = 0.0;                                      \
+        for (int t = 0; t < ck_nthreads_; ++t) ck_total_ += ck_partial_[t]; \
+        *(out) += ck_total_;                                         \
+    }
+
+DEVICE int ck_reduce_threads_() {
+    const int t = omp_get_max_threads();
+    return t < CK_MAX_THREADS ? t : CK_MAX_THREADS;
+}
+
+// Thread count of the host build; called by the runtime once after loading a module.
+extern "C" __attribute__((visibility("default"))) void couplekit_set_num_threads(int n) {
+    if (n > 0) omp_set_num_threads(n);
+}
+extern "C" __attribute__((visibility("default"))) int couplekit_get_num_threads(void) {
+    return omp_get_max_threads();
+}
+#endif
