@@ -40,7 +40,9 @@ def _cmd_info(args: argparse.Namespace) -> int:
         print(f"selfcheck: kernel build failed\n{exc}", file=sys.stderr)
         return 1
     for r in results:
-        print(f"selfcheck {'ok  ' if r.ok else 'FAIL'} {r.name}: rel. error {r.error:.2e} (tolerance {r.tolerance:.0e})")
+        print(
+            f"selfcheck {'ok  ' if r.ok else 'FAIL'} {r.name}: rel. error {r.error:.2e} (tolerance {r.tolerance:.0e})"
+        )
     if backend.name == "cpu":
         threads = backend.module("selfcheck.cu").num_threads()
         print(f"selfcheck: host kernels ran on {threads} OpenMP thread(s) in {time.perf_counter() - t0:.2f} s")

@@ -44,14 +44,14 @@ def find_compiler() -> str | None:
     return None
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def compiler_version(cxx: str) -> str:
     """First line of ``cxx --version``."""
     out = subprocess.run([cxx, "--version"], capture_output=True, text=True, check=False)
     return (out.stdout or out.stderr).splitlines()[0].strip() if (out.stdout or out.stderr) else "unknown"
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _cpu_model() -> str:
     # -march=native: a library built on one CPU may not run on another, so the CPU is part of the cache key
     try:

@@ -105,7 +105,9 @@ def check_args(sig: Signature, args: tuple, array_type: type, array_kind: str) -
             if not isinstance(a, array_type):
                 raise KernelArgumentError(f"{where} must be a {array_kind}, got {type(a).__name__}")
             if a.dtype != p.dtype:
-                raise KernelArgumentError(f"{where} must have dtype {p.dtype}, got {a.dtype}; use .astype({p.dtype.name})")
+                raise KernelArgumentError(
+                    f"{where} must have dtype {p.dtype}, got {a.dtype}; use .astype({p.dtype.name})"
+                )
             if not a.flags.c_contiguous:
                 raise KernelArgumentError(f"{where} must be C-contiguous; pass an ascontiguousarray copy")
             if not p.const and not a.flags.writeable:
@@ -119,7 +121,9 @@ def check_args(sig: Signature, args: tuple, array_type: type, array_kind: str) -
 def _scalar(a, p: Param, where: str):
     if isinstance(a, np.generic):
         if a.dtype != p.dtype:
-            raise KernelArgumentError(f"{where} must be a {p.dtype} scalar, got {a.dtype}; wrap it as np.{p.dtype.name}(...)")
+            raise KernelArgumentError(
+                f"{where} must be a {p.dtype} scalar, got {a.dtype}; wrap it as np.{p.dtype.name}(...)"
+            )
         return a
     if isinstance(a, bool) or not isinstance(a, (int, float)):
         raise KernelArgumentError(f"{where} must be a number, got {type(a).__name__}")
