@@ -20,6 +20,10 @@
 //                                        the result is bitwise reproducible.
 // Atomics: atomic_add(float*|double*|int*|unsigned int*, value).
 // Tables:  CONSTANT float W[27] = {...};   (__constant__ on CUDA, static constexpr on the host)
+//
+// Build variants: a kernel file whose code depends on -D flags lists the values each flag takes in a
+// comment line  `// variants: CK_FLAG_A=0,1 CK_FLAG_B=0,1`; the build tests (nvcc sm_80/sm_90, NVRTC)
+// compile every combination. Without such a line the file is compiled once, with no flags.
 #pragma once
 
 #if defined(__CUDACC__)

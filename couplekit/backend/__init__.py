@@ -29,6 +29,7 @@ __all__ = [
     "KernelArgumentError",
     "KernelBuildError",
     "BACKENDS",
+    "cpu_status",
     "cuda_status",
     "get_backend",
 ]

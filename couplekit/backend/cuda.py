@@ -27,14 +27,31 @@ def nvrtc_source(name: str) -> str:
     return expanded_source(kernel_path(name))
 
 
-def nvrtc_compile(name: str, defines: dict | None = None, arch: str = "80") -> str:
-    """Compile ``name`` to PTX with NVRTC for ``compute_<arch>``; no GPU is needed. Returns the PTX."""
-    from cupy.cuda import compiler
+# what cupy.RawModule adds to the user's options when it calls NVRTC (CuPy 13/14, compiler.py)
+CUPY_ADDED_OPTIONS = ("--device-as-default-execution-space",)
 
+
+def nvrtc_compile(name: str, defines: dict | None = None, arch: str = "80") -> str:
+    """Compile ``name`` to PTX with NVRTC for ``compute_<arch>``; no GPU is needed. Returns the PTX.
+
+    Uses the same source text and options as :class:`CudaModule` (plus those CuPy adds itself), through
+    CuPy's NVRTC binding directly: CuPy's own compile helper asks the CUDA runtime for the device's
+    architecture, which fails on a machine without a GPU.
+    """
+    from cupy.cuda import nvrtc
+
+    options = (*nvrtc_options(defines), *CUPY_ADDED_OPTIONS, f"--gpu-architecture=compute_{arch}")
+    prog = nvrtc.createProgram(nvrtc_source(name), name, [], [])
     try:
-        return compiler.compile_using_nvrtc(nvrtc_source(name), nvrtc_options(defines), arch=arch, filename=name)
-    except compiler.CompileException as exc:
-        raise KernelBuildError(f"NVRTC failed on {name} with options {nvrtc_options(defines)}:\n{exc}") from exc
+        try:
+            nvrtc.compileProgram(prog, list(options))
+        except nvrtc.NVRTCError as exc:
+            log = nvrtc.getProgramLog(prog)
+            raise KernelBuildError(f"NVRTC failed on {name} with options {options}: {exc}\n{log}") from exc
+        ptx = nvrtc.getPTX(prog)
+    finally:
+        nvrtc.destroyProgram(prog)
+    return ptx.decode() if isinstance(ptx, bytes) else ptx
 
 
 class CudaFunction:

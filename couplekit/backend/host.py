@@ -136,8 +136,9 @@ def build_library(source: Path, defines: dict | None = None, cxx: str | None = N
 class HostFunction:
     """A kernel of a host library, called as ``fn(n, *args)`` with NumPy arrays and scalars."""
 
-    def __init__(self, cfunc, sig: Signature):
+    def __init__(self, cfunc, sig: Signature, set_threads=None):
         self._cfunc = cfunc
+        self._set_threads = set_threads
         self.signature = sig
         cfunc.restype = None
         cfunc.argtypes = [ctypes.c_void_p if p.pointer else _CTYPES[p.dtype] for p in sig.params]
@@ -147,6 +148,10 @@ class HostFunction:
             raise TypeError(f"{self.signature.name}: n must be a non-negative integer, got {n!r}")
         checked = check_args(self.signature, args, np.ndarray, "numpy.ndarray")
         cargs = [a.ctypes.data if isinstance(a, np.ndarray) else a for a in checked]
+        if self._set_threads is not None:
+            # the OpenMP thread count is process-wide state: set it per launch so that backends with
+            # different thread counts in one process each get their own
+            self._set_threads()
         self._cfunc(int(n), *cargs)  # ctypes releases the GIL for the call
 
 
@@ -159,8 +164,9 @@ class HostModule:
         self.build = build_library(self.source, self.defines)
         self._lib = ctypes.CDLL(str(self.build.library))
         self.signatures = parse_kernels(self.source.read_text(), self.source.name)
-        if threads:
-            self._lib.couplekit_set_num_threads(ctypes.c_int(int(threads)))
+        self.threads = int(threads) if threads else None
+        if self.threads:
+            self._lib.couplekit_set_num_threads(ctypes.c_int(self.threads))
         self._functions: dict[str, HostFunction] = {}
 
     def function(self, name: str) -> HostFunction:
@@ -168,7 +174,11 @@ class HostModule:
         if name not in self._functions:
             if name not in self.signatures:
                 raise KeyError(f"{self.source.name} has no kernel {name!r} (has: {', '.join(self.signatures)})")
-            self._functions[name] = HostFunction(getattr(self._lib, name), self.signatures[name])
+            set_threads = None
+            if self.threads:
+                setter, count = self._lib.couplekit_set_num_threads, ctypes.c_int(self.threads)
+                set_threads = lambda: setter(count)  # noqa: E731
+            self._functions[name] = HostFunction(getattr(self._lib, name), self.signatures[name], set_threads)
         return self._functions[name]
 
     def num_threads(self) -> int:

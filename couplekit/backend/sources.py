@@ -16,8 +16,9 @@ def kernel_dir() -> Path:
 
 
 def kernel_path(name: str) -> Path:
-    """Path of the kernel source ``name`` (e.g. ``"selfcheck.cu"``); a clear error if it does not exist."""
-    path = kernel_dir() / name
+    """Path of the kernel source ``name`` (e.g. ``"selfcheck.cu"``, or an absolute path to a source elsewhere);
+    a clear error if it does not exist."""
+    path = Path(name) if Path(name).is_absolute() else kernel_dir() / name
     if not path.is_file():
         available = ", ".join(sorted(p.name for p in kernel_dir().glob("*.cu"))) or "none"
         raise FileNotFoundError(f"no kernel source {name!r} in {kernel_dir()} (available: {available})")

@@ -1,0 +1,88 @@
+"""Offline GPU builds: compile kernel sources with nvcc and read ptxas' register and spill report.
+
+Used by the build tests (every kernel builds for sm_80 and sm_90 without spills) and by
+``benchmarks/kernel_build_report.py``, so GPU-side costs are visible on machines without a GPU.
+"""
+
+from __future__ import annotations
+
+import itertools
+import re
+import shutil
+import subprocess
+import tempfile
+from pathlib import Path
+
+from .host import define_flags
+from .sources import kernel_dir
+
+_VARIANTS = re.compile(r"^\s*//\s*variants:\s*(.+)$", re.MULTILINE)
+_FUNC = re.compile(r"Compiling entry function '(\w+)' for '(sm_\d+)'")
+_SPILL = re.compile(r"(\d+) bytes stack frame, (\d+) bytes spill stores, (\d+) bytes spill loads")
+_REGS = re.compile(r"Used (\d+) registers")
+
+
+def kernel_sources() -> list[Path]:
+    """Every ``*.cu`` file in the kernel directory, sorted."""
+    return sorted(kernel_dir().glob("*.cu"))
+
+
+def build_variants(source: Path) -> list[dict[str, str]]:
+    """The define combinations a source declares with ``// variants: A=0,1 B=0,1`` ([{}] if none)."""
+    axes: list[tuple[str, list[str]]] = []
+    for line in _VARIANTS.findall(source.read_text()):
+        for item in line.split():
+            name, _, values = item.partition("=")
+            if not name.isidentifier() or not values:
+                raise ValueError(f"{source.name}: cannot read variant {item!r} (expected NAME=v1,v2)")
+            axes.append((name, values.split(",")))
+    if not axes:
+        return [{}]
+    names = [a[0] for a in axes]
+    return [dict(zip(names, combo, strict=True)) for combo in itertools.product(*(a[1] for a in axes))]
+
+
+def nvcc_path() -> str | None:
+    """nvcc on the PATH, or None."""
+    return shutil.which("nvcc")
+
+
+def nvcc_build(source: Path, arch: str, defines: dict | None = None) -> dict[str, dict[str, int]]:
+    """Build ``source`` to a cubin for ``arch`` (e.g. ``"sm_90"``) and return ptxas' report per kernel:
+    ``{kernel: {"registers", "stack_bytes", "spill_store_bytes", "spill_load_bytes"}}``.
+
+    Raises RuntimeError with the command and nvcc's output if the build fails.
+    """
+    nvcc = nvcc_path()
+    if nvcc is None:
+        raise RuntimeError("nvcc is not on the PATH")
+    with tempfile.TemporaryDirectory() as tmp:
+        cmd = [
+            nvcc,
+            "-std=c++17",
+            f"-arch={arch}",
+            "-cubin",
+            "-Xptxas",
+            "-v",
+            f"-I{source.parent}",
+            *define_flags(defines),
+            str(source),
+            "-o",
+            str(Path(tmp) / "out.cubin"),
+        ]
+        proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
+    if proc.returncode != 0:
+        raise RuntimeError(f"nvcc failed on {source.name} ({arch}, {defines}):\n{' '.join(cmd)}\n{proc.stderr}")
+    report: dict[str, dict[str, int]] = {}
+    current = None
+    for line in proc.stderr.splitlines():
+        if m := _FUNC.search(line):
+            current = m.group(1)
+            report[current] = {}
+        elif current and (m := _SPILL.search(line)):
+            report[current].update(
+                stack_bytes=int(m.group(1)), spill_store_bytes=int(m.group(2)), spill_load_bytes=int(m.group(3))
+            )
+        elif current and (m := _REGS.search(line)):
+            report[current]["registers"] = int(m.group(1))
+    return report

@@ -1,0 +1,24 @@
+# Shared by scripts/demo.sh and scripts/test.sh: make ./.venv (Python >= 3.11) and install couplekit into it.
+# Usage: source scripts/_setup.sh EXTRAS    (EXTRAS: "" or "test", ...)
+set -euo pipefail
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+PY="${PYTHON:-python3}"
+VENV="${COUPLEKIT_VENV:-$ROOT/.venv}"
+if ! "$PY" -c 'import sys; sys.exit(sys.version_info < (3, 11))' 2>/dev/null; then
+    echo "couplekit needs Python >= 3.11; '$PY' is $("$PY" --version 2>&1 || echo missing). Set PYTHON=/path/to/python3.11" >&2
+    exit 1
+fi
+if ! command -v "${CXX:-g++}" >/dev/null 2>&1 && ! command -v c++ >/dev/null 2>&1; then
+    echo "warning: no C++ compiler found: the cpu backend is unavailable and only the NumPy reference will run" >&2
+fi
+if [ ! -x "$VENV/bin/python" ]; then
+    echo "== creating virtual environment $VENV"
+    "$PY" -m venv "$VENV"
+fi
+"$VENV/bin/python" -m pip install -q --upgrade pip
+extras="${1:-}"
+spec="$ROOT"
+[ -n "$extras" ] && spec="$ROOT[$extras]"
+echo "== installing couplekit${extras:+[$extras]} (editable) into $VENV"
+"$VENV/bin/python" -m pip install -q -e "$spec"
+export PATH="$VENV/bin:$PATH"

@@ -1,0 +1,36 @@
+"""Shared fixtures: backends to test on, and a private kernel cache per test session."""
+
+from __future__ import annotations
+
+import os
+
+import pytest
+
+from couplekit.backend import cpu_status, get_backend
+
+
+@pytest.fixture(scope="session")
+def cpu_backend():
+    """The host-build backend; skips (saying why) where no C++ compiler is present."""
+    ok, why = cpu_status()
+    if not ok:
+        pytest.skip(f"cpu backend unavailable: {why}")
+    return get_backend("cpu")
+
+
+@pytest.fixture(scope="session")
+def numpy_backend():
+    """The NumPy reference backend."""
+    return get_backend("numpy")
+
+
+@pytest.fixture
+def private_cache(tmp_path, monkeypatch):
+    """A fresh, empty kernel cache directory for tests that count builds."""
+    cache = tmp_path / "kernel-cache"
+    monkeypatch.setenv("COUPLEKIT_CACHE_DIR", str(cache))
+    return cache
+
+
+def pytest_report_header(config):
+    return f"couplekit kernel cache: {os.environ.get('COUPLEKIT_CACHE_DIR', 'default')}"
