@@ -6,6 +6,8 @@
 //     sizes the CUDA launch from it and the host path ignores it except inside the loop macros;
 //   * parameters are pointers to float/double/int/unsigned int/long long/unsigned char (optionally const and
 //     RESTRICT) or scalars of float/double/int/unsigned int/long long;
+//   * a pointer parameter may carry a size annotation, checked before every launch: `float* f /* size: 27 * n */`
+//     (exact element count) or `/* size >= nx * ny */` (at least), in terms of n and integer parameters;
 //   * one stage per kernel; no shared memory and no __syncthreads (the host path has no equivalent).
 //
 // Loops:

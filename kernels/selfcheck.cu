@@ -11,20 +11,21 @@ CONSTANT float STENCIL27[27] = {
 };
 
 // *out += sum_i x[i]  (float32 data, float64 accumulation)
-KERNEL void sum_reduce(const long long n, const float* RESTRICT x, double* RESTRICT out) {
+KERNEL void sum_reduce(const long long n, const float* RESTRICT x /* size: n */, double* RESTRICT out /* size: 1 */) {
     REDUCE_SUM_BEGIN(i, n, acc) { acc += (double)x[i]; }
     REDUCE_SUM_END(out, acc)
 }
 
 // out[idx[i]] += scale * val[i]  (float atomics: many i may hit one target)
-KERNEL void scatter_add(const long long n, const int* RESTRICT idx, const float* RESTRICT val,
-                        float* RESTRICT out, const float scale) {
+KERNEL void scatter_add(const long long n, const int* RESTRICT idx /* size: n */,
+                        const float* RESTRICT val /* size: n */, float* RESTRICT out, const float scale) {
     FOR_EACH(i, n) { atomic_add(&out[idx[i]], scale * val[i]); }
 }
 
 // out = sum over the 27 neighbours (periodic) of STENCIL27 * in; n = nx*ny*nz
-KERNEL void stencil27_periodic(const long long n, const float* RESTRICT in, float* RESTRICT out,
-                               const int nx, const int ny, const int nz) {
+KERNEL void stencil27_periodic(const long long n, const float* RESTRICT in /* size: nx * ny * nz */,
+                               float* RESTRICT out /* size: nx * ny * nz */, const int nx, const int ny,
+                               const int nz) {
     FOR_EACH_CELL(x, y, z, nx, ny, nz) {
         float s = 0.f;
         for (int dz = -1; dz <= 1; ++dz) {

@@ -179,3 +179,35 @@ def test_unknown_kernel_lists_available(cpu_backend):
 def test_unknown_source_lists_available(cpu_backend):
     with pytest.raises(FileNotFoundError, match="selfcheck.cu"):
         cpu_backend.module("nope.cu")
+
+
+def test_wrong_size_refused(scatter, cpu_backend):
+    idx, val, out = _good()
+    with pytest.raises(KernelArgumentError, match="has 4 elements; the kernel needs == n = 5"):
+        scatter(5, idx, val, out, 1.0)
+    stencil = cpu_backend.module("selfcheck.cu").function("stencil27_periodic")
+    a = np.zeros((2, 3, 4), np.float32)
+    with pytest.raises(KernelArgumentError, match="nx \\* ny \\* nz = 30"):
+        stencil(24, a, a.copy(), 5, 3, 2)  # nx given as 5 for an x extent of 4
+
+
+def test_signature_parser():
+    from couplekit.backend.signature import parse_kernels
+
+    src = """
+    // KERNEL void in_a_comment(const long long n, float* x)
+    /* KERNEL void also_a_comment(int x) */
+    KERNEL void k(const long long n, const float* RESTRICT a /* size: 3 * (n + 1) */,
+                  unsigned char* flags /* size >= nx */, const int nx, double s) {}
+    """
+    (sig,) = parse_kernels(src).values()
+    assert [p.name for p in sig.params] == ["n", "a", "flags", "nx", "s"]
+    a, flags = sig.params[1], sig.params[2]
+    assert a.const and a.pointer and a.dtype == np.float32 and a.size == "3 * (n + 1)" and not a.size_at_least
+    assert not flags.const and flags.dtype == np.uint8 and flags.size_at_least
+    with pytest.raises(ValueError, match="first parameter"):
+        parse_kernels("KERNEL void k(float* x) {}")
+    with pytest.raises(ValueError, match="has type 'short'"):
+        parse_kernels("KERNEL void k(const long long n, short x) {}")
+    with pytest.raises(ValueError, match="may only use integer parameters"):
+        parse_kernels("KERNEL void k(const long long n, float* x /* size: m */) {}")

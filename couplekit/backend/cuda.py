@@ -67,7 +67,7 @@ class CudaFunction:
     def __call__(self, n: int, *args) -> None:
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
             raise TypeError(f"{self.signature.name}: n must be a non-negative integer, got {n!r}")
-        checked = check_args(self.signature, args, self._cupy.ndarray, "cupy.ndarray")
+        checked = check_args(self.signature, n, args, self._cupy.ndarray, "cupy.ndarray")
         if n == 0:
             return
         blocks = min((int(n) + BLOCK_SIZE - 1) // BLOCK_SIZE, MAX_BLOCKS)

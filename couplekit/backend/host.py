@@ -146,7 +146,7 @@ class HostFunction:
     def __call__(self, n: int, *args) -> None:
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
             raise TypeError(f"{self.signature.name}: n must be a non-negative integer, got {n!r}")
-        checked = check_args(self.signature, args, np.ndarray, "numpy.ndarray")
+        checked = check_args(self.signature, n, args, np.ndarray, "numpy.ndarray")
         cargs = [a.ctypes.data if isinstance(a, np.ndarray) else a for a in checked]
         if self._set_threads is not None:
             # the OpenMP thread count is process-wide state: set it per launch so that backends with

@@ -6,6 +6,7 @@ read as garbage. Every call is therefore checked against the signature parsed fr
 
 from __future__ import annotations
 
+import ast
 import re
 from dataclasses import dataclass
 
@@ -24,7 +25,8 @@ C_TYPES: dict[str, np.dtype] = {
     "signed char": np.dtype(np.int8),
 }
 
-_KERNEL = re.compile(r"\bKERNEL\s+void\s+(\w+)\s*\(([^)]*)\)", re.DOTALL)
+_KERNEL = re.compile(r"\bKERNEL\s+void\s+(\w+)\s*\(")
+_SIZE = re.compile(r"/\*\s*size\s*(:|>=)\s*(.+?)\s*\*/", re.DOTALL)
 _QUALIFIERS = re.compile(r"\b(const|RESTRICT|__restrict__|volatile)\b")
 
 
@@ -36,6 +38,8 @@ class Param:
     dtype: np.dtype
     pointer: bool
     const: bool
+    size: str | None = None  # `/* size: EXPR */` (exact element count) or `/* size >= EXPR */` annotation
+    size_at_least: bool = False
 
     def describe(self) -> str:
         ctype = next(k for k, v in C_TYPES.items() if v == self.dtype)
@@ -59,7 +63,47 @@ def _strip_comments(text: str) -> str:
     return re.sub(r"//[^\n]*", " ", text)
 
 
+def _parameter_list(text: str, start: int) -> str:
+    """The text between the '(' ending at ``start`` and its matching ')', skipping comments."""
+    depth, i = 1, start
+    while i < len(text):
+        if text.startswith("/*", i):
+            i = text.index("*/", i) + 2
+            continue
+        if text.startswith("//", i):
+            i = text.index("\n", i)
+            continue
+        depth += {"(": 1, ")": -1}.get(text[i], 0)
+        if depth == 0:
+            return text[start:i]
+        i += 1
+    raise ValueError("unbalanced parentheses in a kernel signature")
+
+
+def _split_params(body: str) -> list[str]:
+    """Split a parameter list at top-level commas (commas inside comments stay)."""
+    parts, depth, current, i = [], 0, [], 0
+    while i < len(body):
+        if body.startswith("/*", i):
+            j = body.index("*/", i) + 2
+            current.append(body[i:j])
+            i = j
+            continue
+        ch = body[i]
+        depth += {"(": 1, ")": -1}.get(ch, 0)
+        if ch == "," and depth == 0:
+            parts.append("".join(current))
+            current = []
+        else:
+            current.append(ch)
+        i += 1
+    parts.append("".join(current))
+    return [p for p in parts if _strip_comments(p).strip()]
+
+
 def _parse_param(text: str, kernel: str, source: str) -> Param:
+    size = _SIZE.search(text)
+    text = _strip_comments(text)
     const = bool(re.search(r"\bconst\b", text.split("*")[0]))
     pointer = "*" in text
     words = _QUALIFIERS.sub(" ", text.replace("*", " ")).split()
@@ -71,22 +115,84 @@ def _parse_param(text: str, kernel: str, source: str) -> Param:
             f"{source}: kernel {kernel}: parameter {name!r} has type {ctype!r}; kernels may take "
             f"{', '.join(C_TYPES)} (as scalars or pointers)"
         )
-    return Param(name, C_TYPES[ctype], pointer, const)
+    if size and not pointer:
+        raise ValueError(f"{source}: kernel {kernel}: size annotation on scalar parameter {name!r}")
+    return Param(
+        name,
+        C_TYPES[ctype],
+        pointer,
+        const,
+        size=size.group(2) if size else None,
+        size_at_least=bool(size and size.group(1) == ">="),
+    )
 
 
 def parse_kernels(text: str, source: str = "<source>") -> dict[str, Signature]:
-    """Every ``KERNEL void name(...)`` in ``text`` (headers pasted in or not), by name."""
+    """Every ``KERNEL void name(...)`` in ``text`` (headers pasted in or not), by name.
+
+    A pointer parameter may carry a size annotation, checked at every call:
+    ``const float* x /* size: 27 * n */`` (exactly that many elements) or ``/* size >= nx * ny */`` (at
+    least). The expression may use ``n``, the kernel's integer scalar parameters, integers, ``+ - * / ( )``.
+    """
     sigs: dict[str, Signature] = {}
-    for m in _KERNEL.finditer(_strip_comments(text)):
-        name, body = m.group(1), m.group(2)
-        params = tuple(_parse_param(p, name, source) for p in body.split(",") if p.strip())
+    # comments blanked out position for position: kernels are found in code only, while the parameter
+    # lists are read from the original text, where the size annotations are
+    blanked = re.sub(r"/\*.*?\*/|//[^\n]*", lambda c: re.sub(r"[^\n]", " ", c.group(0)), text, flags=re.DOTALL)
+    for m in _KERNEL.finditer(blanked):
+        name = m.group(1)
+        params = tuple(_parse_param(p, name, source) for p in _split_params(_parameter_list(text, m.end())))
         if not params or params[0].pointer or params[0].dtype != np.int64:
             raise ValueError(f"{source}: kernel {name} must take `const long long n` as its first parameter")
+        for p in params:
+            if p.size:
+                _check_size_expression(p.size, params, name, source)
         sigs[name] = Signature(name, params, source)
     return sigs
 
 
-def check_args(sig: Signature, args: tuple, array_type: type, array_kind: str) -> list:
+_ALLOWED_NODES = (
+    ast.Expression,
+    ast.BinOp,
+    ast.Add,
+    ast.Sub,
+    ast.Mult,
+    ast.Div,
+    ast.FloorDiv,
+    ast.Name,
+    ast.Load,
+    ast.Constant,
+)
+
+
+def _check_size_expression(expr: str, params: tuple[Param, ...], kernel: str, source: str) -> None:
+    ints = {p.name for p in params if not p.pointer and p.dtype.kind in "iu"}
+    tree = ast.parse(expr, mode="eval")
+    for node in ast.walk(tree):
+        if not isinstance(node, _ALLOWED_NODES) or (isinstance(node, ast.Name) and node.id not in ints):
+            raise ValueError(f"{source}: kernel {kernel}: size annotation {expr!r} may only use integer parameters")
+
+
+def _eval_size(expr: str, values: dict[str, int]) -> int:
+    def ev(node):
+        if isinstance(node, ast.Expression):
+            return ev(node.body)
+        if isinstance(node, ast.Constant):
+            return int(node.value)
+        if isinstance(node, ast.Name):
+            return int(values[node.id])
+        left, right = ev(node.left), ev(node.right)
+        if isinstance(node.op, ast.Add):
+            return left + right
+        if isinstance(node.op, ast.Sub):
+            return left - right
+        if isinstance(node.op, ast.Mult):
+            return left * right
+        return left // right
+
+    return ev(ast.parse(expr, mode="eval"))
+
+
+def check_args(sig: Signature, n: int, args: tuple, array_type: type, array_kind: str) -> list:
     """Check ``args`` (without ``n``) against ``sig``; return them with Python scalars cast to the C type.
 
     Arrays must be ``array_type`` (numpy.ndarray or cupy.ndarray), of the exact dtype, C-contiguous, and
@@ -115,6 +221,20 @@ def check_args(sig: Signature, args: tuple, array_type: type, array_kind: str) -
             out.append(a)
         else:
             out.append(_scalar(a, p, where))
+    if any(p.size for p in expected):
+        values = {"n": int(n)}
+        values.update(
+            {p.name: int(a) for p, a in zip(expected, out, strict=True) if not p.pointer and p.dtype.kind in "iu"}
+        )
+        for i, (p, a) in enumerate(zip(expected, out, strict=True), start=2):
+            if p.size:
+                want = _eval_size(p.size, values)
+                if a.size < want or (not p.size_at_least and a.size != want):
+                    relation = ">=" if p.size_at_least else "=="
+                    raise KernelArgumentError(
+                        f"{sig.name}: argument {i} ({p.describe()}) has {a.size} elements; the kernel needs "
+                        f"{relation} {p.size} = {want} (shape {tuple(a.shape)})"
+                    )
     return out
 
 
