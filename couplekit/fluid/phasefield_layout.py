@@ -1,0 +1,111 @@
+"""Phase-field grid layout and parameters shared by the kernel ops and the NumPy reference.
+
+Every field is padded with one ghost layer on every side: interior extents ``(nz, ny, nx)``, stored
+extents ``(nz + 2, ny + 2, nx + 2)``, interior cell ``(x, y, z)`` at padded index ``[z + 1, y + 1, x + 1]``.
+See :mod:`couplekit.fluid.phasefield` for the full storage and streaming convention.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from ..lattice import CS2_7
+
+Periodic = tuple[bool, bool, bool]
+"""Periodicity of the (x, y, z) axes; a non-periodic axis has no-flux walls at both ends."""
+
+
+def padded_shape(shape: Sequence[int]) -> tuple[int, int, int]:
+    """Stored extents ``(nz + 2, ny + 2, nx + 2)`` of a field with interior extents ``shape = (nz, ny, nx)``."""
+    nz, ny, nx = (int(s) for s in shape)
+    if min(nz, ny, nx) < 1:
+        raise ValueError(f"interior extents must be >= 1, got {tuple(shape)}")
+    return nz + 2, ny + 2, nx + 2
+
+
+def interior_shape(padded: Sequence[int]) -> tuple[int, int, int]:
+    """Interior extents ``(nz, ny, nx)`` of a padded field whose last three extents are ``padded``."""
+    nz, ny, nx = (int(s) - 2 for s in tuple(padded)[-3:])
+    if min(nz, ny, nx) < 1:
+        raise ValueError(f"padded extents must be >= 3, got {tuple(padded)[-3:]}")
+    return nz, ny, nx
+
+
+def interior(a: np.ndarray) -> np.ndarray:
+    """View of the interior cells of a padded field (last three axes)."""
+    return a[..., 1:-1, 1:-1, 1:-1]
+
+
+def as_periodic(periodic: bool | Sequence[bool]) -> Periodic:
+    """Normalise a periodicity flag (one bool for all axes, or (x, y, z))."""
+    if isinstance(periodic, (bool, np.bool_)):
+        return (bool(periodic),) * 3
+    flags = tuple(bool(p) for p in periodic)
+    if len(flags) != 3:
+        raise ValueError(f"periodic must be one bool or three (x, y, z), got {periodic!r}")
+    return flags  # type: ignore[return-value]
+
+
+def pad_solid(solid: np.ndarray | None, shape: Sequence[int], periodic: bool | Sequence[bool]) -> np.ndarray:
+    """The padded uint8 solid mask the kernels expect, from an interior mask (or ``None``: no obstacles).
+
+    Each ghost cell holds the mask of its image: the wrapped cell on a periodic axis, the nearest interior
+    cell on a wall axis (the same images the phase field's ghost values take), so the stencils see
+    consistent obstacles across the boundary.  Domain walls themselves are not marked: the kernels know
+    them from the periodicity flags.
+    """
+    nz, ny, nx = (int(s) for s in shape)
+    m = np.zeros((nz, ny, nx), dtype=np.uint8) if solid is None else np.asarray(solid).astype(np.uint8)
+    if m.shape != (nz, ny, nx):
+        raise ValueError(f"solid mask has shape {m.shape}, expected the interior shape {(nz, ny, nx)}")
+    px, py, pz = as_periodic(periodic)
+    modes = ["wrap" if pz else "edge", "wrap" if py else "edge", "wrap" if px else "edge"]
+    out = m
+    for axis, mode in enumerate(modes):
+        width = [(0, 0)] * 3
+        width[axis] = (1, 1)
+        out = np.pad(out, width, mode=mode)
+    return np.ascontiguousarray(out, dtype=np.uint8)
+
+
+def relaxation_rate(mobility: float) -> float:
+    """omega_h = 1 / tau_h with tau_h = M / cs^2 + 1/2 on D3Q7 (cs^2 = 1/4): mobility M = cs^2 (tau_h - 1/2)."""
+    if mobility <= 0:
+        raise ValueError(f"mobility must be > 0, got {mobility}")
+    return 1.0 / (mobility / CS2_7 + 0.5)
+
+
+def chemical_potential_coefficients(sigma: float, width: float) -> tuple[float, float]:
+    """(beta, kappa) of the chemical potential (Eq. 22) for surface tension sigma and interface width W.
+
+    beta = 12 sigma / W, kappa = 3 sigma W / 2 (Jacqmin 1999; notes §1c): the flat profile
+    phi = (1 + tanh(2 s / W)) / 2 has mu = 0 and excess free energy kappa * integral(phi'^2) = sigma.
+    """
+    if width <= 0:
+        raise ValueError(f"interface width must be > 0, got {width}")
+    if sigma < 0:
+        raise ValueError(f"surface tension must be >= 0, got {sigma}")
+    return 12.0 * sigma / width, 1.5 * sigma * width
+
+
+def volume_controller_gamma(v0: float, volume: float, source_sum: float, eta: float) -> float:
+    """Correction factor gamma(t) of the global volume controller, Eq. 52.
+
+    gamma = clamp((V0 - V) / sum_x S_phi, [-eta, eta]); the corrected source is gamma * S_phi, so one step
+    changes the volume by gamma * sum_x S_phi.  ``eta = 0`` switches the controller off (returns 1: the
+    source is applied as it is).  With sum_x S_phi = 0 there is nothing to scale and gamma = 0.
+    """
+    if eta < 0:
+        raise ValueError(f"eta must be >= 0 (0 = controller off), got {eta}")
+    if eta == 0:
+        return 1.0
+    if source_sum == 0.0:
+        return 0.0
+    return float(np.clip((v0 - volume) / source_sum, -eta, eta))
+
+
+def tanh_profile(s: np.ndarray, width: float) -> np.ndarray:
+    """Equilibrium flat-interface profile phi = (1 + tanh(2 s / W)) / 2, s = signed distance into phase 1."""
+    return 0.5 * (1.0 + np.tanh(2.0 * np.asarray(s, dtype=np.float64) / width))

@@ -1,0 +1,172 @@
+"""Phase-field kernels (kernels/phasefield.cu) against the NumPy reference, and their GPU builds.
+
+Tolerances: the kernels compute in float32, the reference in float64 from the same float32 inputs and
+stores float32.  Each stored value is a short chain (<= ~10 operations for h, 27 terms for the stencils)
+of float32 roundings of 6e-8 relative each, on values of order 1 (h <= 0.3, phi in [0, 1], |grad| <= 1.5,
+|mu| <= 3), so the kernel/reference difference is a few 1e-7; we allow 2e-6 absolute (about 30 ulp of
+1.0), far below any error of the scheme (a wrong weight, slot or sign changes values by >= 1e-3).
+Pure data movement (which slot is read or written) would show up as O(0.1) differences.
+"""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from couplekit.backend import get_backend
+from couplekit.backend.errors import BackendUnavailableError
+from couplekit.fluid.phasefield import (
+    PhaseFieldKernelOps,
+    PhaseFieldReferenceOps,
+    pad_solid,
+    padded_shape,
+)
+
+ATOL = 2e-6
+SHAPE = (6, 7, 9)  # (nz, ny, nx): different extents catch swapped axes
+PERIODIC_CASES = [(True, True, True), (False, True, False), (True, False, True), (False, False, False)]
+
+
+@pytest.fixture(scope="module")
+def cpu():
+    try:
+        return get_backend("cpu")
+    except BackendUnavailableError as exc:  # no host compiler: the reference still runs elsewhere
+        pytest.skip(str(exc))
+
+
+def random_state(seed: int, periodic, solid_fraction: float = 0.15):
+    """A random but valid state: h > 0 with phi in (0, 1.4), |u| < 0.05, obstacles, a small source."""
+    rng = np.random.default_rng(seed)
+    p = padded_shape(SHAPE)
+    solid = pad_solid(rng.random(SHAPE) < solid_fraction, SHAPE, periodic)
+    h = (rng.random((7, *p)) * 0.2).astype(np.float32)
+    phi = rng.random(p).astype(np.float32)
+    grad = (rng.random((3, *p)) - 0.5).astype(np.float32)
+    grad[:, 2, 2, 2] = 0.0  # a bulk cell: no interface normal
+    u = ((rng.random((3, *p)) - 0.5) * 0.1).astype(np.float32)
+    source = ((rng.random(p) - 0.5) * 0.02).astype(np.float32)
+    eps = (0.4 + 0.6 * rng.random(p)).astype(np.float32)
+    return dict(h=h, phi=phi, grad=grad, u=u, source=source, solid=solid, eps=eps)
+
+
+@pytest.mark.parametrize("periodic", PERIODIC_CASES)
+@pytest.mark.parametrize("parity", [0, 1, 7])
+def test_collide_stream_matches_reference(cpu, periodic, parity):
+    s = random_state(10 + parity, periodic)
+    kernel, ref = PhaseFieldKernelOps(cpu, periodic), PhaseFieldReferenceOps(periodic)
+    h_k, h_r = s["h"].copy(), s["h"].copy()
+    args = (s["grad"], s["u"], s["source"], s["solid"], parity, 0.04, 4.5, 0.6)
+    kernel.collide_stream(h_k, *args)
+    ref.collide_stream(h_r, *args)
+    assert np.abs(h_k - h_r).max() < ATOL
+    # the step really changed h (the comparison is not between two untouched copies)
+    assert np.abs(h_k - s["h"]).max() > 1e-2
+
+
+@pytest.mark.parametrize("periodic", PERIODIC_CASES)
+@pytest.mark.parametrize("parity", [0, 1])
+def test_macroscopic_matches_reference(cpu, periodic, parity):
+    s = random_state(20 + parity, periodic)
+    kernel, ref = PhaseFieldKernelOps(cpu, periodic), PhaseFieldReferenceOps(periodic)
+    phi_k = np.full(padded_shape(SHAPE), -9.0, dtype=np.float32)
+    phi_r = phi_k.copy()
+    kernel.macroscopic(s["h"], phi_k, s["solid"], parity)
+    ref.macroscopic(s["h"], phi_r, s["solid"], parity)
+    assert np.abs(phi_k - phi_r).max() < ATOL
+    assert phi_k.min() >= 0.0  # every cell, ghosts included, was written
+
+
+@pytest.mark.parametrize("periodic", PERIODIC_CASES[:2])
+@pytest.mark.parametrize("parity", [0, 1])
+def test_set_equilibrium_matches_reference_and_loads_back(cpu, periodic, parity):
+    s = random_state(30 + parity, periodic)
+    kernel, ref = PhaseFieldKernelOps(cpu, periodic), PhaseFieldReferenceOps(periodic)
+    h_k = np.zeros((7, *padded_shape(SHAPE)), dtype=np.float32)
+    h_r = h_k.copy()
+    kernel.set_equilibrium(h_k, s["phi"], s["u"], s["solid"], parity)
+    ref.set_equilibrium(h_r, s["phi"], s["u"], s["solid"], parity)
+    assert np.abs(h_k - h_r).max() < ATOL
+    # loading at the same parity gives back phi = sum_k h_k^eq in fluid cells
+    phi = np.zeros(padded_shape(SHAPE), dtype=np.float32)
+    kernel.macroscopic(h_k, phi, s["solid"], parity)
+    fluid = s["solid"][1:-1, 1:-1, 1:-1] == 0
+    assert np.abs(phi[1:-1, 1:-1, 1:-1] - s["phi"][1:-1, 1:-1, 1:-1])[fluid].max() < ATOL
+
+
+@pytest.mark.parametrize("surface_tension", [True, False])
+@pytest.mark.parametrize("periodic", PERIODIC_CASES[:2])
+def test_gradients_match_reference(cpu, periodic, surface_tension):
+    s = random_state(40, periodic)
+    kernel = PhaseFieldKernelOps(cpu, periodic, surface_tension=surface_tension)
+    ref = PhaseFieldReferenceOps(periodic, surface_tension=surface_tension)
+    p = padded_shape(SHAPE)
+    g_k, g_r = np.zeros((3, *p), np.float32), np.zeros((3, *p), np.float32)
+    mu_k = np.zeros(p, np.float32) if surface_tension else None
+    mu_r = np.zeros(p, np.float32) if surface_tension else None
+    kernel.gradients(s["phi"], s["solid"], g_k, mu_k, 0.9, 0.7)
+    ref.gradients(s["phi"], s["solid"], g_r, mu_r, 0.9, 0.7)
+    assert np.abs(g_k - g_r).max() < ATOL
+    assert np.abs(g_k).max() > 0.1
+    if surface_tension:
+        assert np.abs(mu_k - mu_r).max() < ATOL
+        assert np.abs(mu_k).max() > 0.1
+
+
+def test_gradients_refuse_mu_mismatch(cpu):
+    s = random_state(41, True)
+    grad = np.zeros((3, *padded_shape(SHAPE)), np.float32)
+    for ops in (PhaseFieldKernelOps(cpu, True, surface_tension=False), PhaseFieldReferenceOps(True, False)):
+        with pytest.raises(ValueError, match="surface_tension"):
+            ops.gradients(s["phi"], s["solid"], grad, s["phi"].copy(), 1.0, 1.0)
+
+
+@pytest.mark.parametrize("with_eps", [False, True])
+def test_volume_sums_match_reference(cpu, with_eps):
+    s = random_state(50, (False, True, False))
+    kernel, ref = PhaseFieldKernelOps(cpu, (False, True, False)), PhaseFieldReferenceOps((False, True, False))
+    eps = s["eps"] if with_eps else None
+    vk, sk = kernel.volume_sums(s["phi"], s["source"], s["solid"], eps)
+    vr, sr = ref.volume_sums(s["phi"], s["source"], s["solid"], eps)
+    # float64 sums of ~400 float32 values in different orders: agree to ~1e-15 relative
+    assert vk == pytest.approx(vr, rel=1e-12, abs=1e-12)
+    assert sk == pytest.approx(sr, rel=1e-12, abs=1e-12)
+    # ghost and solid cells are excluded: a huge value there must not show up
+    phi = s["phi"].copy()
+    phi[0, 0, 0] = 1e6
+    phi[s["solid"] == 1] = 1e6
+    assert kernel.volume_sums(phi, s["source"], s["solid"], eps)[0] == pytest.approx(vk, rel=1e-12)
+
+
+# ------------------------------------------------------------------------------------------ GPU builds
+DEFINE_SETS = [{"CK_PF_SURFACE_TENSION": 1}, {"CK_PF_SURFACE_TENSION": 0}]
+
+
+@pytest.mark.parametrize("defines", DEFINE_SETS, ids=lambda d: f"st{d['CK_PF_SURFACE_TENSION']}")
+def test_nvrtc_compiles(defines):
+    pytest.importorskip("cupy")
+    from couplekit.backend.cuda import nvrtc_compile
+
+    ptx = nvrtc_compile("phasefield.cu", defines, arch="80")
+    for name in ("phase_collide_stream", "phase_macroscopic", "phase_gradients", "phase_volume_sums"):
+        assert name in ptx
+
+
+@pytest.mark.skipif(shutil.which("nvcc") is None, reason="nvcc is not on the PATH")
+@pytest.mark.parametrize("arch", ["80", "90"])
+def test_nvcc_builds_without_spills(arch, tmp_path):
+    kernels = Path(__file__).resolve().parents[2] / "kernels"
+    for defines in DEFINE_SETS:
+        flags = [f"-D{k}={v}" for k, v in defines.items()]
+        cmd = ["nvcc", "-std=c++17", f"-arch=sm_{arch}", "-cubin", "-Xptxas", "-v", "-I", str(kernels), *flags,
+               str(kernels / "phasefield.cu"), "-o", str(tmp_path / "pf.cubin")]  # fmt: skip
+        proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
+        assert proc.returncode == 0, proc.stderr
+        report = proc.stderr + proc.stdout
+        assert "phase_collide_stream" in report
+        spills = [line for line in report.splitlines() if "spill" in line]
+        assert spills and all(" 0 bytes spill stores, 0 bytes spill loads" in line for line in spills), report
