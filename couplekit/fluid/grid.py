@@ -1,0 +1,176 @@
+"""The padded LBM grid: cell flags, wall velocities and the periodic ghost lists.
+
+Every fluid field is stored with one ghost layer on each side: an interior grid ``(nz, ny, nx)`` is held in
+arrays of spatial shape ``(nz + 2, ny + 2, nx + 2)`` (linear index ``x + Px*(y + Py*z)``, x contiguous), so
+that the neighbour ``x + c_j`` of every interior cell is a constant offset and needs no wrap. Interior cell
+``(z, y, x)`` (0-based) lives at padded index ``(z + 1, y + 1, x + 1)``.
+
+Cell flags (``uint8``, one per padded cell):
+
+* ``FLUID`` (0): a cell that is updated (interior), or a periodic ghost whose image is fluid;
+* ``WALL`` (1): half-way bounce-back; the wall velocity is read from the velocity field at that cell
+  (zero for a stationary wall, the face velocity for a moving wall);
+* ``INFLOW`` (2): velocity inlet, handled for the flow exactly as a moving wall with the inflow velocity
+  (Ladd's momentum-corrected bounce-back); the phase value it carries lives in ``phi`` at that cell;
+* ``OUTFLOW`` (3): zero-gradient outflow ghost: before an odd AA step it is filled with the populations of
+  its nearest interior cell, after it the populations it would have pushed are copied likewise
+  (:func:`outflow_lists`); waves leave with a weak reflection.
+
+Faces are described by :class:`Face` objects; a ghost cell beyond several faces (an edge or corner ghost)
+takes the strongest non-periodic kind among them (wall > inflow > outflow); a ghost whose every outside axis
+is periodic is a *periodic ghost*: it copies its interior image before a stage that reads it
+(:func:`periodic_lists`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+FLUID, WALL, INFLOW, OUTFLOW = 0, 1, 2, 3
+FACE_NAMES = ("x-", "x+", "y-", "y+", "z-", "z+")
+_KINDS = {"periodic": None, "wall": WALL, "inflow": INFLOW, "outflow": OUTFLOW}
+_PRIORITY = {WALL: 3, INFLOW: 2, OUTFLOW: 1}
+
+
+@dataclass(frozen=True)
+class Face:
+    """Boundary condition of one domain face.
+
+    ``kind``: ``"periodic"`` (both faces of an axis must be), ``"wall"`` (no-slip, half-way bounce-back; a
+    non-zero ``velocity`` makes it a moving wall), ``"inflow"`` (velocity inlet carrying phase value
+    ``phi``), ``"outflow"`` (zero-gradient, non-reflecting-ish). ``velocity`` is in lattice units (x, y, z).
+    """
+
+    kind: str = "periodic"
+    velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    phi: float = 1.0
+
+    def __post_init__(self) -> None:
+        if self.kind not in _KINDS:
+            raise ValueError(f"face kind {self.kind!r} is not one of {', '.join(_KINDS)}")
+        if len(self.velocity) != 3:
+            raise ValueError(f"face velocity must have 3 components, got {self.velocity!r}")
+
+
+@dataclass(frozen=True)
+class Boundaries:
+    """The six faces of the box, by name ``x-, x+, y-, y+, z-, z+`` (default: all periodic)."""
+
+    faces: dict[str, Face] = field(default_factory=dict)
+
+    def face(self, name: str) -> Face:
+        """The face called ``name`` (periodic unless set)."""
+        return self.faces.get(name, Face())
+
+    def __post_init__(self) -> None:
+        for name in self.faces:
+            if name not in FACE_NAMES:
+                raise ValueError(f"unknown face {name!r}; faces are {', '.join(FACE_NAMES)}")
+        for axis in "xyz":
+            lo, hi = self.face(axis + "-").kind, self.face(axis + "+").kind
+            if (lo == "periodic") != (hi == "periodic"):
+                raise ValueError(f"axis {axis}: periodic must be set on both faces ({axis}- is {lo}, {axis}+ is {hi})")
+
+    @classmethod
+    def channel(cls, walls: str = "y", moving: dict[str, tuple[float, float, float]] | None = None) -> Boundaries:
+        """Walls on the faces of the axes in ``walls`` (e.g. ``"y"`` or ``"xyz"``), periodic elsewhere."""
+        moving = moving or {}
+        faces = {}
+        for axis in walls:
+            for side in "-+":
+                name = axis + side
+                faces[name] = Face("wall", moving.get(name, (0.0, 0.0, 0.0)))
+        return cls(faces)
+
+
+def padded_shape(shape: tuple[int, int, int]) -> tuple[int, int, int]:
+    """Spatial shape of a field of interior ``shape = (nz, ny, nx)`` with its ghost layer."""
+    return tuple(int(s) + 2 for s in shape)
+
+
+INTERIOR = (slice(1, -1), slice(1, -1), slice(1, -1))
+"""Index of the interior cells inside a padded spatial array."""
+
+
+def build_flags(
+    shape: tuple[int, int, int], boundaries: Boundaries, solid: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Flags ``(Pz, Py, Px) uint8``, wall velocities ``(3, Pz, Py, Px) float32`` and ghost phase values.
+
+    ``solid``: optional interior boolean mask ``(nz, ny, nx)`` of stationary obstacle cells. Returns
+    ``(flags, wall_velocity, wall_phi)``; ``wall_phi`` holds the inflow phase value at inflow cells (else 0).
+    """
+    nz, ny, nx = shape
+    pz, py, px = padded_shape(shape)
+    flags = np.zeros((pz, py, px), np.uint8)
+    wall_u = np.zeros((3, pz, py, px), np.float32)
+    wall_phi = np.zeros((pz, py, px), np.float32)
+    if solid is not None:
+        solid = np.asarray(solid, bool)
+        if solid.shape != tuple(shape):
+            raise ValueError(f"solid mask has shape {solid.shape}, the grid is {tuple(shape)}")
+        flags[INTERIOR][solid] = WALL
+    sizes = {"x": nx, "y": ny, "z": nz}
+    zz, yy, xx = np.meshgrid(np.arange(pz), np.arange(py), np.arange(px), indexing="ij")
+    coords = {"x": xx, "y": yy, "z": zz}
+    best = np.zeros((pz, py, px), np.int8)  # priority of the chosen non-periodic face, 0 = none
+    outside_any = np.zeros((pz, py, px), bool)
+    for axis in "xyz":
+        c, n = coords[axis], sizes[axis]
+        for side, mask in (("-", c == 0), ("+", c == n + 1)):
+            outside_any |= mask
+            face = boundaries.face(axis + side)
+            kind = _KINDS[face.kind]
+            if kind is None:
+                continue
+            take = mask & (_PRIORITY[kind] > best)
+            best[take] = _PRIORITY[kind]
+            flags[take] = kind
+            for d in range(3):
+                wall_u[d][take] = face.velocity[d]
+            wall_phi[take] = face.phi if kind == INFLOW else 0.0
+    # periodic ghosts: flag of their image
+    periodic_ghost = outside_any & (best == 0)
+    src = _wrap_index(shape, zz[periodic_ghost], yy[periodic_ghost], xx[periodic_ghost])
+    flags[periodic_ghost] = flags.reshape(-1)[src]
+    return flags, wall_u, wall_phi
+
+
+def _wrap_index(shape: tuple[int, int, int], z: np.ndarray, y: np.ndarray, x: np.ndarray) -> np.ndarray:
+    nz, ny, nx = shape
+    pz, py, px = padded_shape(shape)
+    wz = (z - 1) % nz + 1
+    wy = (y - 1) % ny + 1
+    wx = (x - 1) % nx + 1
+    return (wx + px * (wy + py * wz)).astype(np.int64)
+
+
+def periodic_lists(shape: tuple[int, int, int], boundaries: Boundaries) -> tuple[np.ndarray, np.ndarray]:
+    """``(ghost, image)``: padded linear indices (int64) of every periodic ghost cell and of its interior image."""
+    nz, ny, nx = shape
+    pz, py, px = padded_shape(shape)
+    zz, yy, xx = np.meshgrid(np.arange(pz), np.arange(py), np.arange(px), indexing="ij")
+    outside = np.zeros((pz, py, px), bool)
+    nonperiodic = np.zeros((pz, py, px), bool)
+    for axis, c, n in (("x", xx, nx), ("y", yy, ny), ("z", zz, nz)):
+        for side, mask in (("-", c == 0), ("+", c == n + 1)):
+            outside |= mask
+            if boundaries.face(axis + side).kind != "periodic":
+                nonperiodic |= mask
+    ghost = outside & ~nonperiodic
+    idx = (xx + px * (yy + py * zz))[ghost].astype(np.int64)
+    return idx, _wrap_index(shape, zz[ghost], yy[ghost], xx[ghost])
+
+
+def outflow_lists(shape: tuple[int, int, int], flags: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(ghost, src)``: padded indices (int64) of every OUTFLOW ghost and of its nearest interior cell."""
+    nz, ny, nx = shape
+    pz, py, px = padded_shape(shape)
+    zz, yy, xx = np.nonzero(flags == OUTFLOW)
+    border = (zz == 0) | (zz == pz - 1) | (yy == 0) | (yy == py - 1) | (xx == 0) | (xx == px - 1)
+    zz, yy, xx = zz[border], yy[border], xx[border]
+    sz, sy, sx = np.clip(zz, 1, nz), np.clip(yy, 1, ny), np.clip(xx, 1, nx)
+    ghost = (xx + px * (yy + py * zz)).astype(np.int64)
+    return ghost, (sx + px * (sy + py * sz)).astype(np.int64)

@@ -1,0 +1,147 @@
+"""Compiled fluid stages (cuda or cpu build of ``kernels/lbm_*.cu``), same signatures as :class:`ReferenceOps`.
+
+Effects are compile-time defines (DESIGN "Effects"): ``CK_TWO_PHASE``, ``CK_SURFACE_TENSION``,
+``CK_MIXTURE``, ``CK_EXT_FORCE``; one cached module per flag set. Inputs of switched-off effects are not read
+by the kernels and may be ``None``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..backend import Backend
+
+
+class KernelOps:
+    """The fluid stages as kernels on ``backend`` (``cpu`` or ``cuda``); see :class:`ReferenceOps` for the maths."""
+
+    def __init__(
+        self,
+        backend: Backend,
+        two_phase: bool = False,
+        surface_tension: bool = False,
+        mixture: bool = False,
+        external_force: bool = False,
+    ):
+        self.backend = backend
+        self.name = backend.name
+        self.two_phase = bool(two_phase)
+        self.surface_tension = bool(surface_tension) and self.two_phase
+        self.mixture = bool(mixture)
+        self.external_force = bool(external_force)
+        defines = self.defines()
+        collide = backend.module("lbm_collide.cu", defines)
+        pressure = backend.module(
+            "lbm_pressure.cu", {"CK_TWO_PHASE": defines["CK_TWO_PHASE"], "CK_MIXTURE": defines["CK_MIXTURE"]}
+        )
+        halo = backend.module("lbm_halo.cu")
+        self._collide = collide.function("lbm_collide_stream")
+        self._macro = pressure.function("lbm_macro_pressure")
+        self._filter = pressure.function("lbm_pressure_filter")
+        self._halo = halo.function("lbm_halo_copy")
+        self._fold = halo.function("lbm_fold")
+        self._outflow_fix = halo.function("lbm_outflow_fix")
+        self._dummy = backend.xp.zeros(1, dtype=np.float32)
+
+    def defines(self) -> dict[str, int]:
+        """The preprocessor flags of the collide kernel for this effect set."""
+        return {
+            "CK_TWO_PHASE": int(self.two_phase),
+            "CK_SURFACE_TENSION": int(self.surface_tension),
+            "CK_MIXTURE": int(self.mixture),
+            "CK_EXT_FORCE": int(self.external_force),
+        }
+
+    def _or_dummy(self, a, used: bool):
+        return a if (used and a is not None) else self._dummy
+
+    @staticmethod
+    def _interior(flags) -> tuple[int, int, int, int]:
+        pz, py, px = flags.shape
+        nz, ny, nx = pz - 2, py - 2, px - 2
+        return nx * ny * nz, nx, ny, nz
+
+    def macro_pressure(self, f, flags, velocity, phi, eps, sand_v, p, parity: int, rho_h: float, rho_l: float) -> None:
+        """Eq. 39 pressure update in place (see ReferenceOps.macro_pressure)."""
+        n, nx, ny, nz = self._interior(flags)
+        self._macro(
+            n,
+            f,
+            flags,
+            velocity,
+            self._or_dummy(phi, self.two_phase),
+            self._or_dummy(eps, self.mixture),
+            self._or_dummy(sand_v, self.mixture),
+            p,
+            np.int32(parity),
+            np.int32(nx),
+            np.int32(ny),
+            np.int32(nz),
+            np.float32(rho_h),
+            np.float32(rho_l),
+        )
+
+    def pressure_filter(self, p, flags, pbar) -> None:
+        """Eq. 40 filter (see ReferenceOps.pressure_filter)."""
+        n, nx, ny, nz = self._interior(flags)
+        self._filter(n, p, flags, pbar, np.int32(nx), np.int32(ny), np.int32(nz))
+
+    def collide_stream(
+        self,
+        f,
+        flags,
+        velocity,
+        phi,
+        mu,
+        eps,
+        force,
+        pbar,
+        parity: int,
+        rho_h: float,
+        rho_l: float,
+        nu_h: float,
+        nu_l: float,
+        gx: float,
+        gy: float,
+        gz: float,
+    ) -> None:
+        """Fused forces + NOCM-MRT collision + AA streaming (see ReferenceOps.collide_stream)."""
+        n, nx, ny, nz = self._interior(flags)
+        self._collide(
+            n,
+            f,
+            flags,
+            velocity,
+            self._or_dummy(phi, self.two_phase),
+            self._or_dummy(mu, self.surface_tension),
+            self._or_dummy(eps, self.mixture),
+            self._or_dummy(force, self.external_force),
+            pbar,
+            np.int32(parity),
+            np.int32(nx),
+            np.int32(ny),
+            np.int32(nz),
+            *(np.float32(v) for v in (rho_h, rho_l, nu_h, nu_l, gx, gy, gz)),
+        )
+
+    def halo_copy(self, a, ghost, image) -> None:
+        """Copy every component of ``a`` from the interior images to the periodic ghosts."""
+        if ghost.size == 0:
+            return
+        ncomp = 1 if a.ndim == 3 else int(np.prod(a.shape[:-3]))
+        ncell = int(np.prod(a.shape[-3:]))
+        self._halo(int(ghost.size), a, ghost, image, np.int32(ncomp), np.int64(ncell))
+
+    def fold(self, f, ghost, image) -> None:
+        """After an odd step, move populations pushed into periodic ghosts to their images."""
+        if ghost.size == 0:
+            return
+        pz, py, px = f.shape[-3:]
+        self._fold(int(ghost.size), f, ghost, image, np.int32(px - 2), np.int32(py - 2), np.int32(pz - 2))
+
+    def outflow_fix(self, f, ghost, src) -> None:
+        """After an odd step, set what the outflow ghosts would have pushed (zero gradient)."""
+        if ghost.size == 0:
+            return
+        pz, py, px = f.shape[-3:]
+        self._outflow_fix(int(ghost.size), f, ghost, src, np.int32(px - 2), np.int32(py - 2), np.int32(pz - 2))

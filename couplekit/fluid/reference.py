@@ -1,0 +1,315 @@
+"""NumPy reference ops of the velocity-based D3Q27 NOCM-MRT fluid: the executable specification.
+
+Written for clarity, vectorised over cells and independent of the kernels (the collision goes through the
+explicit moment matrices of :mod:`couplekit.fluid.moments`, Eq. 11, where the kernel uses a specialised
+chimera back-transform). Every method has the signature of the matching :class:`~couplekit.fluid.kernel_ops.KernelOps`
+method. Arrays are padded (see :mod:`couplekit.fluid.grid`): distributions ``f (27, Pz, Py, Px)``, vectors
+``(3, Pz, Py, Px)``, scalars ``(Pz, Py, Px)``, all float32; flags ``uint8``.
+
+Streaming is the AA pattern (Bailey et al. 2009; lbm-method note §1d) with one copy of f. At an even
+``parity`` the populations are stored in natural order ``F[j][x] = f_j(x)``; the step collides locally and
+writes ``F[ĵ][x] = f*_j``. At an odd parity ``f_j(x) = F[ĵ][x − c_j]`` (pull) and the step writes
+``F[j][x + c_j] = f*_j`` (push), which restores the natural order. All boundary rules act in the odd step:
+
+* wall / inflow neighbour ``x − c_j`` (half-way bounce-back, moving wall ``u_w``, note §1f):
+  ``f_j(x) = f*_ĵ(x) + 6 w_j c_j·u_w`` which after the even step sits in ``F[j][x]``;
+  a push towards a wall ``x + c_j`` is written back as ``F[ĵ][x] = f*_j − 6 w_j c_j·u_w``;
+* outflow ghosts are read and pushed to as if they were fluid: :meth:`ReferenceOps.halo_copy` fills them
+  from their nearest interior cell before an odd step (zero normal gradient of f*), and
+  :meth:`ReferenceOps.outflow_fix` sets, after it, what they would have pushed (zero-gradient outflow:
+  waves leave with a small reflection instead of the full reflection of an equilibrium or pressure boundary).
+
+Scalar stencils (isotropic gradient Eq. 18, filter Eq. 40) use a neighbour's value only when it is a
+``FLUID`` cell (periodic ghosts hold copies of their images); otherwise the centre value (zero normal
+gradient at walls, note §1f).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..lattice import C27, CS2, OPP27, W27
+from . import moments
+from .grid import FLUID, INTERIOR, OUTFLOW
+
+
+def shifted(a: np.ndarray, c) -> np.ndarray:
+    """View of padded array ``a`` (..., Pz, Py, Px) at ``x + c`` for every interior cell x (c = (cx, cy, cz))."""
+    cx, cy, cz = (int(v) for v in c)
+    pz, py, px = a.shape[-3:]
+    return a[..., 1 + cz : pz - 1 + cz, 1 + cy : py - 1 + cy, 1 + cx : px - 1 + cx]
+
+
+def interior(a: np.ndarray) -> np.ndarray:
+    """View of the interior cells of a padded array."""
+    return a[(Ellipsis, *INTERIOR)]
+
+
+def isotropic_gradient(s: np.ndarray, flags: np.ndarray) -> np.ndarray:
+    """Eq. 18: ∇s = Σ_j 3 w_j c_j s(x + c_j), with non-fluid neighbours replaced by the centre value."""
+    centre = interior(s).astype(np.float64)
+    grad = np.zeros((3,) + centre.shape)
+    for j in range(1, 27):
+        nb = np.where(shifted(flags, C27[j]) == FLUID, shifted(s, C27[j]), centre)
+        for d in range(3):
+            if C27[j, d]:
+                grad[d] += 3.0 * W27[j] * C27[j, d] * (nb - centre)
+    return grad
+
+
+def local_average(s: np.ndarray, flags: np.ndarray) -> np.ndarray:
+    """Eq. 40: s̄ = Σ_j w_j s(x + c_j), with non-fluid neighbours replaced by the centre value."""
+    centre = interior(s).astype(np.float64)
+    out = W27[0] * centre
+    for j in range(1, 27):
+        out = out + W27[j] * np.where(shifted(flags, C27[j]) == FLUID, shifted(s, C27[j]), centre)
+    return out
+
+
+def equilibrium(u: np.ndarray) -> np.ndarray:
+    """Density-normalised D3Q27 equilibrium (27, ...) for velocity u (3, ...): sixth-order Hermite, product form.
+
+    f_j^eq = Ψ(c_jx, u_x) Ψ(c_jy, u_y) Ψ(c_jz, u_z), Ψ(0, u) = 2/3 − u², Ψ(±1, u) = (1 ± 3u + 3u²)/6
+    (note §1b); its central moments are Eq. 12's.
+    """
+    u = np.asarray(u, np.float64)
+
+    def psi(c, v):
+        return np.where(c == 0, 2.0 / 3.0 - v * v, (1.0 + 3.0 * c * v + 3.0 * v * v) / 6.0)
+
+    return np.stack([psi(C27[j, 0], u[0]) * psi(C27[j, 1], u[1]) * psi(C27[j, 2], u[2]) for j in range(27)])
+
+
+class ReferenceOps:
+    """NumPy implementation of the fluid stages (see the module docstring for layouts and rules).
+
+    The switches mirror the kernel defines: ``two_phase`` (ρ, μ from φ; else ρ = rho_h, ν = nu_h),
+    ``surface_tension`` (F_s = μ_φ ∇φ from a chemical-potential field), ``mixture`` (fluid fraction ε and
+    sand velocity v inputs; else ε ≡ 1), ``external_force`` (a force-density input field, e.g. drag).
+    Arrays of switched-off effects are ignored (pass ``None``).
+    """
+
+    name = "numpy"
+
+    def __init__(
+        self,
+        two_phase: bool = False,
+        surface_tension: bool = False,
+        mixture: bool = False,
+        external_force: bool = False,
+    ):
+        self.two_phase = bool(two_phase)
+        self.surface_tension = bool(surface_tension) and self.two_phase
+        self.mixture = bool(mixture)
+        self.external_force = bool(external_force)
+
+    # ------------------------------------------------------------------------------------------ helpers
+    @staticmethod
+    def load(f: np.ndarray, flags: np.ndarray, velocity: np.ndarray, parity: int) -> np.ndarray:
+        """The populations f_j(x, t) (27, nz, ny, nx) of every interior cell under the AA read rule of ``parity``."""
+        if parity % 2 == 0:
+            return interior(f).astype(np.float64)
+        out = np.empty((27,) + interior(flags).shape)
+        out[0] = interior(f[0])
+        for j in range(1, 27):
+            c, jo = C27[j], OPP27[j]
+            nb_flag = shifted(flags, -c)
+            pulled = shifted(f[jo], -c)
+            wall_u = shifted(velocity, -c).astype(np.float64)
+            bounced = interior(f[j]) + 6.0 * W27[j] * (c[0] * wall_u[0] + c[1] * wall_u[1] + c[2] * wall_u[2])
+            out[j] = np.where((nb_flag == FLUID) | (nb_flag == OUTFLOW), pulled, bounced)
+        return out
+
+    @staticmethod
+    def store(f: np.ndarray, flags: np.ndarray, velocity: np.ndarray, parity: int, fstar: np.ndarray) -> None:
+        """Write post-collision populations of the interior fluid cells under the AA write rule of ``parity``."""
+        fluid = interior(flags) == FLUID
+        if parity % 2 == 0:
+            for j in range(27):
+                interior(f[OPP27[j]])[fluid] = fstar[j][fluid]
+            return
+        interior(f[0])[fluid] = fstar[0][fluid]
+        for j in range(1, 27):
+            c, jo = C27[j], OPP27[j]
+            nb_flag = shifted(flags, c)
+            push = fluid & ((nb_flag == FLUID) | (nb_flag == OUTFLOW))
+            shifted(f[j], c)[push] = fstar[j][push]
+            wall_u = shifted(velocity, c).astype(np.float64)
+            bounced = fstar[j] - 6.0 * W27[j] * (c[0] * wall_u[0] + c[1] * wall_u[1] + c[2] * wall_u[2])
+            wall = fluid & ~push & (nb_flag != FLUID)
+            interior(f[jo])[wall] = bounced[wall]
+
+    def _density(self, phi, rho_h: float, rho_l: float) -> np.ndarray | float:
+        """Eq. 4: ρ = ρ_l + (ρ_h − ρ_l) φ with φ clamped to [0, 1] for the property only."""
+        if not self.two_phase:
+            return float(rho_h)
+        ph = np.clip(interior(phi).astype(np.float64), 0.0, 1.0)
+        return rho_l + (rho_h - rho_l) * ph
+
+    # ------------------------------------------------------------------------------------------ stages
+    def macro_pressure(self, f, flags, velocity, phi, eps, sand_v, p, parity: int, rho_h: float, rho_l: float) -> None:
+        """Pressure update, Eq. 39, in place on the interior fluid cells of ``p``.
+
+        p^{n+1} = p^n − c_s² ρ^{n+1} [(1 − Σ_j f_j) + (ε_s ∇·v + (u − v)·∇ε)/ε], with 1 − Σf ≈ ∇·u (Eq. 38),
+        ε_s = 1 − ε the sand fraction, u = Σ_j f_j c_j (the half-force shift is not known yet at this stage).
+        """
+        fi = self.load(f, flags, velocity, parity)
+        s0 = fi.sum(axis=0)
+        rho = self._density(phi, rho_h, rho_l)
+        divergence = 1.0 - s0
+        if self.mixture:
+            e = interior(eps).astype(np.float64)
+            u = np.einsum("jd,j...->d...", C27.astype(np.float64), fi)
+            v = interior(sand_v).astype(np.float64)
+            grad_e = isotropic_gradient(eps, flags)
+            div_v = sum(isotropic_gradient(sand_v[d], flags)[d] for d in range(3))
+            slip = sum((u[d] - v[d]) * grad_e[d] for d in range(3))
+            divergence = divergence + ((1.0 - e) * div_v + slip) / e
+        fluid = interior(flags) == FLUID
+        new = interior(p).astype(np.float64) - CS2 * rho * divergence
+        interior(p)[fluid] = new[fluid]
+
+    def pressure_filter(self, p, flags, pbar) -> None:
+        """Eq. 40: p̄ = Σ_j w_j p(x + c_j) on interior fluid cells (non-fluid neighbours: centre value)."""
+        fluid = interior(flags) == FLUID
+        interior(pbar)[fluid] = local_average(p, flags)[fluid]
+
+    def forces(self, fi, flags, phi, mu, eps, force, pbar, rho_h, rho_l, nu_h, nu_l, gravity):
+        """Acceleration a (3, ...) of Eq. 15 and the shifted velocity u = Σ f c + a/2, for populations fi.
+
+        a = F_μ/(ερ) − ∇p̄/ρ + F_s/ρ + g + F_ext/(ερ), with F_s = μ_φ ∇φ (Eq. 20) and the viscous correction
+        F_μ = ν ∇^sym u · [∇ρ + (ρ/ε)∇ε] (Eq. 16). ∇^sym u is estimated from the pre-collision
+        non-equilibrium central second moments, ∇^sym u ≈ −3 r_s dev(κ_2) + (2/3)(1 − Σf) I (note §1a), about
+        the velocity shifted by the other forces. Returns (a, u, r_s).
+        """
+        s0 = fi.sum(axis=0)
+        m = np.einsum("jd,j...->d...", C27.astype(np.float64), fi)
+        rho = self._density(phi, rho_h, rho_l)
+        if self.two_phase:
+            ph = np.clip(interior(phi).astype(np.float64), 0.0, 1.0)
+            mu_dyn = rho_l * nu_l + (rho_h * nu_h - rho_l * nu_l) * ph  # Eq. 4
+            nu = mu_dyn / rho
+        else:
+            nu = np.full(s0.shape, float(nu_h))
+        r_s = 1.0 / (nu / CS2 + 0.5)
+        e = interior(eps).astype(np.float64) if self.mixture else 1.0
+        a = -isotropic_gradient(pbar, flags) / rho
+        a = a + np.asarray(gravity, np.float64).reshape(3, 1, 1, 1)
+        if self.two_phase:
+            grad_phi = isotropic_gradient(phi, flags)
+            if self.surface_tension:
+                a = a + interior(mu).astype(np.float64) * grad_phi / rho
+        if self.external_force:
+            a = a + interior(force).astype(np.float64) / (e * rho)
+        if self.two_phase or self.mixture:
+            u0 = m + 0.5 * a
+            kappa = moments.to_central(fi, u0).reshape((3, 3, 3) + s0.shape)
+            k2 = np.empty((3, 3) + s0.shape)
+            unit = np.eye(3, dtype=int)
+            for i in range(3):
+                for k in range(3):
+                    a_, b_, c_ = unit[i] + unit[k]
+                    k2[i, k] = kappa[a_, b_, c_]
+            trace = k2[0, 0] + k2[1, 1] + k2[2, 2]
+            sym_grad = -3.0 * r_s * (k2 - np.eye(3).reshape(3, 3, 1, 1, 1) * trace / 3.0)
+            sym_grad = sym_grad + np.eye(3).reshape(3, 3, 1, 1, 1) * (2.0 / 3.0) * (1.0 - s0)
+            g = np.zeros((3,) + s0.shape)
+            if self.two_phase:
+                g = g + (rho_h - rho_l) * grad_phi
+            if self.mixture:
+                g = g + (rho / e) * isotropic_gradient(eps, flags)
+            f_mu = nu * np.einsum("ik...,k...->i...", sym_grad, g)
+            a = a + f_mu / (e * rho)
+        return a, m + 0.5 * a, r_s
+
+    @staticmethod
+    def collide(fi: np.ndarray, u: np.ndarray, a: np.ndarray, r_s: np.ndarray) -> np.ndarray:
+        """NOCM-MRT collision with forcing, Eqs. 9, 11, 12, in the polynomial central-moment basis.
+
+        k* = k − R (k − k^eq) + (I − R/2) k^F, R = diag(r_j): r_s for k4…k8 (shear), 1 for every other row,
+        including k0 (the zeroth moment is reset to 1 each step, note §1a); k^F are the central moments of
+        the Guo forcing term. Returns f* (27, ...).
+        """
+        k = np.einsum("ab,b...->a...", moments.BASIS, moments.to_central(fi, u))
+        k_eq = moments.K_EQ.reshape((27,) + (1,) * (fi.ndim - 1))
+        k_f = np.einsum("ab,b...->a...", moments.BASIS, moments.kappa_force(a))
+        rates = np.ones((27,) + fi.shape[1:])
+        for row in moments.SHEAR_ROWS:
+            rates[row] = r_s
+        k_star = k - rates * (k - k_eq) + (1.0 - rates / 2.0) * k_f
+        return moments.from_central(np.einsum("ab,b...->a...", moments.BASIS_INV, k_star), u)
+
+    def collide_stream(
+        self,
+        f,
+        flags,
+        velocity,
+        phi,
+        mu,
+        eps,
+        force,
+        pbar,
+        parity: int,
+        rho_h: float,
+        rho_l: float,
+        nu_h: float,
+        nu_l: float,
+        gx: float,
+        gy: float,
+        gz: float,
+    ) -> None:
+        """Fused collide + stream (Eqs. 8-10): forces, NOCM-MRT collision, AA store; writes u to ``velocity``."""
+        fi = self.load(f, flags, velocity, parity)
+        a, u, r_s = self.forces(fi, flags, phi, mu, eps, force, pbar, rho_h, rho_l, nu_h, nu_l, (gx, gy, gz))
+        fstar = self.collide(fi, u, a, r_s)
+        self.store(f, flags, velocity, parity, fstar)
+        fluid = interior(flags) == FLUID
+        for d in range(3):
+            interior(velocity[d])[fluid] = u[d][fluid]
+
+    @staticmethod
+    def halo_copy(a, ghost, image) -> None:
+        """Copy every component of ``a`` (…, Pz, Py, Px) from the interior images to the periodic ghosts."""
+        flat = a.reshape(a.shape[: a.ndim - 3] + (-1,))
+        flat[..., ghost] = flat[..., image]
+
+    @staticmethod
+    def outflow_fix(f, ghost, src) -> None:
+        """After an odd (push) step, outflow ghosts: F[j][g + c_j] = F[j][s + c_j] where both are interior.
+
+        The ghost g "pushes" what its nearest interior cell s pushed in the same direction (zero gradient).
+        """
+        pz, py, px = f.shape[-3:]
+        flat = f.reshape(27, -1)
+
+        def coords(idx):
+            z, rem = np.divmod(idx, px * py)
+            y, x = np.divmod(rem, px)
+            return x, y, z
+
+        gx, gy, gz = coords(ghost)
+        sx, sy, sz = coords(src)
+
+        def inside(x, y, z):
+            return (x >= 1) & (x <= px - 2) & (y >= 1) & (y <= py - 2) & (z >= 1) & (z <= pz - 2)
+
+        for j in range(1, 27):
+            t = (gx + C27[j, 0], gy + C27[j, 1], gz + C27[j, 2])
+            u = (sx + C27[j, 0], sy + C27[j, 1], sz + C27[j, 2])
+            ok = inside(*t) & inside(*u)
+            flat[j, (t[0] + px * (t[1] + py * t[2]))[ok]] = flat[j, (u[0] + px * (u[1] + py * u[2]))[ok]]
+
+    @staticmethod
+    def fold(f, ghost, image) -> None:
+        """After an odd (push) step: move populations pushed into periodic ghosts to their images.
+
+        For ghost g with image i and direction j, F[j][i] = F[j][g] when g − c_j is an interior cell.
+        """
+        pz, py, px = f.shape[-3:]
+        gz, rem = np.divmod(ghost, px * py)
+        gy, gx = np.divmod(rem, px)
+        flat = f.reshape(27, -1)
+        for j in range(1, 27):
+            sx, sy, sz = gx - C27[j, 0], gy - C27[j, 1], gz - C27[j, 2]
+            inside = (sx >= 1) & (sx <= px - 2) & (sy >= 1) & (sy <= py - 2) & (sz >= 1) & (sz <= pz - 2)
+            flat[j, image[inside]] = flat[j, ghost[inside]]

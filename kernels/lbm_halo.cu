@@ -1,0 +1,51 @@
+// Periodic and outflow ghost layers of the padded LBM grid.
+// Spec: couplekit/fluid/reference.py halo_copy / fold / outflow_fix.
+#include "common.cuh"
+#include "lattice.cuh"
+#include "lbm_core.cuh"
+
+// a[k*N + ghost[i]] = a[k*N + image[i]] for every component k < ncomp   (n = number of ghosts)
+KERNEL void lbm_halo_copy(const long long n, float* RESTRICT a, const long long* RESTRICT ghost /* size: n */,
+                          const long long* RESTRICT image /* size: n */, const int ncomp, const long long N) {
+    FOR_EACH(i, n) {
+        const long long g = ghost[i], s = image[i];
+        for (int k = 0; k < ncomp; ++k) a[k * N + g] = a[k * N + s];
+    }
+}
+
+// after an odd (push) step: F[j][image] = F[j][ghost] when ghost - c_j is an interior cell
+KERNEL void lbm_fold(const long long n, float* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
+                     const long long* RESTRICT ghost /* size: n */, const long long* RESTRICT image /* size: n */, const int nx, const int ny, const int nz) {
+    const int px = nx + 2;
+    const long long pxy = (long long)px * (ny + 2);
+    const long long N = pxy * (nz + 2);
+    FOR_EACH(i, n) {
+        const long long g = ghost[i], s = image[i];
+        const int gz = (int)(g / pxy), gy = (int)((g / px) % (ny + 2)), gx = (int)(g % px);
+        for (int q = 1; q < 27; ++q) {
+            const int sx = gx - CX27[q], sy = gy - CY27[q], sz = gz - CZ27[q];
+            if (sx >= 1 && sx <= nx && sy >= 1 && sy <= ny && sz >= 1 && sz <= nz) f[q * N + s] = f[q * N + g];
+        }
+    }
+}
+
+// after an odd (push) step, outflow ghosts: F[j][ghost + c_j] = F[j][src + c_j] for every direction j with
+// ghost + c_j and src + c_j interior (the ghost "pushes" what its interior neighbour src pushed: zero gradient)
+KERNEL void lbm_outflow_fix(const long long n, float* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
+                            const long long* RESTRICT ghost /* size: n */, const long long* RESTRICT src /* size: n */, const int nx, const int ny, const int nz) {
+    const int px = nx + 2;
+    const long long pxy = (long long)px * (ny + 2);
+    const long long N = pxy * (nz + 2);
+    FOR_EACH(i, n) {
+        const long long g = ghost[i], s = src[i];
+        const int gz = (int)(g / pxy), gy = (int)((g / px) % (ny + 2)), gx = (int)(g % px);
+        const int sz = (int)(s / pxy), sy = (int)((s / px) % (ny + 2)), sx = (int)(s % px);
+        for (int q = 1; q < 27; ++q) {
+            const int tx = gx + CX27[q], ty = gy + CY27[q], tz = gz + CZ27[q];
+            const int ux = sx + CX27[q], uy = sy + CY27[q], uz = sz + CZ27[q];
+            if (tx >= 1 && tx <= nx && ty >= 1 && ty <= ny && tz >= 1 && tz <= nz && ux >= 1 && ux <= nx &&
+                uy >= 1 && uy <= ny && uz >= 1 && uz <= nz)
+                f[q * N + tx + px * (long long)ty + pxy * tz] = f[q * N + ux + px * (long long)uy + pxy * uz];
+        }
+    }
+}

@@ -1,0 +1,84 @@
+// Mixture pressure evolution (paper Eqs. 37-39) and the 27-point local-average filter (Eq. 40).
+// Spec: couplekit/fluid/reference.py ReferenceOps.macro_pressure / pressure_filter.
+// Defines: CK_TWO_PHASE (rho from phi, else rho = rho_h), CK_MIXTURE (fluid fraction eps and sand velocity
+// inputs; else eps = 1 and the sand terms vanish).
+// variants: CK_TWO_PHASE=0,1 CK_MIXTURE=0,1
+#include "common.cuh"
+#include "lattice.cuh"
+#include "lbm_core.cuh"
+
+#ifndef CK_TWO_PHASE
+#define CK_TWO_PHASE 0
+#endif
+#ifndef CK_MIXTURE
+#define CK_MIXTURE 0
+#endif
+
+// p <- p - cs2 rho [(1 - sum f) + (eps_s div v + (u - v).grad eps) / eps]   (Eq. 39, 1 - sum f ~ div u, Eq. 38)
+KERNEL void lbm_macro_pressure(const long long n, const float* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
+                               const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                               const float* RESTRICT vel /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
+                               const float* RESTRICT phi, const float* RESTRICT eps, const float* RESTRICT sand_v,
+                               float* RESTRICT p /* size: (nx + 2) * (ny + 2) * (nz + 2) */, const int parity, const int nx,
+                               const int ny, const int nz, const float rho_h, const float rho_l) {
+    const int px = nx + 2;
+    const long long pxy = (long long)px * (ny + 2);
+    const long long N = pxy * (nz + 2);
+    const int odd = parity & 1;
+    FOR_EACH_CELL(x, y, z, nx, ny, nz) {
+        const long long c = (x + 1) + px * (long long)(y + 1) + pxy * (z + 1);
+        if (flags[c] != FLAG_FLUID) continue;
+        float fj[27];
+        lbm_load(f, flags, vel, c, N, px, pxy, odd, fj);
+        float s0 = 0.f;
+        LBM_UNROLL
+        for (int q = 0; q < 27; ++q) s0 += fj[q];
+        float divergence = 1.f - s0;
+#if CK_MIXTURE
+        float ux = 0.f, uy = 0.f, uz = 0.f;
+        LBM_UNROLL
+        for (int q = 1; q < 27; ++q) {
+            ux += CX27[q] * fj[q];
+            uy += CY27[q] * fj[q];
+            uz += CZ27[q] * fj[q];
+        }
+        float ge[3], gvx[3], gvy[3], gvz[3];
+        lbm_gradient(eps, flags, c, px, pxy, ge);
+        lbm_gradient(sand_v, flags, c, px, pxy, gvx);
+        lbm_gradient(sand_v + N, flags, c, px, pxy, gvy);
+        lbm_gradient(sand_v + 2 * N, flags, c, px, pxy, gvz);
+        const float e = eps[c];
+        const float div_v = gvx[0] + gvy[1] + gvz[2];
+        const float slip = (ux - sand_v[c]) * ge[0] + (uy - sand_v[N + c]) * ge[1] + (uz - sand_v[2 * N + c]) * ge[2];
+        divergence += ((1.f - e) * div_v + slip) / e;
+#endif
+#if CK_TWO_PHASE
+        const float ph = fminf(fmaxf(phi[c], 0.f), 1.f);
+        const float rho = rho_l + (rho_h - rho_l) * ph;
+#else
+        const float rho = rho_h;
+#endif
+        p[c] = p[c] - CS2 * rho * divergence;
+    }
+}
+
+// pbar = sum_j w_j p(x + c_j)   (Eq. 40); a non-fluid neighbour contributes the centre value
+KERNEL void lbm_pressure_filter(const long long n, const float* RESTRICT p /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                                const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                                float* RESTRICT pbar /* size: (nx + 2) * (ny + 2) * (nz + 2) */, const int nx,
+                                const int ny, const int nz) {
+    const int px = nx + 2;
+    const long long pxy = (long long)px * (ny + 2);
+    FOR_EACH_CELL(x, y, z, nx, ny, nz) {
+        const long long c = (x + 1) + px * (long long)(y + 1) + pxy * (z + 1);
+        if (flags[c] != FLAG_FLUID) continue;
+        const float pc = p[c];
+        float acc = 0.f;
+        LBM_UNROLL
+        for (int q = 1; q < 27; ++q) {
+            const long long nb = c + LBM_OFFSET(q, px, pxy);
+            acc += W27[q] * (flags[nb] == FLAG_FLUID ? p[nb] - pc : 0.f);
+        }
+        pbar[c] = pc + acc;
+    }
+}
