@@ -1,0 +1,155 @@
+"""The sand solver's stages as compiled kernels (cuda or cpu build of ``kernels/mpm_*.cu``).
+
+Same methods and arguments as :class:`couplekit.sand.reference.ReferenceOps`.  On the cpu backend the P2G
+is deterministic (per-thread private grids summed in thread order; kernels/mpm_p2g.cu), so a run is
+bitwise reproducible for a fixed thread count; ``host_atomics=True`` selects the `omp atomic` scatter
+instead (not reproducible; kept to measure what determinism costs).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..backend import Backend
+from .params import ConstitutiveModel
+
+__all__ = ["KernelOps"]
+
+
+class KernelOps:
+    """Sand stages on ``backend`` (``cuda`` or ``cpu``)."""
+
+    def __init__(self, backend: Backend, host_atomics: bool = False):
+        if not backend.has_kernels:
+            raise ValueError(f"KernelOps needs a kernel backend (cuda or cpu), got {backend.name!r}")
+        self.backend = backend
+        self.name = backend.name
+        self.host_atomics = bool(host_atomics) and backend.name == "cpu"
+        self._p2g_defines = {"MPM_HOST_ATOMICS": 1} if self.host_atomics else {}
+        self._clear_first = backend.name == "cuda" or self.host_atomics
+        self.deterministic = backend.name == "cpu" and not self.host_atomics
+        self._scratch = None
+        self._threads = 1
+
+    def _module(self, source: str, defines: dict | None = None):
+        return self.backend.module(source, defines)
+
+    def _scratch_for(self, ncell: int):
+        """Private grids of the deterministic host P2G: threads × 5 × ncell floats, kept between calls."""
+        if self._clear_first:
+            if self._scratch is None:
+                self._scratch = self.backend.xp.zeros(1, dtype=np.float32)
+            return self._scratch, 1
+        mod = self._module("mpm_p2g.cu", self._p2g_defines)
+        threads = mod.num_threads()
+        size = threads * 5 * ncell
+        if self._scratch is None or self._scratch.size != size:
+            self._scratch = np.zeros(size, dtype=np.float32)
+        return self._scratch, threads
+
+    def p2g(self, x, v, C, tau, mass, vol, grid_m, grid_mv, grid_vol, dx: float, dt: float) -> None:
+        """Overwrite node mass, momentum (with the stress impulse) and sand volume from the particles."""
+        nz, ny, nx = grid_m.shape
+        ncell = nx * ny * nz
+        mod = self._module("mpm_p2g.cu", self._p2g_defines)
+        scratch, threads = self._scratch_for(ncell)
+        if self._clear_first:
+            mod.function("mpm_clear_grid")(ncell, grid_m, grid_mv, grid_vol)
+        mod.function("mpm_p2g")(
+            x.shape[1],
+            x,
+            v,
+            C,
+            tau,
+            mass,
+            vol,
+            grid_m,
+            grid_mv,
+            grid_vol,
+            scratch,
+            np.int32(threads),
+            np.int32(nx),
+            np.int32(ny),
+            np.int32(nz),
+            np.float32(dx),
+            np.float32(dt),
+        )
+
+    def grid_update(
+        self,
+        grid_m,
+        grid_mv,
+        f_ext,
+        grid_v,
+        dx: float,
+        dt: float,
+        gravity,
+        bound: int,
+        walls,
+        colliders,
+        ncolliders: int,
+        sdf,
+        has_sdf: int,
+        sdf_params,
+    ) -> None:
+        """v_i = (mv)_i/m_i + Δt (g + f_ext/m_i) on nodes with mass (Eq. 29), then boundary conditions."""
+        nz, ny, nx = grid_m.shape
+        g = [np.float32(c) for c in gravity]
+        self._module("mpm_grid.cu").function("mpm_grid_update")(
+            nx * ny * nz,
+            grid_m,
+            grid_mv,
+            f_ext,
+            grid_v,
+            np.int32(nx),
+            np.int32(ny),
+            np.int32(nz),
+            np.float32(dx),
+            np.float32(dt),
+            *g,
+            np.int32(bound),
+            walls,
+            colliders,
+            np.int32(ncolliders),
+            sdf,
+            np.int32(has_sdf),
+            sdf_params,
+        )
+
+    def g2p(self, x, v, C, F, tau, q, vc, saturation, grid_v, dx: float, dt: float, model: ConstitutiveModel) -> None:
+        """Gather v_p and C_p, update F, return-map, Kirchhoff stress, advect x_p (in place)."""
+        nz, ny, nx = grid_v.shape[1:]
+        self._module("mpm_g2p.cu", model.defines()).function("mpm_g2p")(
+            x.shape[1],
+            x,
+            v,
+            C,
+            F,
+            tau,
+            q,
+            vc,
+            saturation,
+            grid_v,
+            np.int32(nx),
+            np.int32(ny),
+            np.int32(nz),
+            np.float32(dx),
+            np.float32(dt),
+            *model.scalars(),
+        )
+
+    def svd3(self, A):
+        """A (9, P) -> U (9, P), σ (3, P), V (9, P), signed SVD (float32 kernel)."""
+        xp = self.backend.xp
+        n = A.shape[1]
+        U = xp.empty((9, n), dtype=np.float32)
+        V = xp.empty((9, n), dtype=np.float32)
+        s = xp.empty((3, n), dtype=np.float32)
+        self._module("mpm_constitutive.cu").function("mpm_svd3_batch")(n, A, U, s, V)
+        return U, s, V
+
+    def constitutive(self, F, tau, q, vc, saturation, model: ConstitutiveModel) -> None:
+        """F_trial (9, P) -> elastic F after plasticity, tau (6, P), q, vc (in place)."""
+        self._module("mpm_constitutive.cu", model.defines()).function("mpm_constitutive_batch")(
+            F.shape[1], F, tau, q, vc, saturation, *model.scalars()
+        )

@@ -1,0 +1,341 @@
+"""SandSolver: the standalone MPM sand solver (dry sand, or sand with a given saturation per particle).
+
+One step (paper 000 Alg. 1, MPM lines) is three stages, each an ops call:
+
+1. :meth:`SandSolver.p2g` — node mass, momentum (with the stress impulse) and sand volume (Eqs. 24, 25, 27);
+2. :meth:`SandSolver.grid_update` — node velocity with gravity and the external node force ``f_ext``
+   (Eq. 29), then walls and colliders; the fluid coupling writes drag and buoyancy into ``f_ext`` between
+   stages 1 and 2 (zeros for dry sand);
+3. :meth:`SandSolver.g2p` — particle velocity, APIC affine matrix, F update with Drucker–Prager
+   plasticity, Kirchhoff stress for the next P2G, advection (Eq. 30).
+
+The grid is the LBM lattice: shape (nz, ny, nx), node (i, j, k) at ((i + ½) dx, (j + ½) dx, (k + ½) dx),
+domain [0, nx dx] × [0, ny dx] × [0, nz dx].
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from ..backend import Backend, get_backend
+from .boundaries import Collider, DomainWalls, SdfCollider, node_positions, pack_colliders, pack_walls
+from .kernel_ops import KernelOps
+from .params import SandParams
+from .reference import ReferenceOps
+
+__all__ = ["SandSolver", "TimeStepError", "EPS_MAX", "elastic_dt_limit"]
+
+EPS_MAX = 0.64
+"""Maximum sand volume fraction (random close packing; paper 000 Eq. 25, Baranau & Tallarek 2014)."""
+
+_PARTICLE_FIELDS = ("x", "v", "C", "F", "tau", "q", "vc", "saturation", "mass", "volume")
+
+
+class TimeStepError(ValueError):
+    """Δt above the MPM stability limit."""
+
+
+class SandSolver:
+    """MPM sand on a collocated grid.
+
+    Parameters
+    ----------
+    backend: a :class:`~couplekit.backend.Backend` or a backend name (``"auto"``, ``"cuda"``, ``"cpu"``,
+        ``"numpy"``); the numpy backend runs :class:`ReferenceOps`, the others :class:`KernelOps`.
+    shape: grid shape (nz, ny, nx) — the LBM lattice's.
+    dx: node spacing, m.   dt: time step, s (refused when above :meth:`max_stable_dt`).
+    params: the sand material (:class:`SandParams`).
+    positions: particle positions (3, P) in m (see :mod:`couplekit.sand.seeding`).
+    volumes: particle volumes (P,) or one number, m³; particle mass = params.density × volume.
+    velocities: initial particle velocities (3, P) or one 3-vector, m/s (default 0).
+    gravity: m/s², default (0, 0, −9.81) (z up).
+    walls: :class:`DomainWalls` (default: every face separating, friction 0.5, 2 node layers).
+    colliders: analytic :class:`Collider` list; moving ones are advanced by Δt·velocity every step.
+    sdf_collider: optional :class:`SdfCollider` sampled on the nodes.
+    saturation: per-particle saturation S_r,p (P,) driving the cohesion (default 0 = dry).
+    cfl: particle CFL number C_v (Δt ≤ C_v dx / max|v_p|); elastic_cfl: C_e (Δt ≤ C_e dx / c_p).
+    cfl_check_every: check the particle CFL every this many steps (0 = never; a violation raises).
+    host_atomics: cpu backend only — use the non-deterministic atomic P2G (benchmarking).
+    """
+
+    def __init__(
+        self,
+        backend: Backend | str | None,
+        shape: Sequence[int],
+        dx: float,
+        dt: float,
+        params: SandParams,
+        positions: np.ndarray,
+        volumes: np.ndarray | float,
+        velocities: np.ndarray | Sequence[float] | None = None,
+        gravity: Sequence[float] = (0.0, 0.0, -9.81),
+        walls: DomainWalls | None = None,
+        colliders: Sequence[Collider] = (),
+        sdf_collider: SdfCollider | None = None,
+        saturation: np.ndarray | float | None = None,
+        cfl: float = 0.5,
+        elastic_cfl: float = 0.5,
+        cfl_check_every: int = 20,
+        host_atomics: bool = False,
+    ):
+        self.backend = backend if isinstance(backend, Backend) else get_backend(backend)
+        be, xp = self.backend, self.backend.xp
+        self.ops = KernelOps(be, host_atomics=host_atomics) if be.has_kernels else ReferenceOps()
+        self.shape = tuple(int(s) for s in shape)
+        if len(self.shape) != 3 or min(self.shape) < 5:
+            raise ValueError(f"shape must be (nz, ny, nx) with every extent >= 5, got {shape}")
+        if not dx > 0:
+            raise ValueError(f"dx must be > 0, got {dx}")
+        self.dx = float(dx)
+        self.params = params
+        self.model = params.model()
+        self.gravity = tuple(float(g) for g in gravity)
+        self.walls = walls if walls is not None else DomainWalls.uniform("separate", 0.5)
+        self.colliders = list(colliders)
+        self.sdf_collider = sdf_collider
+        self.cfl = float(cfl)
+        self.elastic_cfl = float(elastic_cfl)
+        self.cfl_check_every = int(cfl_check_every)
+        self.time = 0.0
+        self.steps = 0
+
+        pos = np.asarray(positions, dtype=np.float64)
+        if pos.ndim != 2 or pos.shape[0] != 3:
+            raise ValueError(f"positions must have shape (3, P), got {pos.shape}")
+        n = pos.shape[1]
+        if n == 0:
+            raise ValueError("no particles: the sand body is empty")
+        nz, ny, nx = self.shape
+        b = self.walls.bound
+        ext = np.array([nx, ny, nz], dtype=np.float64) * self.dx
+        inside = np.all((pos >= b * self.dx) & (pos <= (ext - b * self.dx)[:, None]), axis=0)
+        if not inside.all():
+            bad = int(np.count_nonzero(~inside))
+            raise ValueError(
+                f"{bad} of {n} particles lie outside the domain interior [{b}·dx, extent − {b}·dx] "
+                f"(extent {ext.tolist()} m, walls take {b} node layers); enlarge the grid or move the body"
+            )
+        vol = np.broadcast_to(np.asarray(volumes, dtype=np.float64), (n,))
+        if np.any(vol <= 0):
+            raise ValueError("particle volumes must be > 0")
+        vel = np.zeros((3, n)) if velocities is None else np.asarray(velocities, dtype=np.float64)
+        vel = np.broadcast_to(vel.reshape(3, -1) if vel.ndim == 1 else vel, (3, n))
+        sat = np.zeros(n) if saturation is None else np.broadcast_to(np.asarray(saturation, dtype=np.float64), (n,))
+
+        f32 = np.float32
+        self.n_particles = n
+        self.x = be.asarray(pos, f32)
+        self.v = be.asarray(vel, f32)
+        self.C = xp.zeros((9, n), dtype=f32)
+        self.F = be.asarray(np.repeat(np.eye(3, dtype=f32).reshape(9, 1), n, axis=1), f32)
+        self.tau = xp.zeros((6, n), dtype=f32)
+        self.q = xp.zeros(n, dtype=f32)
+        self.vc = xp.zeros(n, dtype=f32)
+        self.saturation = be.asarray(sat, f32)
+        self.volume = be.asarray(vol, f32)
+        self.mass = be.asarray(vol * params.density, f32)
+
+        self.grid_m = xp.zeros(self.shape, dtype=f32)
+        self.grid_mv = xp.zeros((3, *self.shape), dtype=f32)
+        self.grid_vol = xp.zeros(self.shape, dtype=f32)
+        self.grid_v = xp.zeros((3, *self.shape), dtype=f32)
+        self.f_ext = xp.zeros((3, *self.shape), dtype=f32)
+        """External node force (N), added by the grid update; the fluid coupling writes drag/buoyancy here."""
+
+        self._walls = be.asarray(pack_walls(self.walls), f32)
+        self._sdf = xp.zeros(self.shape if sdf_collider else (1,), dtype=f32)
+        self._sdf_params = be.asarray(sdf_collider.params() if sdf_collider else np.zeros(5), f32)
+        self._upload_colliders()
+        if sdf_collider is not None:
+            self._sample_sdf()
+        self.set_dt(dt)
+
+    # ------------------------------------------------------------------ time step
+    def max_stable_dt(self) -> float:
+        """Largest stable Δt: min(C_e dx / c_p, C_v dx / max|v_p|) (notes §4; c_p the P-wave speed)."""
+        elastic = self.elastic_cfl * self.dx / self.params.p_wave_speed
+        vmax = self._max_speed()
+        return min(elastic, self.cfl * self.dx / vmax) if vmax > 0 else elastic
+
+    def set_dt(self, dt: float) -> None:
+        """Change Δt; refused (TimeStepError, with the limit) when above :meth:`max_stable_dt`."""
+        if not dt > 0:
+            raise TimeStepError(f"dt must be > 0, got {dt}")
+        self._check_dt(float(dt))
+        self.dt = float(dt)
+
+    def _check_dt(self, dt: float) -> None:
+        limit = self.max_stable_dt()
+        if dt > limit:
+            elastic = self.elastic_cfl * self.dx / self.params.p_wave_speed
+            vmax = self._max_speed()
+            raise TimeStepError(
+                f"MPM time step {dt:.4g} s exceeds the stability limit {limit:.4g} s "
+                f"(elastic: {self.elastic_cfl} dx / c_p = {elastic:.4g} s with c_p = "
+                f"{self.params.p_wave_speed:.4g} m/s; particle CFL: {self.cfl} dx / max|v| with max|v| = "
+                f"{vmax:.4g} m/s); use dt <= {limit:.4g} s, or a softer sand / coarser grid"
+            )
+
+    # ------------------------------------------------------------------ stages
+    def p2g(self) -> None:
+        """Stage 1: particles -> grid mass, momentum (with stress impulse), sand volume."""
+        self.ops.p2g(
+            self.x,
+            self.v,
+            self.C,
+            self.tau,
+            self.mass,
+            self.volume,
+            self.grid_m,
+            self.grid_mv,
+            self.grid_vol,
+            self.dx,
+            self.dt,
+        )
+
+    def grid_update(self) -> None:
+        """Stage 2: node velocities with gravity and ``f_ext``, then boundary conditions."""
+        self.ops.grid_update(
+            self.grid_m,
+            self.grid_mv,
+            self.f_ext,
+            self.grid_v,
+            self.dx,
+            self.dt,
+            self.gravity,
+            self.walls.bound,
+            self._walls,
+            self._colliders,
+            len(self.colliders),
+            self._sdf,
+            int(self.sdf_collider is not None),
+            self._sdf_params,
+        )
+
+    def g2p(self) -> None:
+        """Stage 3: grid -> particles, plasticity, advection; then moving colliders advance."""
+        self.ops.g2p(
+            self.x,
+            self.v,
+            self.C,
+            self.F,
+            self.tau,
+            self.q,
+            self.vc,
+            self.saturation,
+            self.grid_v,
+            self.dx,
+            self.dt,
+            self.model,
+        )
+        self.time += self.dt
+        self.steps += 1
+        moved = False
+        for c in self.colliders:
+            if c.moving:
+                c.centre = c.centre + self.dt * c.velocity
+                moved = True
+        if moved:
+            self._upload_colliders()
+        if self.sdf_collider is not None and self.sdf_collider.moving:
+            self._sample_sdf()
+
+    def step(self, n: int = 1) -> None:
+        """Advance ``n`` MPM steps of Δt."""
+        for _ in range(int(n)):
+            self.p2g()
+            self.grid_update()
+            self.g2p()
+            if self.cfl_check_every and self.steps % self.cfl_check_every == 0:
+                self._check_dt(self.dt)
+
+    # ------------------------------------------------------------------ outputs
+    def particles(self) -> dict[str, np.ndarray]:
+        """Host copies: x, v (3, P); C, F (9, P); tau (6, P); q (hardening), vc, saturation, mass, volume
+        (P,); friction_angle (P,) in degrees."""
+        out = {k: self.backend.to_host(getattr(self, k)) for k in _PARTICLE_FIELDS}
+        out["friction_angle"] = np.degrees(self.model.friction_angle(out["q"]))
+        return out
+
+    def fields(self) -> dict[str, np.ndarray]:
+        """Host copies of the grid fields of the last step: sand_fraction ε = min(ε_max, ΣV_p w_ip / V_cell)
+        (Eq. 25), velocity (3, nz, ny, nx), mass, sand_volume."""
+        vol = self.backend.to_host(self.grid_vol)
+        return {
+            "sand_fraction": np.minimum(EPS_MAX, vol / self.dx**3),
+            "velocity": self.backend.to_host(self.grid_v),
+            "mass": self.backend.to_host(self.grid_m),
+            "sand_volume": vol,
+        }
+
+    def diagnostics(self) -> dict[str, float]:
+        """Float64 sums over particles: mass, momentum_x/y/z, kinetic_energy (½ Σ m v²), max_speed; time, step."""
+        m = self.backend.to_host(self.mass).astype(np.float64)
+        v = self.backend.to_host(self.v).astype(np.float64)
+        mom = (m * v).sum(axis=1)
+        speed = np.sqrt((v**2).sum(axis=0))
+        return {
+            "time": self.time,
+            "step": float(self.steps),
+            "mass": float(m.sum()),
+            "momentum_x": float(mom[0]),
+            "momentum_y": float(mom[1]),
+            "momentum_z": float(mom[2]),
+            "kinetic_energy": float(0.5 * (m * speed**2).sum()),
+            "max_speed": float(speed.max()),
+        }
+
+    # ------------------------------------------------------------------ checkpoint
+    def state(self) -> dict[str, np.ndarray]:
+        """Everything needed for a bitwise restart (host arrays; scalars as 0-d arrays)."""
+        st = {k: self.backend.to_host(getattr(self, k)) for k in _PARTICLE_FIELDS}
+        st["time"] = np.array(self.time)
+        st["steps"] = np.array(self.steps)
+        st["dt"] = np.array(self.dt)
+        st["collider_centres"] = np.array([c.centre for c in self.colliders]).reshape(-1, 3)
+        return st
+
+    def load_state(self, st: dict) -> None:
+        """Restore a :meth:`state` dict (same particle count and colliders)."""
+        n = np.asarray(st["x"]).shape[1]
+        if n != self.n_particles:
+            raise ValueError(f"state has {n} particles, this solver {self.n_particles}")
+        centres = np.asarray(st["collider_centres"]).reshape(-1, 3)
+        if len(centres) != len(self.colliders):
+            raise ValueError(f"state has {len(centres)} colliders, this solver {len(self.colliders)}")
+        for k in _PARTICLE_FIELDS:
+            getattr(self, k)[...] = self.backend.asarray(np.asarray(st[k]), np.float32)
+        self.time = float(st["time"])
+        self.steps = int(st["steps"])
+        self.dt = float(st["dt"])
+        for c, centre in zip(self.colliders, centres, strict=True):
+            c.centre = centre.astype(np.float64)
+        self._upload_colliders()
+        if self.sdf_collider is not None:
+            self._sample_sdf()
+
+    # ------------------------------------------------------------------ helpers
+    def _max_speed(self) -> float:
+        v = self.backend.to_host(self.v)
+        return float(np.sqrt((v.astype(np.float64) ** 2).sum(axis=0).max()))
+
+    def _upload_colliders(self) -> None:
+        self._colliders = self.backend.asarray(pack_colliders(self.colliders), np.float32)
+
+    def _sample_sdf(self) -> None:
+        pts = node_positions(self.shape, self.dx)
+        phi = np.asarray(self.sdf_collider.sdf(pts, self.time), dtype=np.float64).reshape(self.shape)
+        self._sdf = self.backend.asarray(phi, np.float32)
+
+    def __repr__(self) -> str:
+        return (
+            f"SandSolver({self.n_particles} particles, grid {self.shape}, dx={self.dx:g} m, dt={self.dt:g} s, "
+            f"ops={self.ops.name})"
+        )
+
+
+def elastic_dt_limit(params: SandParams, dx: float, elastic_cfl: float = 0.5) -> float:
+    """C_e dx / c_p without building a solver (for schedulers and scene validation)."""
+    return elastic_cfl * dx / params.p_wave_speed

@@ -1,0 +1,40 @@
+// The constitutive pieces of mpm_g2p.cu as stand-alone kernels, so each can be checked against its NumPy
+// reference on its own (and used by tools that need a stress from an F): the float32 SVD, and the
+// constitutive update F_trial -> (F_new, tau, q, vc).  Same defines as mpm_g2p.cu (see mpm_model.cuh).
+#include "common.cuh"
+#include "mpm_model.cuh"
+
+// A (9, n) row-major matrices -> U (9, n), sigma (3, n), V (9, n) with A = U diag(sigma) V^T.
+KERNEL void mpm_svd3_batch(const long long n, const float* RESTRICT A, float* RESTRICT U, float* RESTRICT sigma,
+                           float* RESTRICT V) {
+    FOR_EACH(p, n) {
+        float a[9], u[9], s[3], w[9];
+        for (int j = 0; j < 9; ++j) a[j] = A[j * n + p];
+        mpm_svd3(a, u, s, w);
+        for (int j = 0; j < 9; ++j) {
+            U[j * n + p] = u[j];
+            V[j * n + p] = w[j];
+        }
+        for (int j = 0; j < 3; ++j) sigma[j * n + p] = s[j];
+    }
+}
+
+// F (9, n) in: trial deformation gradient; out: elastic F after plasticity.  tau (6, n) out: Kirchhoff
+// stress (xx, yy, zz, yz, xz, xy).  q, vc (n) in/out: hardening and volume-correction states.
+KERNEL void mpm_constitutive_batch(const long long n, float* RESTRICT F, float* RESTRICT tau, float* RESTRICT q,
+                                   float* RESTRICT vc, const float* RESTRICT saturation, const float mu,
+                                   const float lambda, const float h0, const float h1, const float h2,
+                                   const float h3, const float c_max, const float S1, const float S2,
+                                   const float S3) {
+    FOR_EACH(p, n) {
+        float f[9], U[9], e0, e1, e2, t[6];
+        for (int j = 0; j < 9; ++j) f[j] = F[j * n + p];
+        float qp = q[p], vcp = vc[p];
+        mpm_constitutive(f, U, e0, e1, e2, qp, vcp, saturation[p], mu, lambda, h0, h1, h2, h3, c_max, S1, S2, S3);
+        mpm_kirchhoff(U, e0, e1, e2, mu, lambda, t);
+        for (int j = 0; j < 9; ++j) F[j * n + p] = f[j];
+        for (int j = 0; j < 6; ++j) tau[j * n + p] = t[j];
+        q[p] = qp;
+        vc[p] = vcp;
+    }
+}

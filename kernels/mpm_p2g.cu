@@ -1,0 +1,153 @@
+// MPM particle-to-grid transfer (paper 000 Eqs. 24, 25, 27; notes Sec. 1.2): one fused pass writing the
+// node mass, the node momentum including the stress impulse (MLS-MPM "fused affine"), and the node sand
+// volume.  Grid: the LBM lattice, node (i, j, k) at ((i + 1/2) dx, (j + 1/2) dx, (k + 1/2) dx), arrays
+// (nz, ny, nx) / (3, nz, ny, nx), linear index x + nx*(y + ny*z).
+//
+//   m_i   = sum_p w_ip m_p
+//   (mv)_i = sum_p w_ip [ m_p v_p + A_p (x_i - x_p) ],  A_p = m_p C_p - dt V_p (4/dx^2) tau_p
+//   V_i   = sum_p w_ip V_p
+//
+// tau_p is the Kirchhoff stress (xx, yy, zz, yz, xz, xy) left by the previous G2P, V_p the initial particle
+// volume (Eq. 27 with V^0 and tau = J sigma).
+//
+// The grid arrays are overwritten (no need to clear them first).
+// CUDA: float atomics straight into the grid (order-dependent round-off, as any GPU MPM).
+// Host: deterministic.  Each OpenMP thread scatters its static block of particles into a private grid
+// (scratch: nthreads * 5 * ncell floats, node-interleaved), then the private grids are summed node by
+// node in thread order, so for a fixed thread count the result is bitwise reproducible.
+// Define MPM_HOST_ATOMICS=1 to use `omp atomic` on the host instead (for benchmarking only:
+// not reproducible).
+#include "common.cuh"
+
+#ifndef MPM_HOST_ATOMICS
+#define MPM_HOST_ATOMICS 0
+#endif
+
+// Quadratic B-spline weights along one axis for grid coordinate X (node i at X = i); base node index.
+DEVICE int mpm_bspline(const float X, float w[3], float& f) {
+    const int base = (int)floorf(X - 0.5f);
+    f = X - (float)base;  // in [0.5, 1.5)
+    w[0] = 0.5f * (1.5f - f) * (1.5f - f);
+    w[1] = 0.75f - (f - 1.f) * (f - 1.f);
+    w[2] = 0.5f * (f - 0.5f) * (f - 0.5f);
+    return base;
+}
+
+// Per-particle quantities of the fused scatter: the affine matrix A_p (row-major) and m_p v_p - A_p x_p
+// (relative to the stencil base node, in units of dx) so that the momentum a node receives is
+// w * (mv0 + A dpos) with dpos = (node - base - f) dx.
+#define MPM_P2G_PARTICLE_SETUP                                                                         \
+    const float xp = x[p], yp = x[np + p], zp = x[2 * np + p];                                         \
+    const float Xg = xp * inv_dx - 0.5f, Yg = yp * inv_dx - 0.5f, Zg = zp * inv_dx - 0.5f;             \
+    float wx[3], wy[3], wz[3], fx, fy, fz;                                                             \
+    const int bx = mpm_bspline(Xg, wx, fx), by = mpm_bspline(Yg, wy, fy), bz = mpm_bspline(Zg, wz, fz); \
+    const float mp = mass[p], vp = vol[p];                                                             \
+    const float st = dt * vp * 4.f * inv_dx * inv_dx;                                                  \
+    const float txx = tau[p], tyy = tau[np + p], tzz = tau[2 * np + p];                                \
+    const float tyz = tau[3 * np + p], txz = tau[4 * np + p], txy = tau[5 * np + p];                   \
+    const float A00 = mp * C[p] - st * txx, A01 = mp * C[np + p] - st * txy,                           \
+                A02 = mp * C[2 * np + p] - st * txz;                                                   \
+    const float A10 = mp * C[3 * np + p] - st * txy, A11 = mp * C[4 * np + p] - st * tyy,              \
+                A12 = mp * C[5 * np + p] - st * tyz;                                                   \
+    const float A20 = mp * C[6 * np + p] - st * txz, A21 = mp * C[7 * np + p] - st * tyz,              \
+                A22 = mp * C[8 * np + p] - st * tzz;                                                   \
+    const float mvx = mp * v[p], mvy = mp * v[np + p], mvz = mp * v[2 * np + p];
+
+KERNEL void mpm_p2g(const long long n, const float* RESTRICT x, const float* RESTRICT v,
+                    const float* RESTRICT C, const float* RESTRICT tau, const float* RESTRICT mass,
+                    const float* RESTRICT vol, float* RESTRICT grid_m, float* RESTRICT grid_mv,
+                    float* RESTRICT grid_vol, float* RESTRICT scratch, const int nthreads, const int nx,
+                    const int ny, const int nz, const float dx, const float dt) {
+    const long long np = n;
+    const long long ncell = (long long)nx * ny * nz;
+    const float inv_dx = 1.f / dx;
+#if CK_ON_GPU || MPM_HOST_ATOMICS
+    // the caller clears the grid on CUDA / host-atomics builds (mpm_clear_grid)
+    FOR_EACH(p, n) {
+        MPM_P2G_PARTICLE_SETUP
+        for (int c = 0; c < 3; ++c) {
+            const float dz = ((float)c - fz) * dx;
+            const long long zoff = (long long)(bz + c) * ny;
+            for (int b = 0; b < 3; ++b) {
+                const float dy = ((float)b - fy) * dx;
+                const float wyz = wy[b] * wz[c];
+                const long long row = (long long)nx * (zoff + by + b);
+                for (int a = 0; a < 3; ++a) {
+                    const float ddx = ((float)a - fx) * dx;
+                    const float w = wx[a] * wyz;
+                    const long long i = row + bx + a;
+                    atomic_add(&grid_m[i], w * mp);
+                    atomic_add(&grid_mv[i], w * (mvx + A00 * ddx + A01 * dy + A02 * dz));
+                    atomic_add(&grid_mv[ncell + i], w * (mvy + A10 * ddx + A11 * dy + A12 * dz));
+                    atomic_add(&grid_mv[2 * ncell + i], w * (mvz + A20 * ddx + A21 * dy + A22 * dz));
+                    atomic_add(&grid_vol[i], w * vp);
+                }
+            }
+        }
+    }
+    (void)scratch;
+    (void)nthreads;
+#else
+    CK_PRAGMA(omp parallel num_threads(nthreads)) {
+        const int t = omp_get_thread_num();
+        const int team = omp_get_num_threads();
+        float* RESTRICT g = scratch + (long long)t * 5 * ncell;
+        for (long long k = 0; k < 5 * ncell; ++k) g[k] = 0.f;
+        CK_PRAGMA(omp for schedule(static))
+        for (long long p = 0; p < np; ++p) {
+            MPM_P2G_PARTICLE_SETUP
+            for (int c = 0; c < 3; ++c) {
+                const float dz = ((float)c - fz) * dx;
+                const long long zoff = (long long)(bz + c) * ny;
+                for (int b = 0; b < 3; ++b) {
+                    const float dy = ((float)b - fy) * dx;
+                    const float wyz = wy[b] * wz[c];
+                    const float bxv = mvx + A01 * dy + A02 * dz;
+                    const float byv = mvy + A11 * dy + A12 * dz;
+                    const float bzv = mvz + A21 * dy + A22 * dz;
+                    float* RESTRICT gr = g + 5 * ((long long)nx * (zoff + by + b) + bx);
+                    for (int a = 0; a < 3; ++a) {
+                        const float ddx = ((float)a - fx) * dx;
+                        const float w = wx[a] * wyz;
+                        gr[5 * a + 0] += w * mp;
+                        gr[5 * a + 1] += w * (bxv + A00 * ddx);
+                        gr[5 * a + 2] += w * (byv + A10 * ddx);
+                        gr[5 * a + 3] += w * (bzv + A20 * ddx);
+                        gr[5 * a + 4] += w * vp;
+                    }
+                }
+            }
+        }
+        // implicit barrier: every private grid is complete; sum them in thread order
+        CK_PRAGMA(omp for schedule(static))
+        for (long long i = 0; i < ncell; ++i) {
+            float s0 = 0.f, s1 = 0.f, s2 = 0.f, s3 = 0.f, s4 = 0.f;
+            for (int u = 0; u < team; ++u) {
+                const float* RESTRICT h = scratch + (long long)u * 5 * ncell + 5 * i;
+                s0 += h[0];
+                s1 += h[1];
+                s2 += h[2];
+                s3 += h[3];
+                s4 += h[4];
+            }
+            grid_m[i] = s0;
+            grid_mv[i] = s1;
+            grid_mv[ncell + i] = s2;
+            grid_mv[2 * ncell + i] = s3;
+            grid_vol[i] = s4;
+        }
+    }
+#endif
+}
+
+// Zero the grid accumulators before an atomic P2G (CUDA, host-atomics build); n = ncell.
+KERNEL void mpm_clear_grid(const long long n, float* RESTRICT grid_m, float* RESTRICT grid_mv,
+                           float* RESTRICT grid_vol) {
+    FOR_EACH(i, n) {
+        grid_m[i] = 0.f;
+        grid_mv[i] = 0.f;
+        grid_mv[n + i] = 0.f;
+        grid_mv[2 * n + i] = 0.f;
+        grid_vol[i] = 0.f;
+    }
+}
