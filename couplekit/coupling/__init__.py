@@ -1,0 +1,37 @@
+"""Sand–water–air coupling (paper 000 §§4.3–4.5): volume fractions, buoyancy and implicit drag, the
+phase-field source term S_φ and water retention with the saturation that drives cohesion.
+
+* :mod:`.params` — :class:`CouplingParams` (defaults and their sources) and the node-level closed forms;
+* :mod:`.reference` — :class:`ReferenceOps`, the NumPy specification of every stage;
+* :mod:`.kernel_ops` — :class:`KernelOps`, the same stages compiled from ``kernels/coupling_*.cu``.
+
+Per lockstep step (paper Algorithm 1), with the MPM grid after P2G:
+``bound_water_p2g`` (retention only) → ``fractions`` → ``phase_source`` → ``drag_buoyancy`` (before the
+sand's grid update, which then adds f_ext and applies the boundaries) → ``particle_moisture`` (before the
+sand's G2P, which reads the saturation).  :func:`make_coupling_ops` picks the implementation.
+"""
+
+from __future__ import annotations
+
+from ..backend import Backend
+from .kernel_ops import KernelOps
+from .params import CouplingParams, drag_area, node_terminal_velocity
+from .reference import ReferenceOps
+
+__all__ = [
+    "CouplingParams",
+    "KernelOps",
+    "ReferenceOps",
+    "drag_area",
+    "make_coupling_ops",
+    "node_terminal_velocity",
+]
+
+
+def make_coupling_ops(
+    backend: Backend, params: CouplingParams | None = None, two_phase: bool = True
+) -> KernelOps | ReferenceOps:
+    """Kernel ops on the cuda/cpu backends, the NumPy reference on the numpy backend."""
+    if backend.has_kernels:
+        return KernelOps(backend, params, two_phase)
+    return ReferenceOps(params, two_phase)

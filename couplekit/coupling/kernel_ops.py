@@ -1,0 +1,137 @@
+"""The coupling stages as compiled kernels (cuda or cpu build of ``kernels/coupling_*.cu``).
+
+Same methods and arguments as :class:`couplekit.coupling.reference.ReferenceOps`.  Effects are compile-time
+switches: ``CK_RETENTION`` (bound-water field and Eqs. 55–58) and ``CK_TWO_PHASE`` (φ read; else
+single-phase water).  Arrays of switched-off effects may be ``None``: a 1-element placeholder is passed.
+The bound-water scatter is deterministic on the cpu backend (per-thread private grids summed in thread
+order) and uses float atomics on CUDA.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from ..backend import Backend
+from ..units import Units
+from .params import CouplingParams
+from .reference import drag_scales
+
+__all__ = ["KernelOps"]
+
+
+class KernelOps:
+    """Coupling stages on ``backend`` (``cuda`` or ``cpu``); see the module docstring."""
+
+    def __init__(self, backend: Backend, params: CouplingParams | None = None, two_phase: bool = True):
+        if not backend.has_kernels:
+            raise ValueError(f"KernelOps needs a kernel backend (cuda or cpu), got {backend.name!r}")
+        self.backend = backend
+        self.name = backend.name
+        self.xp = backend.xp
+        self.params = params or CouplingParams()
+        self.two_phase = bool(two_phase)
+        self.retention = bool(self.params.retention)
+        self._defines = {"CK_RETENTION": int(self.retention), "CK_TWO_PHASE": int(self.two_phase)}
+        self._none = self.xp.zeros(1, dtype=np.float32)
+        self._scratch = None
+
+    def _fn(self, source: str, name: str, *keys: str):
+        return self.backend.module(source, {k: self._defines[k] for k in keys}).function(name)
+
+    def _opt(self, a, needed: bool, what: str):
+        if not needed:
+            return self._none
+        if a is None:
+            raise ValueError(f"{what} is required with the effects these ops were built for")
+        return a
+
+    def fractions(
+        self,
+        grid_vol,
+        phi,
+        bound_in,
+        eps_sand,
+        eps_fluid,
+        d_bound,
+        bound_out,
+        water,
+        dx: float,
+        periodic: Sequence[bool] = (True, True, True),
+    ) -> None:
+        """Sand fraction ε and porosity (padded, ghosts filled), dR, R' and the water fraction (MPM grid)."""
+        nz, ny, nx = grid_vol.shape
+        p = self.params
+        ret = self.retention
+        self._fn("coupling_fractions.cu", "coupling_fractions", "CK_RETENTION", "CK_TWO_PHASE")(
+            (nx + 2) * (ny + 2) * (nz + 2), grid_vol, self._opt(phi, self.two_phase, "phi"),
+            self._opt(bound_in, ret, "bound_in"), eps_sand, eps_fluid, self._opt(d_bound, ret, "d_bound"),
+            self._opt(bound_out, ret, "bound_out"), water, np.int32(nx), np.int32(ny), np.int32(nz),
+            *(np.int32(bool(v)) for v in periodic), np.float32(1.0 / dx**3), np.float32(p.eps_max),
+            np.float32(p.r_max), np.float32(p.absorption_rate),
+        )  # fmt: skip
+
+    def drag_buoyancy(
+        self,
+        grid_m,
+        grid_mv,
+        f_ext,
+        force,
+        u,
+        phi,
+        eps_sand,
+        eps_fluid,
+        flags,
+        units: Units,
+        gravity: Sequence[float],
+        rho_h: float,
+        rho_l: float,
+        dt: float | None = None,
+    ) -> None:
+        """Buoyancy into ``f_ext`` (N), implicit drag impulse into ``grid_mv`` and −J/Δt into ``force``."""
+        nz, ny, nx = grid_m.shape
+        p = self.params
+        mass_scale, velocity_scale, dt, dt_lattice = drag_scales(units, dt)
+        self._fn("coupling_drag.cu", "coupling_drag_buoyancy", "CK_TWO_PHASE")(
+            nx * ny * nz, grid_m, grid_mv, f_ext, force, u, self._opt(phi, self.two_phase, "phi"), eps_sand,
+            eps_fluid, flags, np.int32(nx), np.int32(ny), np.int32(nz), np.float32(dt), np.float32(dt_lattice),
+            *(np.float32(g) for g in gravity), np.float32(mass_scale), np.float32(velocity_scale),
+            np.float32(rho_h), np.float32(rho_l), np.float32(p.drag_coefficient), np.float32(p.drag_exponent),
+            np.float32(p.grain_diameter_lattice(units.dx)),
+        )  # fmt: skip
+
+    def phase_source(self, eps, eps_prev, phi, u, flags, d_bound, source) -> None:
+        """S_φ of Eq. 45 (Eq. 57 with retention) on interior FLUID cells of the padded ``source``."""
+        nz, ny, nx = (s - 2 for s in eps.shape)
+        self._fn("coupling_source.cu", "coupling_phase_source", "CK_RETENTION")(
+            nx * ny * nz, eps, eps_prev, phi, u, flags, self._opt(d_bound, self.retention, "d_bound"), source,
+            np.int32(nx), np.int32(ny), np.int32(nz),
+        )  # fmt: skip
+
+    def bound_water_p2g(self, x, r, vol, bound, dx: float) -> None:
+        """R_i = (1/V_cell) Σ_p r_p V_p N_i(x_p) (Eq. 53), overwriting ``bound``."""
+        nz, ny, nx = bound.shape
+        ncell = nx * ny * nz
+        mod = self.backend.module("coupling_moisture.cu", {"CK_RETENTION": int(self.retention)})
+        if self.backend.name == "cuda":
+            mod.function("coupling_clear")(ncell, bound)
+            scratch, threads = self._none, 1
+        else:
+            threads = mod.num_threads()
+            if self._scratch is None or self._scratch.size != threads * ncell:
+                self._scratch = np.zeros(threads * ncell, dtype=np.float32)
+            scratch = self._scratch
+        mod.function("coupling_bound_water_p2g")(
+            x.shape[1], x, r, vol, bound, scratch, np.int32(threads), np.int32(nx), np.int32(ny), np.int32(nz),
+            np.float32(dx),
+        )  # fmt: skip
+
+    def particle_moisture(self, x, r, saturation, water, d_bound, grid_vol, dx: float) -> None:
+        """Saturation S_p (Eq. 59) and, with retention, the moisture update r_p (Eq. 58)."""
+        nz, ny, nx = water.shape
+        ret = self.retention
+        self._fn("coupling_moisture.cu", "coupling_particle_moisture", "CK_RETENTION")(
+            x.shape[1], x, self._opt(r, ret, "r"), saturation, water, self._opt(d_bound, ret, "d_bound"),
+            self._opt(grid_vol, ret, "grid_vol"), np.int32(nx), np.int32(ny), np.int32(nz), np.float32(dx),
+        )  # fmt: skip

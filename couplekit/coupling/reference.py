@@ -1,0 +1,252 @@
+"""NumPy reference of the coupling stages: the executable specification the kernels are tested against.
+
+Written for clarity in float64, vectorised, with paper 000's equation numbers; independent of the kernels
+(its own B-spline stencil, its own ghost mapping).  Inputs and outputs are the solvers' float32 arrays,
+written in place like the kernels.  Layouts:
+
+* fluid fields padded with one ghost layer (``(nz+2, ny+2, nx+2)``, vectors ``(3, nz+2, ny+2, nx+2)``;
+  interior cell ``(z, y, x)`` at ``[z+1, y+1, x+1]``), flags ``uint8`` (0 = FLUID) as in
+  :mod:`couplekit.fluid.grid`;
+* MPM grid arrays unpadded (``(nz, ny, nx)``, ``(3, nz, ny, nx)``), node ``(i, j, k)`` at
+  ``((i+½)dx, (j+½)dx, (k+½)dx)`` — the centre of the same LBM cell;
+* particles ``x (3, P)``, ``r``, ``vol``, ``saturation`` ``(P,)``.
+
+Units: the sand grid is in SI (kg, kg·m/s, m³, N; couplekit.sand); the fluid in lattice units (dx = dt = 1,
+density 1 = the reference density of :class:`couplekit.units.Units`).  The drag converts at the one
+interface with ``mass_scale`` = ρ_ref dx³ (kg per lattice mass unit) and ``velocity_scale`` = dx/dt_LBM.
+
+Readings of the extracted paper text chosen here (the PDF extraction garbles accents):
+
+* Eq. 54's effective porosity is written ε̃ = 1 − ε − R (the tilde is lost in the text); Eq. 57 and Eq. 59
+  use ε̃; Eq. 55's "ε_i φ_i" is the free water ε̃_i φ_i (the outer min "caps the intake at the currently
+  available fluid volume").
+* Eq. 55's R_a Δt r_max ε with Δt = 1 lattice step (Table 1 gives R_a "in dimensionless space").
+* The drag's (ε_i^n)^(−χ) is the fluid fraction 1 − ε (Eq. 33) — retention only replaces it in Eqs. 39
+  and 16; the fluid mass the exchange moves is ρ ε̃ V_cell, the mass the fluid solver accelerates.
+* φ is clamped to [0, 1] where it measures water (density, Eq. 55, Eq. 59), not in the source term
+  (so that the source conserves Σ ε̃ φ exactly, see :meth:`ReferenceOps.phase_source`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from ..lattice import C27, W27
+from ..units import Units
+from .params import CouplingParams
+
+__all__ = ["ReferenceOps", "bspline_stencil", "drag_scales", "source_index"]
+
+
+def drag_scales(units: Units, dt: float | None = None) -> tuple[float, float, float, float]:
+    """(mass_scale kg, velocity_scale m/s, dt s, dt in LBM steps) of the drag's unit conversion."""
+    dt = float(units.dt if dt is None else dt)
+    return units.rho * units.dx**3, units.dx / units.dt, dt, dt / units.dt
+
+
+def source_index(n: int, periodic: bool) -> np.ndarray:
+    """Interior node (0-based) each padded coordinate 0 … n+1 reads: wrap if periodic, else clamp."""
+    padded = np.arange(n + 2) - 1
+    return np.mod(padded, n) if periodic else np.clip(padded, 0, n - 1)
+
+
+def bspline_stencil(x: np.ndarray, dx: float, shape: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """Node linear indices (P, 27) and quadratic B-spline weights N_i(x_p) (P, 27) of particles x (3, P).
+
+    N(s) = ¾ − s² for |s| < ½, ½(3/2 − |s|)² for ½ ≤ |s| < 3/2, s = x/dx − ½ − i (node i at (i + ½) dx).
+    """
+    nz, ny, nx = shape
+    X = x.astype(np.float64) / dx - 0.5
+    base = np.floor(X - 0.5).astype(np.int64)  # (3, P)
+    offs = np.arange(3)
+    nodes = base[:, :, None] + offs  # (3, P, 3)
+    s = np.abs(nodes - X[:, :, None])
+    w1 = np.where(s < 0.5, 0.75 - s**2, np.where(s < 1.5, 0.5 * (1.5 - s) ** 2, 0.0))
+    # 27 = (a, b, c) with a fastest (x)
+    a, b, c = np.meshgrid(offs, offs, offs, indexing="ij")
+    a, b, c = c.ravel(), b.ravel(), a.ravel()
+    index = nodes[0][:, a] + nx * (nodes[1][:, b] + ny * nodes[2][:, c])
+    weight = w1[0][:, a] * w1[1][:, b] * w1[2][:, c]
+    return index, weight
+
+
+def _interior(a: np.ndarray) -> np.ndarray:
+    return a[..., 1:-1, 1:-1, 1:-1]
+
+
+def _isotropic_gradient(s: np.ndarray, flags: np.ndarray) -> np.ndarray:
+    """Eq. 18 on interior cells: ∇s = Σ_j 3 w_j c_j s(x + c_j), non-FLUID neighbours replaced by the centre."""
+    pz, py, px = s.shape
+    centre = _interior(s).astype(np.float64)
+    grad = np.zeros((3,) + centre.shape)
+    for j in range(1, 27):
+        cx, cy, cz = (int(v) for v in C27[j])
+        sl = (slice(1 + cz, pz - 1 + cz), slice(1 + cy, py - 1 + cy), slice(1 + cx, px - 1 + cx))
+        nb = np.where(flags[sl] == 0, s[sl].astype(np.float64), centre)
+        for d in range(3):
+            grad[d] += 3.0 * W27[j] * C27[j, d] * (nb - centre)
+    return grad
+
+
+class ReferenceOps:
+    """The coupling stages in NumPy; same methods and arguments as :class:`~couplekit.coupling.kernel_ops.KernelOps`.
+
+    ``params``: the coupling constants (retention on/off included); ``two_phase``: φ is read (else the
+    fluid is single-phase water, φ ≡ 1, ρ ≡ ρ_h).  Arrays of switched-off effects may be ``None``.
+    """
+
+    name = "numpy"
+
+    def __init__(self, params: CouplingParams | None = None, two_phase: bool = True):
+        self.params = params or CouplingParams()
+        self.two_phase = bool(two_phase)
+        self.retention = bool(self.params.retention)
+        self.xp = np
+
+    def _phi_water(self, phi: np.ndarray | None, like: np.ndarray) -> np.ndarray:
+        if not self.two_phase:
+            return np.ones_like(like, dtype=np.float64)
+        return np.clip(phi.astype(np.float64), 0.0, 1.0)
+
+    # ------------------------------------------------------------------ volume fractions, Eqs. 25, 33, 54-56
+    def fractions(
+        self,
+        grid_vol,
+        phi,
+        bound_in,
+        eps_sand,
+        eps_fluid,
+        d_bound,
+        bound_out,
+        water,
+        dx: float,
+        periodic: Sequence[bool] = (True, True, True),
+    ) -> None:
+        """Sand fraction ε and porosity (padded, ghosts filled), and on the MPM grid: bound-water increment
+        dR, bound water R' and the water fraction that drives cohesion (Eq. 59 summand).
+
+        ``periodic`` = (x, y, z): a ghost on a periodic axis copies its periodic image, else its nearest
+        interior node (zero normal gradient).  ``bound_in``: R from :meth:`bound_water_p2g` (retention).
+        """
+        p = self.params
+        nz, ny, nx = grid_vol.shape
+        iz = source_index(nz, periodic[2])[:, None, None]
+        iy = source_index(ny, periodic[1])[None, :, None]
+        ix = source_index(nx, periodic[0])[None, None, :]
+        eps_node = np.minimum(p.eps_max, grid_vol.astype(np.float64) / dx**3)  # Eq. 25
+        ph_node = self._phi_water(_interior(phi) if self.two_phase else None, grid_vol)
+        if self.retention:
+            R = bound_in.astype(np.float64)
+            cap = p.r_max * eps_node  # retention capacity r_max ε
+            free = np.maximum(1.0 - eps_node - R, 0.0)  # Eq. 54 before the update
+            dR = np.minimum(free * ph_node, np.minimum(p.absorption_rate * cap, cap - R))  # Eq. 55 (Δt = 1)
+            R_new = R + dR  # Eq. 56
+            ef_node = 1.0 - eps_node - R_new  # Eq. 54
+            wet = R_new + ef_node * ph_node  # Eq. 59 summand
+            d_bound[...] = dR
+            bound_out[...] = R_new
+        else:
+            ef_node = 1.0 - eps_node  # Eq. 33
+            wet = ef_node * ph_node  # saturation summand of the text after Eq. 28
+        eps_sand[...] = eps_node[iz, iy, ix]
+        eps_fluid[...] = ef_node[iz, iy, ix]
+        water[...] = wet
+
+    # ------------------------------------------------------------------ buoyancy (Eq. 31) + implicit drag (§4.3)
+    def drag_buoyancy(
+        self,
+        grid_m,
+        grid_mv,
+        f_ext,
+        force,
+        u,
+        phi,
+        eps_sand,
+        eps_fluid,
+        flags,
+        units: Units,
+        gravity: Sequence[float],
+        rho_h: float,
+        rho_l: float,
+        dt: float | None = None,
+    ) -> None:
+        """Buoyancy into ``f_ext`` (N), implicit drag impulse J added to ``grid_mv`` (kg·m/s) and −J/Δt to
+        the fluid ``force`` (lattice force density).  See kernels/coupling_drag.cu for the formulas
+        (notes §3.4).
+
+        ``units``: the lattice unit system (dx, LBM step, reference density); ``gravity`` in m/s²;
+        ``rho_h``, ``rho_l`` lattice densities; ``dt``: the MPM step in s (default: the LBM step).
+        """
+        p = self.params
+        mass_scale, velocity_scale, dt, dt_lattice = drag_scales(units, dt)
+        grain_diameter = p.grain_diameter_lattice(units.dx)
+        g = np.asarray(gravity, np.float64).reshape(3, 1, 1, 1)
+        m = grid_m.astype(np.float64)
+        active = (m > 0) & (_interior(flags) == 0)
+        if self.two_phase:
+            rho = rho_l + (rho_h - rho_l) * np.clip(_interior(phi).astype(np.float64), 0.0, 1.0)  # Eq. 4
+        else:
+            rho = np.full(m.shape, float(rho_h))
+        es = _interior(eps_sand).astype(np.float64)
+        ef = _interior(eps_fluid).astype(np.float64)
+        f_b = -es * rho * mass_scale * g  # Eq. 31: −V_cell ε ρ g  (ρ·mass_scale = ρ_SI V_cell)
+        m_safe = np.where(active, m, 1.0)
+        v_star = ((grid_mv.astype(np.float64) + dt * f_b) / m_safe + dt * g) / velocity_scale  # lattice
+        r_star = _interior(u).astype(np.float64) - v_star  # slip u − v before the exchange
+        m_s = m_safe / mass_scale
+        m_f = rho * ef  # fluid mass of the cell, V_cell = 1
+        if grain_diameter > 0:
+            area = 1.5 * es / grain_diameter  # all grains' cross-sections (notes §3.2 option)
+        else:
+            area = np.pi * (3.0 * es / (4.0 * np.pi)) ** (2.0 / 3.0)  # one ball of the node's sand (§4.3)
+        beta = 0.5 * p.drag_coefficient * np.maximum(1.0 - es, 1e-6) ** (-p.drag_exponent) * rho * area
+        k = dt_lattice * beta * (1.0 / m_s + 1.0 / m_f)
+        speed = np.sqrt((r_star**2).sum(axis=0))
+        # backward Euler, implicit in |r| too: k|r'|² + |r'| − |r*| = 0  (notes §3.4)
+        r_new = r_star * 2.0 / (1.0 + np.sqrt(1.0 + 4.0 * k * speed))
+        impulse = (m_s * m_f / (m_s + m_f)) * (r_star - r_new)  # J on the sand = m_s (v' − v*)
+        impulse = np.where(active, impulse, 0.0)
+        f_b = np.where(active, f_b, 0.0)
+        grid_mv[...] = grid_mv.astype(np.float64) + impulse * mass_scale * velocity_scale
+        f_ext[...] = f_b
+        _interior(force)[...] = -impulse / dt_lattice  # F_d = −𝔽_d / V_cell (§4.3)
+
+    # ------------------------------------------------------------------ phase-field source, Eqs. 45, 57
+    def phase_source(self, eps, eps_prev, phi, u, flags, d_bound, source) -> None:
+        """S_φ = −(φ/ε̃)[(ε̃ − ε̃_prev) + u·∇ε̃] (Eq. 45) − dR/ε̃ (Eq. 57, retention) on interior FLUID cells.
+
+        Why this discretisation: with u = 0 the phase-field update φ' = φ + S gives
+        ε̃ φ' = ε̃ φ − φ(ε̃ − ε̃_prev) − dR = ε̃_prev φ − dR, so Σ ε̃ φ (free water) + Σ R (bound water) is
+        carried from one step to the next exactly; the advective part is the continuum identity
+        ε̃ ∇·(φu) + φ u·∇ε̃ = ∇·(ε̃ φ u).
+        """
+        e = _interior(eps).astype(np.float64)
+        grad = _isotropic_gradient(eps, flags)
+        uu = _interior(u).astype(np.float64)
+        advect = (uu * grad).sum(axis=0)
+        inv = 1.0 / np.maximum(e, 1e-6)
+        s = -_interior(phi).astype(np.float64) * inv * ((e - _interior(eps_prev)) + advect)
+        if self.retention:
+            s = s - d_bound.astype(np.float64) * inv
+        _interior(source)[...] = np.where(_interior(flags) == 0, s, 0.0)
+
+    # ------------------------------------------------------------------ particles: Eqs. 53, 58, 59
+    def bound_water_p2g(self, x, r, vol, bound, dx: float) -> None:
+        """R_i = (1/V_cell) Σ_p r_p V_p N_i(x_p)  (Eq. 53), overwriting ``bound``."""
+        index, w = bspline_stencil(x, dx, bound.shape)
+        q = r.astype(np.float64) * vol.astype(np.float64) / dx**3
+        acc = np.zeros(bound.size)
+        np.add.at(acc, index.ravel(), (w * q[:, None]).ravel())
+        bound[...] = acc.reshape(bound.shape)
+
+    def particle_moisture(self, x, r, saturation, water, d_bound, grid_vol, dx: float) -> None:
+        """S_p = Σ_i water_i N_i(x_p) (Eq. 59); with retention r_p += Σ_i dR_i / ε̂_i N_i(x_p) (Eq. 58),
+        ε̂_i = V_i / V_cell unclamped (so that bound water is conserved; see kernels/coupling_moisture.cu)."""
+        index, w = bspline_stencil(x, dx, water.shape)
+        saturation[...] = (w * water.astype(np.float64).ravel()[index]).sum(axis=1)
+        if self.retention:
+            vol = grid_vol.astype(np.float64).ravel()
+            ratio = np.where(vol > 0, d_bound.astype(np.float64).ravel() * dx**3 / np.where(vol > 0, vol, 1.0), 0.0)
+            r[...] = r.astype(np.float64) + (w * ratio[index]).sum(axis=1)

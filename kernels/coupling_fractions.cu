@@ -1,0 +1,96 @@
+// Sand-water coupling, per node: volume fractions (paper 000 Eqs. 25, 33, 54) and, with water retention,
+// the bound-water update (Eqs. 55, 56) and the water volume fraction that drives cohesion (Eq. 59).
+// Spec: couplekit/coupling/reference.py ReferenceOps.fractions.
+//
+// One pass over the PADDED box (nx + 2, ny + 2, nz + 2) of the fluid fields.  Every padded cell takes its
+// values from a source node of the (unpadded) MPM grid: its own node for an interior cell; for a ghost,
+// the periodic image on a periodic axis (px/py/pz = 1) and the nearest interior node otherwise (zero normal
+// gradient).  So eps_sand / eps_fluid come out with their ghost layer filled and stencils may read them
+// directly.  The unpadded outputs (d_bound, bound_out, water) are written by interior cells only.
+//
+//   eps_s  = min(eps_max, V_i / V_cell)                           (Eq. 25, V_i = sum_p V_p N_i(x_p))
+//   eps_f  = 1 - eps_s                                            (Eq. 33, no retention)
+// with retention (CK_RETENTION=1), R_i the bound water rasterised from the particles (Eq. 53):
+//   free   = 1 - eps_s - R_i                                      (Eq. 54 before the update)
+//   dR     = min(max(free, 0) phi, min(R_a dt r_max eps_s, r_max eps_s - R_i))   (Eq. 55, dt = 1 lattice step)
+//   R'     = R_i + dR                                             (Eq. 56)
+//   eps_f  = 1 - eps_s - R'                                       (Eq. 54 after the update: the porosity the
+//                                                                  fluid and the source term see)
+//   water  = R' + eps_f phi    (Eq. 59 summand)   /   water = eps_f phi without retention (text after Eq. 28)
+// phi is the liquid phase field clamped to [0, 1] (CK_TWO_PHASE=1) or 1 (single-phase water, CK_TWO_PHASE=0).
+// variants: CK_RETENTION=0,1 CK_TWO_PHASE=0,1
+#include "common.cuh"
+
+#ifndef CK_RETENTION
+#define CK_RETENTION 0
+#endif
+#ifndef CK_TWO_PHASE
+#define CK_TWO_PHASE 1
+#endif
+
+// interior source index (0-based) of padded coordinate X (0 .. n + 1) along an axis of n interior cells
+DEVICE int coupling_source_index(const int X, const int n, const int periodic) {
+    if (X < 1) return periodic ? n - 1 : 0;
+    if (X > n) return periodic ? 0 : n - 1;
+    return X - 1;
+}
+
+// n = (nx + 2) * (ny + 2) * (nz + 2).  Arrays of switched-off effects (bound_in, d_bound, bound_out without
+// retention; phi single-phase) are not read or written: pass a 1-element array.
+KERNEL void coupling_fractions(const long long n, const float* RESTRICT grid_vol /* size: nx * ny * nz */,
+                               const float* RESTRICT phi /* size >= 1 */,
+                               const float* RESTRICT bound_in /* size >= 1 */,
+                               float* RESTRICT eps_sand /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                               float* RESTRICT eps_fluid /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                               float* RESTRICT d_bound /* size >= 1 */, float* RESTRICT bound_out /* size >= 1 */,
+                               float* RESTRICT water /* size: nx * ny * nz */, const int nx, const int ny,
+                               const int nz, const int px, const int py, const int pz, const float inv_cell_volume,
+                               const float eps_max, const float r_max, const float absorption) {
+    const int PX = nx + 2;
+    const long long PXY = (long long)PX * (ny + 2);
+    FOR_EACH_CELL(X, Y, Z, nx + 2, ny + 2, nz + 2) {
+        const int ix = coupling_source_index(X, nx, px);
+        const int iy = coupling_source_index(Y, ny, py);
+        const int iz = coupling_source_index(Z, nz, pz);
+        const long long node = ix + (long long)nx * (iy + (long long)ny * iz);
+        const long long cell = X + PX * (long long)Y + PXY * Z;
+        const float es = fminf(eps_max, grid_vol[node] * inv_cell_volume);  // Eq. 25
+#if CK_TWO_PHASE
+        const long long image = (ix + 1) + PX * (long long)(iy + 1) + PXY * (iz + 1);
+        const float ph = fminf(fmaxf(phi[image], 0.f), 1.f);
+#else
+        const float ph = 1.f;
+#endif
+#if CK_RETENTION
+        const float R = bound_in[node];
+        const float cap = r_max * es;                                                   // retention capacity
+        const float dR = fminf(fmaxf(1.f - es - R, 0.f) * ph, fminf(absorption * cap, cap - R));  // Eq. 55
+        const float Rn = R + dR;                                                        // Eq. 56
+        const float ef = 1.f - es - Rn;                                                 // Eq. 54
+        const float wet = Rn + ef * ph;                                                 // Eq. 59
+#else
+        const float ef = 1.f - es;  // Eq. 33
+        const float wet = ef * ph;
+#endif
+        eps_sand[cell] = es;
+        eps_fluid[cell] = ef;
+        const int inside = X >= 1 && X <= nx && Y >= 1 && Y <= ny && Z >= 1 && Z <= nz;
+        if (inside) {
+            water[node] = wet;
+#if CK_RETENTION
+            d_bound[node] = dR;
+            bound_out[node] = Rn;
+#endif
+        }
+    }
+#if !CK_RETENTION
+    (void)bound_in;
+    (void)d_bound;
+    (void)bound_out;
+    (void)r_max;
+    (void)absorption;
+#endif
+#if !CK_TWO_PHASE
+    (void)phi;
+#endif
+}

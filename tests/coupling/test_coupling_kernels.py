@@ -1,0 +1,136 @@
+"""Every coupling kernel against its NumPy reference on random but valid states (cpu backend).
+
+Tolerances: the kernels compute in float32, the reference in float64 on the same float32 inputs.
+* fractions: a handful of flops per node (a min, a multiply, two additions) — rtol 1e-6, atol 1e-6
+  (a few float32 ulps of O(1) fractions);
+* drag/buoyancy: powf/sqrtf/cbrt-like chains of ~30 flops and a v* that subtracts nearly equal SI
+  numbers, — rtol 2e-5 and an atol of 1e-5 × the largest magnitude of each output;
+* source: a 26-neighbour gradient sum and a division by ε̃ ≥ 0.18 — atol 1e-6 × max|S| + 1e-7;
+* particle scatter/gather: 27 float32 products per particle and up to ~40 particles per node — rtol 1e-5.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from coupling_states import GRAVITY, RHO_H, RHO_L, SHAPE, UNITS, grid_state, padded, particles
+
+from couplekit.coupling import CouplingParams, KernelOps, ReferenceOps
+
+VARIANTS = [(False, True), (True, True), (False, False), (True, False)]
+IDS = [f"retention={r}-two_phase={t}" for r, t in VARIANTS]
+
+
+def _pair(cpu, retention: bool, two_phase: bool, **kw):
+    params = CouplingParams(retention=retention, **kw)
+    return KernelOps(cpu, params, two_phase), ReferenceOps(params, two_phase)
+
+
+def _fraction_outputs(shape=SHAPE):
+    return {
+        "eps_sand": np.full(padded(shape), -7.0, np.float32),
+        "eps_fluid": np.full(padded(shape), -7.0, np.float32),
+        "d_bound": np.full(shape, -7.0, np.float32),
+        "bound_out": np.full(shape, -7.0, np.float32),
+        "water": np.full(shape, -7.0, np.float32),
+    }
+
+
+def _run_fractions(ops, st, periodic, shape=SHAPE):
+    out = _fraction_outputs(shape)
+    ops.fractions(
+        st["grid_vol"], st["phi"], st["bound"], out["eps_sand"], out["eps_fluid"], out["d_bound"],
+        out["bound_out"], out["water"], UNITS.dx, periodic,
+    )  # fmt: skip
+    return out
+
+
+@pytest.mark.parametrize("retention, two_phase", VARIANTS, ids=IDS)
+@pytest.mark.parametrize("periodic", [(True, True, False), (False, True, True)], ids=["xy-periodic", "yz-periodic"])
+def test_fractions_match_reference(cpu, retention, two_phase, periodic):
+    kops, rops = _pair(cpu, retention, two_phase)
+    st = grid_state(np.random.default_rng(1), kops.params)
+    got, want = _run_fractions(kops, st, periodic), _run_fractions(rops, st, periodic)
+    for key in ("eps_sand", "eps_fluid", "water") + (("d_bound", "bound_out") if retention else ()):
+        np.testing.assert_allclose(got[key], want[key], rtol=1e-6, atol=1e-6, err_msg=key)
+    assert (got["eps_sand"] != -7).all() and (got["eps_fluid"] != -7).all(), "ghost layer left unwritten"
+
+
+def _run_drag(ops, st, eps_sand, eps_fluid, dt=None):
+    grid_mv = st["grid_mv"].copy()
+    f_ext = np.full((3, *SHAPE), -7.0, np.float32)
+    force = np.zeros((3, *padded()), np.float32)
+    ops.drag_buoyancy(
+        st["grid_m"], grid_mv, f_ext, force, st["u"], st["phi"], eps_sand, eps_fluid, st["flags"], UNITS,
+        GRAVITY, RHO_H, RHO_L, dt,
+    )  # fmt: skip
+    return grid_mv, f_ext, force
+
+
+@pytest.mark.parametrize("two_phase", [True, False], ids=["two_phase", "single_phase"])
+@pytest.mark.parametrize("grain", [None, 2e-4], ids=["ball_area", "grain_area"])
+@pytest.mark.parametrize("c_drag", [0.39, 390.0])
+def test_drag_buoyancy_matches_reference(cpu, two_phase, grain, c_drag):
+    kops, rops = _pair(cpu, True, two_phase, grain_diameter=grain, drag_coefficient=c_drag)
+    st = grid_state(np.random.default_rng(2), kops.params)
+    fr = _run_fractions(rops, st, (True, True, False))
+    for dt in (None, UNITS.dt / 4):
+        got = _run_drag(kops, st, fr["eps_sand"], fr["eps_fluid"], dt)
+        want = _run_drag(rops, st, fr["eps_sand"], fr["eps_fluid"], dt)
+        for name, a, b in zip(("grid_mv", "f_ext", "force"), got, want, strict=True):
+            np.testing.assert_allclose(a, b, rtol=2e-5, atol=1e-5 * float(np.abs(b).max()), err_msg=name)
+        assert np.abs(want[2]).max() > 0 and np.abs(want[1]).max() > 0, "state exercises no exchange"
+
+
+@pytest.mark.parametrize("retention", [False, True])
+def test_phase_source_matches_reference(cpu, retention):
+    kops, rops = _pair(cpu, retention, True)
+    rng = np.random.default_rng(3)
+    st = grid_state(rng, kops.params)
+    fr = _run_fractions(rops, st, (True, False, True))
+    eps_prev = (fr["eps_fluid"] + rng.uniform(-0.05, 0.05, fr["eps_fluid"].shape)).astype(np.float32)
+    out = []
+    for ops in (kops, rops):
+        source = np.full(padded(), -7.0, np.float32)
+        ops.phase_source(fr["eps_fluid"], eps_prev, st["phi"], st["u"], st["flags"], fr["d_bound"], source)
+        out.append(source)
+    np.testing.assert_allclose(out[0], out[1], rtol=0, atol=1e-6 * float(np.abs(out[1][1:-1, 1:-1, 1:-1]).max()) + 1e-7)
+    ghosts = np.ones(padded(), bool)
+    ghosts[1:-1, 1:-1, 1:-1] = False
+    assert (out[0][ghosts] == -7).all(), "the source kernel must not touch ghost cells"
+    assert (out[0][1:-1, 1:-1, 1:-1][st["flags"][1:-1, 1:-1, 1:-1] != 0] == 0).all()
+
+
+def test_bound_water_p2g_matches_reference(cpu):
+    kops, rops = _pair(cpu, True, True)
+    pt = particles(np.random.default_rng(4), 3000)
+    got = np.full(SHAPE, -7.0, np.float32)
+    want = np.zeros(SHAPE, np.float32)
+    kops.bound_water_p2g(pt["x"], pt["r"], pt["vol"], got, UNITS.dx)
+    rops.bound_water_p2g(pt["x"], pt["r"], pt["vol"], want, UNITS.dx)
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6 * float(want.max()))
+    # Eq. 53 sums to the particles' bound water over the cell volume (partition of unity)
+    total = float((pt["r"].astype(np.float64) * pt["vol"]).sum() / UNITS.dx**3)
+    assert abs(float(got.astype(np.float64).sum()) - total) <= 1e-5 * total
+    again = np.zeros(SHAPE, np.float32)
+    kops.bound_water_p2g(pt["x"], pt["r"], pt["vol"], again, UNITS.dx)
+    assert np.array_equal(again, got), "host scatter must be bitwise reproducible"
+
+
+@pytest.mark.parametrize("retention", [False, True])
+def test_particle_moisture_matches_reference(cpu, retention):
+    kops, rops = _pair(cpu, retention, True)
+    rng = np.random.default_rng(5)
+    st = grid_state(rng, kops.params)
+    pt = particles(rng, 2000)
+    fr = _run_fractions(rops, st, (True, True, True))
+    res = []
+    for ops in (kops, rops):
+        r = pt["r"].copy()
+        sat = np.full(pt["r"].shape, -7.0, np.float32)
+        ops.particle_moisture(pt["x"], r, sat, fr["water"], fr["d_bound"], st["grid_vol"], UNITS.dx)
+        res.append((r, sat))
+    np.testing.assert_allclose(res[0][1], res[1][1], rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(res[0][0], res[1][0], rtol=1e-5, atol=1e-6)
+    if not retention:
+        assert np.array_equal(res[0][0], pt["r"]), "without retention the moisture ratio is not touched"
