@@ -1,29 +1,29 @@
 // D3Q7 conservative Allen–Cahn phase field (paper 000 §4.4, Eqs. 44–52) and the phase-field quantities the
-// flow needs (normal / gradient Eq. 21, chemical potential Eqs. 22–23).  NumPy twin (the specification):
+// flow needs (gradient Eq. 21, chemical potential Eqs. 22–23).  NumPy twin (the specification):
 // couplekit/fluid/phasefield_reference.py.  Notes: shared/notes/lbm-method.md §1c (scheme), §1d (streaming).
 //
-// Storage (every field padded with ONE ghost layer on every side, as the flow's f):
-//   padded extents NX = nx + 2, NY = ny + 2, NZ = nz + 2; interior cells have padded coordinates 1..nx etc.;
-//   scalar fields (NZ, NY, NX), vectors (3, NZ, NY, NX), h (7, NZ, NY, NX), float32; linear index
-//   c = X + NX*(Y + NY*Z), slot q of cell c at h[q*NCELL + c] with NCELL = NX*NY*NZ.
-//   solid (NZ, NY, NX) uint8: 1 = obstacle cell (never updated); its ghost layer holds the mask of each ghost
-//   cell's image (wrap on periodic axes, nearest interior cell on wall axes; see phasefield.pad_solid).
+// Storage: the flow's padded grid (couplekit/fluid/grid.py).  Every field has ONE ghost layer on every side:
+//   padded extents NX = nx + 2, NY = ny + 2, NZ = nz + 2, interior cells at padded coordinates 1..nx etc.;
+//   scalars (NZ, NY, NX), vectors (3, NZ, NY, NX), h (7, NZ, NY, NX), float32; linear index
+//   c = X + NX*(Y + NY*Z); slot q of cell c at h[q*NCELL + c], NCELL = NX*NY*NZ.
+//   flags (NZ, NY, NX) uint8, the flow's cell flags: FLUID 0 (updated), WALL 1 (solid / wall: no-flux
+//   bounce-back), INFLOW 2 (h enters at equilibrium with the phi and velocity stored at that cell),
+//   OUTFLOW 3 (zero-gradient equilibrium: h enters at equilibrium with this cell's own phi and velocity).
+//   Ghost cells on non-periodic axes must be WALL/INFLOW/OUTFLOW (grid.build_flags, phasefield.pad_flags).
 //
-// Neighbours: the neighbour of an interior cell along d_q is the cell at constant offset, except on a
-// periodic axis where the step out of the interior wraps to the other side (so the kernels never need
-// ghost copies of h).  A link is BLOCKED when it leaves the interior on a wall (non-periodic) axis or ends
-// in a solid cell; blocked links bounce back (no-flux wall for h, halfway in space and in time).
+// Neighbours: constant offsets, except on a periodic axis where a step out of the interior wraps to the
+// other side (the kernels never read h in periodic ghosts, so h needs no halo copy).
 //
-// In-place streaming, esoteric pull (Lehmann 2022; FluidX3D load_f/store_f), one copy of h.
-// Pairs (j, j+1) with j odd and d_{j+1} = -d_j.  Step parity t (odd = t & 1), cell c, m = neighbour along
-// d_j, a = (odd ? j : j+1), b = (odd ? j+1 : j):
-//   load   f_0 = h[0][c];  f_j = h[a][c];  f_{j+1} = h[b][m]
-//   store  h[0][c] = f*_0; h[b][m] = f*_j; h[a][c] = f*_{j+1}   (each value goes where its partner was read)
-//   blocked fix (exact halfway bounce-back): if the link along d_j is blocked, f_{j+1} = h[a][m] (this
-//   cell's own f*_j of the previous step, left in m as in a mailbox); if the link along d_{j+1} is blocked,
-//   f_j = h[b][c] (this cell's own f*_{j+1} of the previous step).  Stores never change.
-// So the populations of step t live at: f_q(c) = h[t odd ? q : opp(q)][c - (q even ? d_q : 0)].
-// phase_set_equilibrium writes a state that loads as h^eq at a given parity (use it to initialise).
+// In-place streaming: the AA pattern (Bailey et al. 2009), exactly as the flow (kernels/lbm_core.cuh):
+//   even parity: f_q = h[q][c]; store h[opp q][c] = f*_q (local).
+//   odd parity:  f_q = h[opp q][c - d_q] (pull); store h[q][c + d_q] = f*_q (push).  Boundary rules, odd only:
+//     pull from WALL c - d_q:              f_q = h[q][c]       (own f*_{opp q} of the even step: bounce-back)
+//     push to WALL c + d_q:                h[opp q][c] = f*_q  (read back at the next even step)
+//     pull from INFLOW p / push to INFLOW m: the equilibrium w_q phi_b (1 + d_q.u_b / cs^2) with phi_b, u_b
+//                                          stored at the inflow cell (written to h[opp q][c] on a push);
+//     OUTFLOW: the same with this cell's u and phi; on a pull phi solves phi = sum of the other populations
+//                                          + its own outflow equilibria; on a push phi = sum_k f*_k.
+// After an even step the populations sit in reversed slots, after an odd step in natural order.
 #include "common.cuh"
 #include "lattice.cuh"
 
@@ -31,6 +31,11 @@
 #ifndef CK_PF_SURFACE_TENSION
 #define CK_PF_SURFACE_TENSION 1
 #endif
+
+#define PF_FLUID 0
+#define PF_WALL 1
+#define PF_INFLOW 2
+#define PF_OUTFLOW 3
 
 // |grad phi|^2 below which the interface normal is set to zero (bulk phases, round-off gradients)
 #define PF_GRAD_EPS2 1e-12f
@@ -48,117 +53,160 @@ CONSTANT float PF_W27_CUBE[27] = {
     1.f / 216, 1.f / 54, 1.f / 216, 1.f / 54, 2.f / 27, 1.f / 54, 1.f / 216, 1.f / 54, 1.f / 216,
 };
 
-// The 7 D3Q7 neighbours of interior cell (X, Y, Z) (padded coordinates) and which links are blocked.
-DEVICE void pf_links(const int X, const int Y, const int Z, const int nx, const int ny, const int nz,
-                     const int px, const int py, const int pz, const unsigned char* RESTRICT solid,
-                     long long nb[7], bool blocked[7]) {
-    const long long sx = 1, sy = (long long)(nx + 2), sz = (long long)(nx + 2) * (long long)(ny + 2);
+// The cell itself (nb[0]) and its 6 D3Q7 neighbours nb[q] = c + d_q, wrapped on periodic axes.
+DEVICE void pf_neighbours(const int X, const int Y, const int Z, const int nx, const int ny, const int nz,
+                          const int px, const int py, const int pz, long long nb[7]) {
+    const long long sy = (long long)(nx + 2), sz = (long long)(nx + 2) * (long long)(ny + 2);
     const long long c = X + sy * Y + sz * Z;
     nb[0] = c;
-    nb[1] = (X == nx && px) ? c - sx * (nx - 1) : c + sx;
-    nb[2] = (X == 1 && px) ? c + sx * (nx - 1) : c - sx;
+    nb[1] = (X == nx && px) ? c - (nx - 1) : c + 1;
+    nb[2] = (X == 1 && px) ? c + (nx - 1) : c - 1;
     nb[3] = (Y == ny && py) ? c - sy * (ny - 1) : c + sy;
     nb[4] = (Y == 1 && py) ? c + sy * (ny - 1) : c - sy;
     nb[5] = (Z == nz && pz) ? c - sz * (nz - 1) : c + sz;
     nb[6] = (Z == 1 && pz) ? c + sz * (nz - 1) : c - sz;
-    blocked[0] = false;
-    blocked[1] = (X == nx && !px) || solid[nb[1]];
-    blocked[2] = (X == 1 && !px) || solid[nb[2]];
-    blocked[3] = (Y == ny && !py) || solid[nb[3]];
-    blocked[4] = (Y == 1 && !py) || solid[nb[4]];
-    blocked[5] = (Z == nz && !pz) || solid[nb[5]];
-    blocked[6] = (Z == 1 && !pz) || solid[nb[6]];
 }
 
-// Pre-collision populations of cell nb[0] at step parity `odd` (esoteric-pull load with the blocked fix).
-DEVICE void pf_load(const float* RESTRICT h, const long long ncell, const long long nb[7],
-                    const bool blocked[7], const int odd, float f[7]) {
+DEVICE int pf_opp(const int q) { return q == 0 ? 0 : ((q & 1) ? q + 1 : q - 1); }
+
+// d_q . u for the D3Q7 direction q
+DEVICE float pf_dot(const int q, const float ux, const float uy, const float uz) {
+    return (float)CX7[q] * ux + (float)CY7[q] * uy + (float)CZ7[q] * uz;
+}
+
+// D3Q7 equilibrium h_q^eq = w_q phi (1 + d_q.u / cs^2), cs^2 = 1/4 (first order in u, notes §1c).
+DEVICE float pf_feq(const int q, const float phi, const float ux, const float uy, const float uz) {
+    return W7[q] * phi * (1.f + pf_dot(q, ux, uy, uz) / CS2_7);
+}
+
+// Pre-collision populations of fluid cell nb[0] at step parity `odd` (AA read rule with boundary rules).
+DEVICE void pf_load(const float* RESTRICT h, const unsigned char* RESTRICT flags, const float* RESTRICT phi,
+                    const float* RESTRICT u, const long long ncell, const long long nb[7], const int odd,
+                    float f[7]) {
     const long long c = nb[0];
+    if (!odd) {
+        PF_UNROLL
+        for (int q = 0; q < 7; ++q) f[q] = h[q * ncell + c];
+        return;
+    }
+    const float ux = u[c], uy = u[ncell + c], uz = u[2 * ncell + c];
     f[0] = h[c];
+    float known = f[0], outflow_weight = 0.f;
     PF_UNROLL
-    for (int j = 1; j < 7; j += 2) {
-        const int a = odd ? j : j + 1, b = odd ? j + 1 : j;
-        f[j] = h[(blocked[j + 1] ? b : a) * ncell + c];
-        f[j + 1] = h[(blocked[j] ? a : b) * ncell + nb[j]];
+    for (int q = 1; q < 7; ++q) {
+        const long long p = nb[pf_opp(q)];  // c - d_q
+        const int kind = flags[p];
+        float v = 0.f;
+        if (kind == PF_FLUID) {
+            v = h[pf_opp(q) * ncell + p];
+        } else if (kind == PF_INFLOW) {
+            v = pf_feq(q, phi[p], u[p], u[ncell + p], u[2 * ncell + p]);
+        } else if (kind == PF_OUTFLOW) {
+            outflow_weight += pf_feq(q, 1.f, ux, uy, uz);
+        } else {
+            v = h[q * ncell + c];
+        }
+        f[q] = v;
+        known += v;
+    }
+    if (outflow_weight != 0.f) {
+        // zero-gradient outflow: phi = known + phi * outflow_weight
+        const float phi_c = known / (1.f - outflow_weight);
+        PF_UNROLL
+        for (int q = 1; q < 7; ++q)
+            if (flags[nb[pf_opp(q)]] == PF_OUTFLOW) f[q] = pf_feq(q, phi_c, ux, uy, uz);
     }
 }
 
-// Inverse of pf_load: write f so that pf_load at the same parity returns it (initialisation only).
-DEVICE void pf_unload(float* RESTRICT h, const long long ncell, const long long nb[7], const bool blocked[7],
-                      const int odd, const float f[7]) {
-    const long long c = nb[0];
-    h[c] = f[0];
-    PF_UNROLL
-    for (int j = 1; j < 7; j += 2) {
-        const int a = odd ? j : j + 1, b = odd ? j + 1 : j;
-        h[(blocked[j + 1] ? b : a) * ncell + c] = f[j];
-        h[(blocked[j] ? a : b) * ncell + nb[j]] = f[j + 1];
-    }
-}
-
-// Esoteric-pull store of post-collision populations of cell nb[0].
-DEVICE void pf_store(float* RESTRICT h, const long long ncell, const long long nb[7], const int odd,
+// AA write rule: post-collision populations of fluid cell nb[0] at step parity `odd`.
+DEVICE void pf_store(float* RESTRICT h, const unsigned char* RESTRICT flags, const float* RESTRICT phi,
+                     const float* RESTRICT u, const long long ncell, const long long nb[7], const int odd,
                      const float f[7]) {
     const long long c = nb[0];
-    h[c] = f[0];
-    PF_UNROLL
-    for (int j = 1; j < 7; j += 2) {
-        const int a = odd ? j : j + 1, b = odd ? j + 1 : j;
-        h[b * ncell + nb[j]] = f[j];
-        h[a * ncell + c] = f[j + 1];
+    if (!odd) {
+        PF_UNROLL
+        for (int q = 0; q < 7; ++q) h[pf_opp(q) * ncell + c] = f[q];
+        return;
     }
-}
-
-// D3Q7 equilibrium h_k^eq = w_k phi (1 + d_k.u / cs^2), cs^2 = 1/4 (first order in u, notes §1c).
-DEVICE void pf_equilibrium(const float phi, const float ux, const float uy, const float uz, float feq[7]) {
-    const float inv_cs2 = 1.f / CS2_7;
-    feq[0] = W7[0] * phi;
-    feq[1] = W7[1] * phi * (1.f + inv_cs2 * ux);
-    feq[2] = W7[2] * phi * (1.f - inv_cs2 * ux);
-    feq[3] = W7[3] * phi * (1.f + inv_cs2 * uy);
-    feq[4] = W7[4] * phi * (1.f - inv_cs2 * uy);
-    feq[5] = W7[5] * phi * (1.f + inv_cs2 * uz);
-    feq[6] = W7[6] * phi * (1.f - inv_cs2 * uz);
+    h[c] = f[0];
+    const float phi_post = f[0] + f[1] + f[2] + f[3] + f[4] + f[5] + f[6];
+    PF_UNROLL
+    for (int q = 1; q < 7; ++q) {
+        const long long m = nb[q];
+        const int kind = flags[m];
+        const int qo = pf_opp(q);
+        if (kind == PF_FLUID) {
+            h[q * ncell + m] = f[q];
+        } else if (kind == PF_INFLOW) {
+            h[qo * ncell + c] = pf_feq(qo, phi[m], u[m], u[ncell + m], u[2 * ncell + m]);
+        } else if (kind == PF_OUTFLOW) {
+            h[qo * ncell + c] = pf_feq(qo, phi_post, u[c], u[ncell + c], u[2 * ncell + c]);
+        } else {
+            h[qo * ncell + c] = f[q];
+        }
+    }
 }
 
 // h := a state that loads (at parity t) as h^eq(phi, u) in every interior fluid cell.  n = nx*ny*nz.
-KERNEL void phase_set_equilibrium(const long long n, float* RESTRICT h, const float* RESTRICT phi,
-                                  const float* RESTRICT u, const unsigned char* RESTRICT solid, const int nx,
-                                  const int ny, const int nz, const int px, const int py, const int pz,
-                                  const int parity) {
+KERNEL void phase_set_equilibrium(const long long n,
+                                  float* RESTRICT h /* size: 7 * (nx + 2) * (ny + 2) * (nz + 2) */,
+                                  const float* RESTRICT phi /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                                  const float* RESTRICT u /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
+                                  const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                                  const int nx, const int ny, const int nz, const int px, const int py,
+                                  const int pz, const int parity) {
     const long long ncell = (long long)(nx + 2) * (ny + 2) * (nz + 2);
     FOR_EACH_CELL(x, y, z, nx, ny, nz) {
         long long nb[7];
-        bool blocked[7];
-        pf_links(x + 1, y + 1, z + 1, nx, ny, nz, px, py, pz, solid, nb, blocked);
+        pf_neighbours(x + 1, y + 1, z + 1, nx, ny, nz, px, py, pz, nb);
         const long long c = nb[0];
-        if (solid[c]) continue;
-        float feq[7];
-        pf_equilibrium(phi[c], u[c], u[ncell + c], u[2 * ncell + c], feq);
-        pf_unload(h, ncell, nb, blocked, parity & 1, feq);
+        if (flags[c] != PF_FLUID) continue;
+        const float p0 = phi[c], ux = u[c], uy = u[ncell + c], uz = u[2 * ncell + c];
+        PF_UNROLL
+        for (int q = 0; q < 7; ++q) {
+            const float feq = pf_feq(q, p0, ux, uy, uz);
+            if (!(parity & 1) || q == 0) {
+                h[q * ncell + c] = feq;
+            } else {
+                const long long p = nb[pf_opp(q)];
+                const int kind = flags[p];
+                if (kind == PF_FLUID) h[pf_opp(q) * ncell + p] = feq;
+                else if (kind == PF_WALL) h[q * ncell + c] = feq;
+                // INFLOW / OUTFLOW links: the load rule computes the value
+            }
+        }
     }
 }
 
-// phi = sum_k h_k (Eq. 47) at parity t on every padded cell: a ghost cell takes the value of its image
-// (wrap on periodic axes, nearest interior cell on wall axes: zero normal gradient, 90 degree contact
-// angle); solid cells get 0.  n = (nx+2)*(ny+2)*(nz+2).
-KERNEL void phase_macroscopic(const long long n, const float* RESTRICT h, float* RESTRICT phi,
-                              const unsigned char* RESTRICT solid, const int nx, const int ny, const int nz,
-                              const int px, const int py, const int pz, const int parity) {
+// phi = sum_k h_k (Eq. 47) at parity t, on every padded cell: a ghost cell takes the value of its image
+// (wrap on periodic axes, nearest interior cell otherwise); WALL/OUTFLOW cells (images) get 0; INFLOW cells
+// keep their phi (the phase value they carry).  n = (nx+2)*(ny+2)*(nz+2).
+KERNEL void phase_macroscopic(const long long n,
+                              const float* RESTRICT h /* size: 7 * (nx + 2) * (ny + 2) * (nz + 2) */,
+                              float* RESTRICT phi /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                              const float* RESTRICT u /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
+                              const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                              const int nx, const int ny, const int nz, const int px, const int py,
+                              const int pz, const int parity) {
     const long long ncell = (long long)(nx + 2) * (ny + 2) * (nz + 2);
     FOR_EACH_CELL(X, Y, Z, nx + 2, ny + 2, nz + 2) {
+        const long long c = X + (long long)(nx + 2) * (Y + (long long)(ny + 2) * Z);
+        if (flags[c] == PF_INFLOW) continue;
         const int xi = X == 0 ? (px ? nx : 1) : (X == nx + 1 ? (px ? 1 : nx) : X);
         const int yi = Y == 0 ? (py ? ny : 1) : (Y == ny + 1 ? (py ? 1 : ny) : Y);
         const int zi = Z == 0 ? (pz ? nz : 1) : (Z == nz + 1 ? (pz ? 1 : nz) : Z);
-        const long long c = X + (long long)(nx + 2) * (Y + (long long)(ny + 2) * Z);
         long long nb[7];
-        bool blocked[7];
-        pf_links(xi, yi, zi, nx, ny, nz, px, py, pz, solid, nb, blocked);
+        pf_neighbours(xi, yi, zi, nx, ny, nz, px, py, pz, nb);
+        const int kind = flags[nb[0]];
         float s = 0.f;
-        if (!solid[nb[0]]) {
+        if (kind == PF_FLUID) {
             float f[7];
-            pf_load(h, ncell, nb, blocked, parity & 1, f);
-            s = f[0] + f[1] + f[2] + f[3] + f[4] + f[5] + f[6];
+            pf_load(h, flags, phi, u, ncell, nb, parity & 1, f);
+            // summed in double as in phase_collide_stream: phi is the populations' sum up to one rounding
+            s = (float)((double)f[0] + (double)f[1] + (double)f[2] + (double)f[3] + (double)f[4] + (double)f[5] +
+                        (double)f[6]);
+        } else if (kind == PF_INFLOW) {
+            s = phi[nb[0]];
         }
         phi[c] = s;
     }
@@ -166,17 +214,19 @@ KERNEL void phase_macroscopic(const long long n, const float* RESTRICT h, float*
 
 // grad phi by the isotropic D3Q27 stencil (Eq. 21) and, with CK_PF_SURFACE_TENSION, the chemical potential
 // mu = 4 beta phi (phi - 1)(phi - 1/2) - kappa lap(phi) (Eq. 22) with the isotropic Laplacian (Eq. 23).
-// A solid neighbour contributes the centre value (zero gradient along that link).  phi must have its
-// ghost layer filled (phase_macroscopic does).  Interior cells only; solid cells get 0.  n = nx*ny*nz.
-// Without CK_PF_SURFACE_TENSION, mu, beta and kappa are not used (pass a 1-element dummy for mu).
-KERNEL void phase_gradients(const long long n, const float* RESTRICT phi, const unsigned char* RESTRICT solid,
-                            float* RESTRICT grad, float* RESTRICT mu, const int nx, const int ny, const int nz,
-                            const float beta, const float kappa) {
+// Only FLUID neighbours contribute their value, any other takes the centre value (zero gradient along that
+// link, as the flow's stencils).  phi must have its ghost layer filled (phase_macroscopic does).  Interior
+// cells only; non-fluid cells get 0.  n = nx*ny*nz.  Without CK_PF_SURFACE_TENSION, mu, beta and kappa
+// are not used (pass a 1-element dummy for mu).
+KERNEL void phase_gradients(const long long n, const float* RESTRICT phi /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                            const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                            float* RESTRICT grad /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */, float* RESTRICT mu /* size >= 1 */,
+                            const int nx, const int ny, const int nz, const float beta, const float kappa) {
     const long long sy = (long long)(nx + 2), sz = (long long)(nx + 2) * (ny + 2);
     const long long ncell = sz * (nz + 2);
     FOR_EACH_CELL(x, y, z, nx, ny, nz) {
         const long long c = (x + 1) + sy * (y + 1) + sz * (z + 1);
-        if (solid[c]) {
+        if (flags[c] != PF_FLUID) {
             grad[c] = 0.f;
             grad[ncell + c] = 0.f;
             grad[2 * ncell + c] = 0.f;
@@ -194,7 +244,7 @@ KERNEL void phase_gradients(const long long n, const float* RESTRICT phi, const 
         for (int k = 0; k < 27; ++k) {
             const int dx = k % 3 - 1, dy = (k / 3) % 3 - 1, dz = k / 9 - 1;
             const long long o = c + dx + sy * dy + sz * dz;
-            const float v = solid[o] ? p0 : phi[o];
+            const float v = flags[o] == PF_FLUID ? phi[o] : p0;
             const float w = PF_W27_CUBE[k];
             gx += (w * dx) * v;
             gy += (w * dy) * v;
@@ -214,65 +264,79 @@ KERNEL void phase_gradients(const long long n, const float* RESTRICT phi, const 
     }
 }
 
-// One phase-field step: load h at parity t (esoteric pull), collide (Eq. 48), store (stream in place).
+// One phase-field step: load h at parity t (AA), collide (Eq. 48), store (stream in place).
 //   h*_k = h_k - omega (h_k - h_k^eq) + (1 - omega/2) H_k + S_k
 //   H_k = w_k d_k . H,  H = (4/W) phi (1 - phi) grad(phi)/|grad(phi)|   (Eqs. 49-50; the (1 - omega/2)
 //         factor makes the recovered counter-flux M H, notes §1c pitfall)
 //   S_k = w_k gamma S_phi  (Eq. 51, source corrected by the volume controller factor gamma, Eq. 52)
 //   omega = 1/tau, tau = M / cs^2 + 1/2 (mobility M, cs^2 = 1/4)
-// grad: grad phi of the same step (phase_gradients); u: fluid velocity; source: S_phi.  n = nx*ny*nz.
-KERNEL void phase_collide_stream(const long long n, float* RESTRICT h, const float* RESTRICT grad,
-                                 const float* RESTRICT u, const float* RESTRICT source,
-                                 const unsigned char* RESTRICT solid, const int nx, const int ny, const int nz,
-                                 const int px, const int py, const int pz, const int parity,
-                                 const float mobility, const float width, const float source_scale) {
+// grad: grad phi of the same step (phase_gradients); u: fluid velocity (and the velocity of INFLOW cells);
+// phi: read only at INFLOW cells (their phase value); source: S_phi.  n = nx*ny*nz.
+KERNEL void phase_collide_stream(const long long n, float* RESTRICT h /* size: 7 * (nx + 2) * (ny + 2) * (nz + 2) */,
+                                 const float* RESTRICT phi /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                                 const float* RESTRICT grad /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
+                                 const float* RESTRICT u /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
+                                 const float* RESTRICT source /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                                 const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                                 const int nx, const int ny, const int nz, const int px, const int py,
+                                 const int pz, const int parity, const float mobility, const float width,
+                                 const float source_scale) {
     const long long ncell = (long long)(nx + 2) * (ny + 2) * (nz + 2);
     const float omega = 1.f / (mobility / CS2_7 + 0.5f);
     const float interface_factor = (1.f - 0.5f * omega) * 4.f / width;
     const int odd = parity & 1;
     FOR_EACH_CELL(x, y, z, nx, ny, nz) {
         long long nb[7];
-        bool blocked[7];
-        pf_links(x + 1, y + 1, z + 1, nx, ny, nz, px, py, pz, solid, nb, blocked);
+        pf_neighbours(x + 1, y + 1, z + 1, nx, ny, nz, px, py, pz, nb);
         const long long c = nb[0];
-        if (solid[c]) continue;
+        if (flags[c] != PF_FLUID) continue;
         float f[7];
-        pf_load(h, ncell, nb, blocked, odd, f);
-        const float phi = f[0] + f[1] + f[2] + f[3] + f[4] + f[5] + f[6];  // Eq. 47
+        pf_load(h, flags, phi, u, ncell, nb, odd, f);
+        // Eq. 47, summed in double: together with the rest population below, Sigma phi changes per step only
+        // by the source and one float32 rounding per cell (float32 sums drifted ~50x more in steady states)
+        const double mass = (double)f[0] + (double)f[1] + (double)f[2] + (double)f[3] + (double)f[4] +
+                            (double)f[5] + (double)f[6];
+        const float p0 = (float)mass;
 
         const float gx = grad[c], gy = grad[ncell + c], gz = grad[2 * ncell + c];
         const float g2 = gx * gx + gy * gy + gz * gz;
         // (1 - omega/2) |H| / |grad phi|, Eq. 49
-        const float hscale = g2 > PF_GRAD_EPS2 ? interface_factor * phi * (1.f - phi) / sqrtf(g2) : 0.f;
+        const float hscale = g2 > PF_GRAD_EPS2 ? interface_factor * p0 * (1.f - p0) / sqrtf(g2) : 0.f;
         const float hx = hscale * gx, hy = hscale * gy, hz = hscale * gz;
         const float s = source_scale * source[c];
-
-        float feq[7];
-        pf_equilibrium(phi, u[c], u[ncell + c], u[2 * ncell + c], feq);
-        const float dH[7] = {0.f, hx, -hx, hy, -hy, hz, -hz};  // d_k . (1 - omega/2) H
+        const float ux = u[c], uy = u[ncell + c], uz = u[2 * ncell + c];
+        double moved = 0.0;
         PF_UNROLL
-        for (int k = 0; k < 7; ++k) f[k] = f[k] - omega * (f[k] - feq[k]) + W7[k] * (dH[k] + s);
-        pf_store(h, ncell, nb, odd, f);
+        for (int q = 1; q < 7; ++q) {
+            const float feq = pf_feq(q, p0, ux, uy, uz);
+            f[q] = f[q] - omega * (f[q] - feq) + W7[q] * (pf_dot(q, hx, hy, hz) + s);
+            moved += (double)f[q];
+        }
+        // rest population from the exact local balance sum_k h*_k = sum_k h_k + S_phi (the H_k sum to zero
+        // and the equilibria to phi); equal to the collision formula for q = 0 up to rounding
+        f[0] = (float)(mass + (double)s - moved);
+        pf_store(h, flags, phi, u, ncell, nb, odd, f);
     }
 }
 
-// Global volume sums for the volume controller (Eq. 52), in float64 over interior fluid cells:
+// Global volume sums for the volume controller (Eq. 52), in float64 over interior FLUID cells:
 //   out[0] += sum phi,  out[1] += sum S_phi.  n = ny*nz (one work item per x row).
-KERNEL void phase_volume_sums(const long long n, const float* RESTRICT phi, const float* RESTRICT source,
-                              const unsigned char* RESTRICT solid, double* RESTRICT out, const int nx,
-                              const int ny, const int nz) {
+KERNEL void phase_volume_sums(const long long n, const float* RESTRICT phi /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                              const float* RESTRICT source /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                              const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                              double* RESTRICT out /* size: 2 */, const int nx, const int ny, const int nz) {
     const long long sy = (long long)(nx + 2), sz = (long long)(nx + 2) * (ny + 2);
     REDUCE_SUM_BEGIN(row, n, acc) {
         const long long c0 = 1 + sy * (row % ny + 1) + sz * (row / ny + 1);
         double s = 0.0;
-        for (int x = 0; x < nx; ++x) s += solid[c0 + x] ? 0.0 : (double)phi[c0 + x];
+        for (int x = 0; x < nx; ++x) s += flags[c0 + x] == PF_FLUID ? (double)phi[c0 + x] : 0.0;
         acc += s;
     }
     REDUCE_SUM_END(out, acc)
     REDUCE_SUM_BEGIN(row, n, acc_s) {
         const long long c0 = 1 + sy * (row % ny + 1) + sz * (row / ny + 1);
         double s = 0.0;
-        for (int x = 0; x < nx; ++x) s += solid[c0 + x] ? 0.0 : (double)source[c0 + x];
+        for (int x = 0; x < nx; ++x) s += flags[c0 + x] == PF_FLUID ? (double)source[c0 + x] : 0.0;
         acc_s += s;
     }
     REDUCE_SUM_END(out + 1, acc_s)
@@ -280,21 +344,25 @@ KERNEL void phase_volume_sums(const long long n, const float* RESTRICT phi, cons
 
 // As phase_volume_sums with the fluid volume fraction eps of the mixture (Eq. 45's epsilon):
 //   out[0] += sum eps phi (the heavy-fluid volume),  out[1] += sum S_phi.  n = ny*nz.
-KERNEL void phase_volume_sums_eps(const long long n, const float* RESTRICT phi, const float* RESTRICT eps,
-                                  const float* RESTRICT source, const unsigned char* RESTRICT solid,
-                                  double* RESTRICT out, const int nx, const int ny, const int nz) {
+KERNEL void phase_volume_sums_eps(const long long n, const float* RESTRICT phi /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                                  const float* RESTRICT eps /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                                  const float* RESTRICT source /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                                  const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                                  double* RESTRICT out /* size: 2 */, const int nx, const int ny,
+                                  const int nz) {
     const long long sy = (long long)(nx + 2), sz = (long long)(nx + 2) * (ny + 2);
     REDUCE_SUM_BEGIN(row, n, acc) {
         const long long c0 = 1 + sy * (row % ny + 1) + sz * (row / ny + 1);
         double s = 0.0;
-        for (int x = 0; x < nx; ++x) s += solid[c0 + x] ? 0.0 : (double)eps[c0 + x] * (double)phi[c0 + x];
+        for (int x = 0; x < nx; ++x)
+            s += flags[c0 + x] == PF_FLUID ? (double)eps[c0 + x] * (double)phi[c0 + x] : 0.0;
         acc += s;
     }
     REDUCE_SUM_END(out, acc)
     REDUCE_SUM_BEGIN(row, n, acc_s) {
         const long long c0 = 1 + sy * (row % ny + 1) + sz * (row / ny + 1);
         double s = 0.0;
-        for (int x = 0; x < nx; ++x) s += solid[c0 + x] ? 0.0 : (double)source[c0 + x];
+        for (int x = 0; x < nx; ++x) s += flags[c0 + x] == PF_FLUID ? (double)source[c0 + x] : 0.0;
         acc_s += s;
     }
     REDUCE_SUM_END(out + 1, acc_s)

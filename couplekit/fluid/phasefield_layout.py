@@ -48,26 +48,43 @@ def as_periodic(periodic: bool | Sequence[bool]) -> Periodic:
     return flags  # type: ignore[return-value]
 
 
-def pad_solid(solid: np.ndarray | None, shape: Sequence[int], periodic: bool | Sequence[bool]) -> np.ndarray:
-    """The padded uint8 solid mask the kernels expect, from an interior mask (or ``None``: no obstacles).
+FLUID, WALL, INFLOW, OUTFLOW = 0, 1, 2, 3
+"""Cell flags, the values of :mod:`couplekit.fluid.grid` (the flow's flags array is passed as is)."""
 
-    Each ghost cell holds the mask of its image: the wrapped cell on a periodic axis, the nearest interior
-    cell on a wall axis (the same images the phase field's ghost values take), so the stencils see
-    consistent obstacles across the boundary.  Domain walls themselves are not marked: the kernels know
-    them from the periodicity flags.
+
+def pad_flags(solid: np.ndarray | None, shape: Sequence[int], periodic: bool | Sequence[bool]) -> np.ndarray:
+    """Padded uint8 cell flags for walls on the non-periodic faces and obstacles ``solid`` (or ``None``).
+
+    Interior obstacle cells and every ghost cell of a non-periodic axis are ``WALL``; a ghost cell of
+    periodic axes only takes the flag of its wrapped image.  This is what
+    :func:`couplekit.fluid.grid.build_flags` gives for periodic and wall faces.
     """
     nz, ny, nx = (int(s) for s in shape)
-    m = np.zeros((nz, ny, nx), dtype=np.uint8) if solid is None else np.asarray(solid).astype(np.uint8)
+    m = np.zeros((nz, ny, nx), dtype=np.uint8) if solid is None else np.asarray(solid).astype(bool) * np.uint8(WALL)
     if m.shape != (nz, ny, nx):
         raise ValueError(f"solid mask has shape {m.shape}, expected the interior shape {(nz, ny, nx)}")
     px, py, pz = as_periodic(periodic)
-    modes = ["wrap" if pz else "edge", "wrap" if py else "edge", "wrap" if px else "edge"]
-    out = m
-    for axis, mode in enumerate(modes):
+    out = m.astype(np.uint8)
+    for axis, per in enumerate((pz, py, px)):
         width = [(0, 0)] * 3
         width[axis] = (1, 1)
-        out = np.pad(out, width, mode=mode)
+        out = np.pad(out, width, mode="wrap") if per else np.pad(out, width, constant_values=WALL)
     return np.ascontiguousarray(out, dtype=np.uint8)
+
+
+def check_flags(flags: np.ndarray, periodic: bool | Sequence[bool]) -> None:
+    """Refuse flags whose ghost cells on a non-periodic axis are FLUID (h would stream into the void)."""
+    px, py, pz = as_periodic(periodic)
+    f = np.asarray(flags)
+    faces = []
+    if not px:
+        faces += [f[:, :, 0], f[:, :, -1]]
+    if not py:
+        faces += [f[:, 0, :], f[:, -1, :]]
+    if not pz:
+        faces += [f[0], f[-1]]
+    if any((face == FLUID).any() for face in faces):
+        raise ValueError("flags: a ghost cell of a non-periodic axis is FLUID; mark it WALL, INFLOW or OUTFLOW")
 
 
 def relaxation_rate(mobility: float) -> float:

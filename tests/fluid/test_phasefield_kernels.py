@@ -20,9 +20,13 @@ import pytest
 from couplekit.backend import get_backend
 from couplekit.backend.errors import BackendUnavailableError
 from couplekit.fluid.phasefield import (
+    FLUID,
+    INFLOW,
+    OUTFLOW,
+    WALL,
     PhaseFieldKernelOps,
     PhaseFieldReferenceOps,
-    pad_solid,
+    pad_flags,
     padded_shape,
 )
 
@@ -39,11 +43,19 @@ def cpu():
         pytest.skip(str(exc))
 
 
-def random_state(seed: int, periodic, solid_fraction: float = 0.15):
-    """A random but valid state: h > 0 with phi in (0, 1.4), |u| < 0.05, obstacles, a small source."""
+def random_state(seed: int, periodic, boundary_kinds=(WALL, INFLOW, OUTFLOW)):
+    """A random but valid state: h > 0 with phi in (0, 1.4), |u| < 0.05, a small source, and flags with
+    interior obstacles plus random WALL / INFLOW / OUTFLOW cells on the ghost layer of non-periodic axes
+    (and a few inside), so every boundary rule of the AA pattern is exercised."""
     rng = np.random.default_rng(seed)
     p = padded_shape(SHAPE)
-    solid = pad_solid(rng.random(SHAPE) < solid_fraction, SHAPE, periodic)
+    flags = pad_flags(rng.random(SHAPE) < 0.12, SHAPE, periodic)
+    kinds = np.asarray(boundary_kinds, dtype=np.uint8)
+    ghost = flags == WALL
+    ghost[1:-1, 1:-1, 1:-1] = False
+    flags[ghost] = rng.choice(kinds, size=int(ghost.sum()))
+    inner = flags[1:-1, 1:-1, 1:-1]
+    inner[(rng.random(SHAPE) < 0.03) & (inner == FLUID)] = rng.choice(kinds)
     h = (rng.random((7, *p)) * 0.2).astype(np.float32)
     phi = rng.random(p).astype(np.float32)
     grad = (rng.random((3, *p)) - 0.5).astype(np.float32)
@@ -51,7 +63,12 @@ def random_state(seed: int, periodic, solid_fraction: float = 0.15):
     u = ((rng.random((3, *p)) - 0.5) * 0.1).astype(np.float32)
     source = ((rng.random(p) - 0.5) * 0.02).astype(np.float32)
     eps = (0.4 + 0.6 * rng.random(p)).astype(np.float32)
-    return dict(h=h, phi=phi, grad=grad, u=u, source=source, solid=solid, eps=eps)
+    return dict(h=h, phi=phi, grad=grad, u=u, source=source, flags=flags, eps=eps)
+
+
+def test_random_states_use_every_flag_kind():
+    s = random_state(1, (False, True, False))
+    assert {FLUID, WALL, INFLOW, OUTFLOW} <= set(np.unique(s["flags"]).tolist())
 
 
 @pytest.mark.parametrize("periodic", PERIODIC_CASES)
@@ -60,7 +77,7 @@ def test_collide_stream_matches_reference(cpu, periodic, parity):
     s = random_state(10 + parity, periodic)
     kernel, ref = PhaseFieldKernelOps(cpu, periodic), PhaseFieldReferenceOps(periodic)
     h_k, h_r = s["h"].copy(), s["h"].copy()
-    args = (s["grad"], s["u"], s["source"], s["solid"], parity, 0.04, 4.5, 0.6)
+    args = (s["phi"], s["grad"], s["u"], s["source"], s["flags"], parity, 0.04, 4.5, 0.6)
     kernel.collide_stream(h_k, *args)
     ref.collide_stream(h_r, *args)
     assert np.abs(h_k - h_r).max() < ATOL
@@ -75,26 +92,29 @@ def test_macroscopic_matches_reference(cpu, periodic, parity):
     kernel, ref = PhaseFieldKernelOps(cpu, periodic), PhaseFieldReferenceOps(periodic)
     phi_k = np.full(padded_shape(SHAPE), -9.0, dtype=np.float32)
     phi_r = phi_k.copy()
-    kernel.macroscopic(s["h"], phi_k, s["solid"], parity)
-    ref.macroscopic(s["h"], phi_r, s["solid"], parity)
+    inflow = s["flags"] == INFLOW
+    phi_k[inflow] = phi_r[inflow] = s["phi"][inflow]  # the phase value inflow cells carry
+    kernel.macroscopic(s["h"], phi_k, s["u"], s["flags"], parity)
+    ref.macroscopic(s["h"], phi_r, s["u"], s["flags"], parity)
     assert np.abs(phi_k - phi_r).max() < ATOL
     assert phi_k.min() >= 0.0  # every cell, ghosts included, was written
+    assert np.array_equal(phi_k[inflow], s["phi"][inflow])  # inflow values are kept
 
 
 @pytest.mark.parametrize("periodic", PERIODIC_CASES[:2])
 @pytest.mark.parametrize("parity", [0, 1])
 def test_set_equilibrium_matches_reference_and_loads_back(cpu, periodic, parity):
-    s = random_state(30 + parity, periodic)
+    s = random_state(30 + parity, periodic, boundary_kinds=(WALL,))
     kernel, ref = PhaseFieldKernelOps(cpu, periodic), PhaseFieldReferenceOps(periodic)
     h_k = np.zeros((7, *padded_shape(SHAPE)), dtype=np.float32)
     h_r = h_k.copy()
-    kernel.set_equilibrium(h_k, s["phi"], s["u"], s["solid"], parity)
-    ref.set_equilibrium(h_r, s["phi"], s["u"], s["solid"], parity)
+    kernel.set_equilibrium(h_k, s["phi"], s["u"], s["flags"], parity)
+    ref.set_equilibrium(h_r, s["phi"], s["u"], s["flags"], parity)
     assert np.abs(h_k - h_r).max() < ATOL
     # loading at the same parity gives back phi = sum_k h_k^eq in fluid cells
     phi = np.zeros(padded_shape(SHAPE), dtype=np.float32)
-    kernel.macroscopic(h_k, phi, s["solid"], parity)
-    fluid = s["solid"][1:-1, 1:-1, 1:-1] == 0
+    kernel.macroscopic(h_k, phi, s["u"], s["flags"], parity)
+    fluid = s["flags"][1:-1, 1:-1, 1:-1] == FLUID
     assert np.abs(phi[1:-1, 1:-1, 1:-1] - s["phi"][1:-1, 1:-1, 1:-1])[fluid].max() < ATOL
 
 
@@ -108,8 +128,8 @@ def test_gradients_match_reference(cpu, periodic, surface_tension):
     g_k, g_r = np.zeros((3, *p), np.float32), np.zeros((3, *p), np.float32)
     mu_k = np.zeros(p, np.float32) if surface_tension else None
     mu_r = np.zeros(p, np.float32) if surface_tension else None
-    kernel.gradients(s["phi"], s["solid"], g_k, mu_k, 0.9, 0.7)
-    ref.gradients(s["phi"], s["solid"], g_r, mu_r, 0.9, 0.7)
+    kernel.gradients(s["phi"], s["flags"], g_k, mu_k, 0.9, 0.7)
+    ref.gradients(s["phi"], s["flags"], g_r, mu_r, 0.9, 0.7)
     assert np.abs(g_k - g_r).max() < ATOL
     assert np.abs(g_k).max() > 0.1
     if surface_tension:
@@ -122,7 +142,7 @@ def test_gradients_refuse_mu_mismatch(cpu):
     grad = np.zeros((3, *padded_shape(SHAPE)), np.float32)
     for ops in (PhaseFieldKernelOps(cpu, True, surface_tension=False), PhaseFieldReferenceOps(True, False)):
         with pytest.raises(ValueError, match="surface_tension"):
-            ops.gradients(s["phi"], s["solid"], grad, s["phi"].copy(), 1.0, 1.0)
+            ops.gradients(s["phi"], s["flags"], grad, s["phi"].copy(), 1.0, 1.0)
 
 
 @pytest.mark.parametrize("with_eps", [False, True])
@@ -130,16 +150,16 @@ def test_volume_sums_match_reference(cpu, with_eps):
     s = random_state(50, (False, True, False))
     kernel, ref = PhaseFieldKernelOps(cpu, (False, True, False)), PhaseFieldReferenceOps((False, True, False))
     eps = s["eps"] if with_eps else None
-    vk, sk = kernel.volume_sums(s["phi"], s["source"], s["solid"], eps)
-    vr, sr = ref.volume_sums(s["phi"], s["source"], s["solid"], eps)
+    vk, sk = kernel.volume_sums(s["phi"], s["source"], s["flags"], eps)
+    vr, sr = ref.volume_sums(s["phi"], s["source"], s["flags"], eps)
     # float64 sums of ~400 float32 values in different orders: agree to ~1e-15 relative
     assert vk == pytest.approx(vr, rel=1e-12, abs=1e-12)
     assert sk == pytest.approx(sr, rel=1e-12, abs=1e-12)
     # ghost and solid cells are excluded: a huge value there must not show up
     phi = s["phi"].copy()
     phi[0, 0, 0] = 1e6
-    phi[s["solid"] == 1] = 1e6
-    assert kernel.volume_sums(phi, s["source"], s["solid"], eps)[0] == pytest.approx(vk, rel=1e-12)
+    phi[s["flags"] != FLUID] = 1e6
+    assert kernel.volume_sums(phi, s["source"], s["flags"], eps)[0] == pytest.approx(vk, rel=1e-12)
 
 
 # ------------------------------------------------------------------------------------------ GPU builds
