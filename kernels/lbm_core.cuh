@@ -76,7 +76,11 @@ DEVICE void lbm_store(float* RESTRICT f, const unsigned char* RESTRICT flags, co
     }
 }
 
-// Eq. 18 isotropic gradient, non-fluid neighbours take the centre value (their term vanishes)
+// a neighbour whose scalar values enter the stencils: fluid, or an outflow ghost (which holds the outlet's
+// reference value, e.g. p = 0: a pressure Dirichlet condition half a link beyond the last cell)
+#define LBM_STENCIL_CELL(fl) ((fl) == FLAG_FLUID || (fl) == FLAG_OUTFLOW)
+
+// Eq. 18 isotropic gradient; wall / inflow / solid neighbours take the centre value (their term vanishes)
 DEVICE void lbm_gradient(const float* RESTRICT s, const unsigned char* RESTRICT flags, const long long c,
                          const int px, const long long pxy, float* RESTRICT g) {
     const float sc = s[c];
@@ -84,7 +88,7 @@ DEVICE void lbm_gradient(const float* RESTRICT s, const unsigned char* RESTRICT 
     LBM_UNROLL
     for (int q = 1; q < 27; ++q) {
         const long long nb = c + LBM_OFFSET(q, px, pxy);
-        const float d = flags[nb] == FLAG_FLUID ? (s[nb] - sc) : 0.f;
+        const float d = LBM_STENCIL_CELL(flags[nb]) ? (s[nb] - sc) : 0.f;
         const float wd = 3.f * W27[q] * d;
         gx += CX27[q] * wd;
         gy += CY27[q] * wd;

@@ -62,7 +62,7 @@ KERNEL void lbm_macro_pressure(const long long n, const float* RESTRICT f /* siz
     }
 }
 
-// pbar = sum_j w_j p(x + c_j)   (Eq. 40); a non-fluid neighbour contributes the centre value
+// pbar = sum_j w_j p(x + c_j)   (Eq. 40); a wall / inflow / solid neighbour contributes the centre value
 KERNEL void lbm_pressure_filter(const long long n, const float* RESTRICT p /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                                 const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                                 float* RESTRICT pbar /* size: (nx + 2) * (ny + 2) * (nz + 2) */, const int nx,
@@ -77,7 +77,7 @@ KERNEL void lbm_pressure_filter(const long long n, const float* RESTRICT p /* si
         LBM_UNROLL
         for (int q = 1; q < 27; ++q) {
             const long long nb = c + LBM_OFFSET(q, px, pxy);
-            acc += W27[q] * (flags[nb] == FLAG_FLUID ? p[nb] - pc : 0.f);
+            acc += W27[q] * (LBM_STENCIL_CELL(flags[nb]) ? p[nb] - pc : 0.f);
         }
         pbar[c] = pc + acc;
     }

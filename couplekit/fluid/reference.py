@@ -19,9 +19,10 @@ writes ``F[ĵ][x] = f*_j``. At an odd parity ``f_j(x) = F[ĵ][x − c_j]`` (pull
   :meth:`ReferenceOps.outflow_fix` sets, after it, what they would have pushed (zero-gradient outflow:
   waves leave with a small reflection instead of the full reflection of an equilibrium or pressure boundary).
 
-Scalar stencils (isotropic gradient Eq. 18, filter Eq. 40) use a neighbour's value only when it is a
-``FLUID`` cell (periodic ghosts hold copies of their images); otherwise the centre value (zero normal
-gradient at walls, note §1f).
+Scalar stencils (isotropic gradient Eq. 18, filter Eq. 40) use a neighbour's value when it is a ``FLUID``
+cell (periodic ghosts hold copies of their images) or an ``OUTFLOW`` ghost (which keeps the outlet reference
+value, p = 0: a pressure Dirichlet condition half a link outside); otherwise (walls, inflow, solids) the
+centre value (zero normal gradient, note §1f).
 """
 
 from __future__ import annotations
@@ -45,12 +46,17 @@ def interior(a: np.ndarray) -> np.ndarray:
     return a[(Ellipsis, *INTERIOR)]
 
 
+def stencil_cell(flags: np.ndarray) -> np.ndarray:
+    """Where a neighbour's own scalar value enters the stencils: fluid cells and outflow ghosts."""
+    return (flags == FLUID) | (flags == OUTFLOW)
+
+
 def isotropic_gradient(s: np.ndarray, flags: np.ndarray) -> np.ndarray:
-    """Eq. 18: ∇s = Σ_j 3 w_j c_j s(x + c_j), with non-fluid neighbours replaced by the centre value."""
+    """Eq. 18: ∇s = Σ_j 3 w_j c_j s(x + c_j), wall/inflow/solid neighbours replaced by the centre value."""
     centre = interior(s).astype(np.float64)
     grad = np.zeros((3,) + centre.shape)
     for j in range(1, 27):
-        nb = np.where(shifted(flags, C27[j]) == FLUID, shifted(s, C27[j]), centre)
+        nb = np.where(stencil_cell(shifted(flags, C27[j])), shifted(s, C27[j]), centre)
         for d in range(3):
             if C27[j, d]:
                 grad[d] += 3.0 * W27[j] * C27[j, d] * (nb - centre)
@@ -58,11 +64,11 @@ def isotropic_gradient(s: np.ndarray, flags: np.ndarray) -> np.ndarray:
 
 
 def local_average(s: np.ndarray, flags: np.ndarray) -> np.ndarray:
-    """Eq. 40: s̄ = Σ_j w_j s(x + c_j), with non-fluid neighbours replaced by the centre value."""
+    """Eq. 40: s̄ = Σ_j w_j s(x + c_j), wall/inflow/solid neighbours replaced by the centre value."""
     centre = interior(s).astype(np.float64)
     out = W27[0] * centre
     for j in range(1, 27):
-        out = out + W27[j] * np.where(shifted(flags, C27[j]) == FLUID, shifted(s, C27[j]), centre)
+        out = out + W27[j] * np.where(stencil_cell(shifted(flags, C27[j])), shifted(s, C27[j]), centre)
     return out
 
 

@@ -1,0 +1,291 @@
+"""FluidSolver: the two-phase (or single-phase) velocity-based LBM of paper 000 §4.1/§4.4, one step at a time.
+
+The solver owns the padded fields (layout: :mod:`couplekit.fluid.grid`) and calls only ops objects, so one
+code path serves every backend: :class:`KernelOps` + :class:`PhaseFieldKernelOps` on cpu/cuda,
+:class:`ReferenceOps` + :class:`PhaseFieldReferenceOps` on numpy. One step (Algorithm 1's LBM stages):
+
+1. (odd parity) periodic and outflow ghosts of f are filled from the interior;
+2. pressure update, Eq. 39, from the current populations and φ (``macro_pressure``);
+3. 27-point filter, Eq. 40 (stored p stays unfiltered; p̄ is used only for the pressure force);
+4. fused forces (Eqs. 15-20) + NOCM-MRT collision + AA streaming of f, writing the velocity u^n;
+5. (odd parity) populations pushed into periodic / outflow ghosts are folded back;
+6. two-phase: phase-field collide + stream with u^n (Eq. 48, volume controller Eq. 52 when η > 0),
+   then φ, ∇φ and the chemical potential of the next step.
+
+Effects (DESIGN "Effects"): a single-phase solver (``phi=None``) allocates no phase field; σ = 0 compiles the
+chemical potential out of both the phase field and the flow kernel; the fluid-fraction / sand-velocity
+inputs (``mixture=True``) and the force-density input (``external_force=True``) exist only when asked for.
+
+Streaming: f uses the AA pattern (reference module docstring), h the phase field's esoteric pull; each is
+self-consistent and they share only the padded field layout.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..backend import Backend
+from .grid import FLUID, INTERIOR, Boundaries, build_flags, outflow_lists, padded_shape, periodic_lists
+from .kernel_ops import KernelOps
+from .reference import ReferenceOps, equilibrium
+
+
+@dataclass(frozen=True)
+class FluidParams:
+    """Lattice-unit parameters of the fluid (Δx = Δt = 1).
+
+    ``rho_h``, ``rho_l``: densities of the heavy and light phase (ρ_h = 1 is the usual reference);
+    ``nu_h``, ``nu_l``: their kinematic viscosities (μ interpolates linearly in φ, Eq. 4);
+    ``gravity``: acceleration (x, y, z); ``sigma``: surface tension (0 compiles the chemical potential out);
+    ``mobility``, ``width``: phase-field mobility M and interface width ξ (cells);
+    ``eta``: volume-controller bound η of Eq. 52 (0 = off). A single-phase solver uses ``rho_h``, ``nu_h``.
+    """
+
+    rho_h: float = 1.0
+    rho_l: float = 1.0
+    nu_h: float = 0.1
+    nu_l: float = 0.1
+    gravity: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    sigma: float = 0.0
+    mobility: float = 0.02
+    width: float = 4.0
+    eta: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("rho_h", "rho_l", "nu_h", "nu_l", "mobility", "width"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"FluidParams.{name} must be > 0, got {getattr(self, name)}")
+        if self.sigma < 0 or self.eta < 0:
+            raise ValueError("FluidParams.sigma and .eta must be >= 0")
+        if len(self.gravity) != 3:
+            raise ValueError(f"FluidParams.gravity needs 3 components, got {self.gravity!r}")
+
+
+class FluidSolver:
+    """Velocity-based D3Q27 NOCM-MRT flow, optionally with the D3Q7 conservative phase field.
+
+    Parameters
+    ----------
+    backend: where to run (:func:`couplekit.backend.get_backend`); numpy runs the reference ops.
+    shape: interior grid ``(nz, ny, nx)``.
+    params: :class:`FluidParams` in lattice units.
+    boundaries: the six faces (:class:`~couplekit.fluid.grid.Boundaries`; default all periodic).
+    solid: interior boolean mask of stationary obstacle cells (e.g. ``sdf < 0`` of a signed distance field).
+    phi: initial phase field ``(nz, ny, nx)`` (1 = heavy); ``None`` makes a single-phase solver.
+    velocity: initial velocity ``(3, nz, ny, nx)`` (x, y, z components), default rest.
+    pressure: initial pressure ``(nz, ny, nx)`` (e.g. hydrostatic), default 0.
+    mixture: allocate the ``fluid_fraction`` (ε, ones) and ``sand_velocity`` (zeros) inputs.
+    external_force: allocate the ``force`` input (force density, e.g. drag; zeros).
+
+    Inputs the coupling fills (padded backend arrays, present only when enabled): ``fluid_fraction``,
+    ``sand_velocity``, ``force``, and ``source_term`` (S_φ of the phase field, two-phase only).
+    """
+
+    def __init__(
+        self,
+        backend: Backend,
+        shape: tuple[int, int, int],
+        params: FluidParams,
+        boundaries: Boundaries | None = None,
+        solid: np.ndarray | None = None,
+        phi: np.ndarray | None = None,
+        velocity: np.ndarray | None = None,
+        pressure: np.ndarray | None = None,
+        mixture: bool = False,
+        external_force: bool = False,
+    ):
+        self.backend = backend
+        self.shape = tuple(int(s) for s in shape)
+        if len(self.shape) != 3 or min(self.shape) < 2:
+            raise ValueError(f"shape must be (nz, ny, nx) with every extent >= 2, got {shape!r}")
+        self.params = params
+        self.boundaries = boundaries or Boundaries()
+        self.two_phase = phi is not None
+        self.surface_tension = self.two_phase and params.sigma > 0
+        self.mixture = bool(mixture)
+        self.external_force = bool(external_force)
+        xp = backend.xp
+        self.xp = xp
+        effects = dict(
+            two_phase=self.two_phase,
+            surface_tension=self.surface_tension,
+            mixture=self.mixture,
+            external_force=self.external_force,
+        )
+        self.ops = KernelOps(backend, **effects) if backend.has_kernels else ReferenceOps(**effects)
+        pshape = padded_shape(self.shape)
+
+        flags, wall_u, wall_phi = build_flags(self.shape, self.boundaries, solid)
+        self._fluid_host = flags[INTERIOR] == FLUID
+        ghost, image = periodic_lists(self.shape, self.boundaries)
+        out_ghost, out_src = outflow_lists(self.shape, flags)
+        self.flags = backend.asarray(flags)
+        self._ghost, self._image = backend.asarray(ghost), backend.asarray(image)
+        self._out_ghost, self._out_src = backend.asarray(out_ghost), backend.asarray(out_src)
+
+        u0 = np.zeros((3,) + self.shape) if velocity is None else np.asarray(velocity, np.float64)
+        if u0.shape != (3,) + self.shape:
+            raise ValueError(f"velocity must have shape {(3,) + self.shape}, got {u0.shape}")
+        u0 = np.where(self._fluid_host[None], u0, 0.0)
+        vel = wall_u.astype(np.float32)
+        vel[(slice(None), *INTERIOR)] = np.where(self._fluid_host[None], u0, vel[(slice(None), *INTERIOR)])
+        f = np.zeros((27,) + pshape, np.float32)
+        f[(slice(None), *INTERIOR)] = equilibrium(u0)  # parity 0: natural order
+        self.f = backend.asarray(f)
+        self.velocity = backend.asarray(vel)
+        p0 = np.zeros(pshape, np.float32)
+        if pressure is not None:
+            p0[INTERIOR] = np.asarray(pressure, np.float32)
+        self.p = backend.asarray(p0)
+        self.pbar = xp.zeros(pshape, dtype=np.float32)
+
+        self.fluid_fraction = xp.ones(pshape, dtype=np.float32) if self.mixture else None
+        self.sand_velocity = xp.zeros((3,) + pshape, dtype=np.float32) if self.mixture else None
+        self.force = xp.zeros((3,) + pshape, dtype=np.float32) if self.external_force else None
+
+        self.step_count = 0
+        self.gamma = 1.0
+        self.phi = self.h = self.grad = self.mu = self.source_term = None
+        if self.two_phase:
+            from . import phasefield as pf  # only two-phase scenes need (and load) the phase field
+
+            self._pf = pf
+            periodic = tuple(self.boundaries.face(a + "-").kind == "periodic" for a in "xyz")
+            self.pf_ops = pf.make_phase_field_ops(backend, periodic, self.surface_tension)
+            self.beta, self.kappa = pf.chemical_potential_coefficients(params.sigma, params.width)
+            phi0 = np.asarray(phi, np.float32)
+            if phi0.shape != self.shape:
+                raise ValueError(f"phi must have the interior shape {self.shape}, got {phi0.shape}")
+            self.pf_solid = backend.asarray(pf.pad_solid(flags[INTERIOR] != FLUID, self.shape, periodic))
+            phi_p = np.zeros(pshape, np.float32)
+            phi_p[INTERIOR] = phi0
+            self.phi = backend.asarray(phi_p)
+            self.grad = xp.zeros((3,) + pshape, dtype=np.float32)
+            self.mu = xp.zeros(pshape, dtype=np.float32) if self.surface_tension else None
+            self.h = xp.zeros((7,) + pshape, dtype=np.float32)
+            self.source_term = xp.zeros(pshape, dtype=np.float32)
+            self.pf_ops.set_equilibrium(self.h, self.phi, self.velocity, self.pf_solid, 0)
+            self._phase_macroscopic()
+        self.volume0 = self._volume()
+
+    # ------------------------------------------------------------------------------------------ stepping
+    def _phase_macroscopic(self) -> None:
+        self.pf_ops.macroscopic(self.h, self.phi, self.pf_solid, self.step_count)
+        self.pf_ops.gradients(self.phi, self.pf_solid, self.grad, self.mu, self.beta, self.kappa)
+
+    def step(self, n: int = 1) -> None:
+        """Advance ``n`` LBM steps."""
+        ops, prm = self.ops, self.params
+        for _ in range(int(n)):
+            parity = self.step_count & 1
+            if parity:
+                ops.halo_copy(self.f, self._ghost, self._image)
+                ops.halo_copy(self.f, self._out_ghost, self._out_src)
+            if self.mixture:
+                ops.halo_copy(self.fluid_fraction, self._ghost, self._image)
+                ops.halo_copy(self.sand_velocity, self._ghost, self._image)
+            ops.macro_pressure(
+                self.f, self.flags, self.velocity, self.phi, self.fluid_fraction, self.sand_velocity, self.p,
+                parity, prm.rho_h, prm.rho_l,
+            )  # fmt: skip
+            ops.halo_copy(self.p, self._ghost, self._image)
+            ops.pressure_filter(self.p, self.flags, self.pbar)
+            ops.halo_copy(self.pbar, self._ghost, self._image)
+            ops.collide_stream(
+                self.f, self.flags, self.velocity, self.phi, self.mu, self.fluid_fraction, self.force, self.pbar,
+                parity, prm.rho_h, prm.rho_l, prm.nu_h, prm.nu_l, *prm.gravity,
+            )  # fmt: skip
+            if parity:
+                ops.fold(self.f, self._ghost, self._image)
+                ops.outflow_fix(self.f, self._out_ghost, self._out_src)
+            if self.two_phase:
+                if prm.eta > 0:
+                    volume, source_sum = self.pf_ops.volume_sums(self.phi, self.source_term, self.pf_solid)
+                    self.gamma = self._pf.volume_controller_gamma(self.volume0, volume, source_sum, prm.eta)
+                self.pf_ops.collide_stream(
+                    self.h, self.grad, self.velocity, self.source_term, self.pf_solid, self.step_count,
+                    prm.mobility, prm.width, self.gamma,
+                )  # fmt: skip
+            self.step_count += 1
+            if self.two_phase:
+                self._phase_macroscopic()
+
+    # ------------------------------------------------------------------------------------------ outputs
+    def _host_interior(self, a) -> np.ndarray:
+        return np.asarray(self.backend.to_host(a)[(Ellipsis, *INTERIOR)])
+
+    def _volume(self) -> float:
+        if self.two_phase:
+            return self.pf_ops.volume_sums(self.phi, self.source_term, self.pf_solid)[0]
+        return float(self._fluid_host.sum())
+
+    def density(self) -> np.ndarray:
+        """ρ(φ) of Eq. 4 on the interior (host float32); ρ_h everywhere for a single-phase solver."""
+        if not self.two_phase:
+            return np.full(self.shape, self.params.rho_h, np.float32)
+        ph = np.clip(self._host_interior(self.phi), 0.0, 1.0)
+        return (self.params.rho_l + (self.params.rho_h - self.params.rho_l) * ph).astype(np.float32)
+
+    def fields(self) -> dict[str, np.ndarray]:
+        """Host copies of the interior fields: velocity (3, nz, ny, nx), pressure, density, solid, and phi
+        (two-phase only). Velocity includes the half-force shift (Eq. 13 with Guo forcing); pressure is the
+        unfiltered p of Eq. 39."""
+        out = {
+            "velocity": self._host_interior(self.velocity) * self._fluid_host[None],
+            "pressure": self._host_interior(self.p),
+            "density": self.density(),
+            "solid": ~self._fluid_host,
+        }
+        if self.two_phase:
+            out["phi"] = self._host_interior(self.phi)
+        return out
+
+    def diagnostics(self) -> dict[str, float]:
+        """Float64 global quantities: fluid_volume (Σφ, or the fluid cell count single-phase),
+        fluid_volume_drift (relative to the start), max_lattice_speed, momentum_x/y/z (Σ ρu) and
+        kinetic_energy (½ Σ ρ|u|²) over fluid cells, step."""
+        u = self._host_interior(self.velocity).astype(np.float64) * self._fluid_host[None]
+        rho = self.density().astype(np.float64) * self._fluid_host
+        volume = self._volume()
+        mom = np.einsum("dzyx,zyx->d", u, rho)
+        return {
+            "step": float(self.step_count),
+            "fluid_volume": volume,
+            "fluid_volume_drift": (volume - self.volume0) / self.volume0 if self.volume0 else 0.0,
+            "max_lattice_speed": float(np.sqrt((u * u).sum(axis=0)).max()),
+            "momentum_x": float(mom[0]),
+            "momentum_y": float(mom[1]),
+            "momentum_z": float(mom[2]),
+            "kinetic_energy": float(0.5 * np.einsum("dzyx,dzyx,zyx->", u, u, rho)),
+        }
+
+    # ------------------------------------------------------------------------------------------ restart
+    _STATE_ARRAYS = ("f", "velocity", "p", "h", "fluid_fraction", "sand_velocity", "force", "source_term")
+
+    def state(self) -> dict[str, np.ndarray]:
+        """Everything a bitwise-exact restart needs (host NumPy copies of padded arrays, plus counters)."""
+        out = {k: self.backend.to_host(getattr(self, k)) for k in self._STATE_ARRAYS if getattr(self, k) is not None}
+        out["step_count"] = np.array(self.step_count, np.int64)
+        out["gamma"] = np.array(self.gamma, np.float64)
+        out["volume0"] = np.array(self.volume0, np.float64)
+        return out
+
+    def load_state(self, state: dict[str, np.ndarray]) -> None:
+        """Restore a :meth:`state` of a solver built with the same shape, parameters and effects."""
+        for k in self._STATE_ARRAYS:
+            mine = getattr(self, k)
+            if mine is None:
+                continue
+            if k not in state:
+                raise KeyError(f"state has no {k!r}: it was saved by a solver with other effects")
+            arr = np.asarray(state[k])
+            if arr.shape != tuple(mine.shape):
+                raise ValueError(f"state[{k!r}] has shape {arr.shape}, this solver needs {tuple(mine.shape)}")
+            setattr(self, k, self.backend.asarray(arr.astype(np.float32)))
+        self.step_count = int(state["step_count"])
+        self.gamma = float(state["gamma"])
+        self.volume0 = float(state["volume0"])
+        if self.two_phase:
+            self._phase_macroscopic()
