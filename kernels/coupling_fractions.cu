@@ -11,13 +11,18 @@
 //   eps_s  = min(eps_max, V_i / V_cell)                           (Eq. 25, V_i = sum_p V_p N_i(x_p))
 //   eps_f  = 1 - eps_s                                            (Eq. 33, no retention)
 // with retention (CK_RETENTION=1), R_i the bound water rasterised from the particles (Eq. 53):
-//   free   = 1 - eps_s - R_i                                      (Eq. 54 before the update)
+//   free   = min(1 - eps_s - R_i, eps_prev)                       (Eq. 54 before the update, see below)
 //   dR     = min(max(free, 0) phi, min(R_a dt r_max eps_s, r_max eps_s - R_i))   (Eq. 55, dt = 1 lattice step)
 //   R'     = R_i + dR                                             (Eq. 56)
 //   eps_f  = 1 - eps_s - R'                                       (Eq. 54 after the update: the porosity the
 //                                                                  fluid and the source term see)
 //   water  = R' + eps_f phi    (Eq. 59 summand)   /   water = eps_f phi without retention (text after Eq. 28)
 // phi is the liquid phase field clamped to [0, 1] (CK_TWO_PHASE=1) or 1 (single-phase water, CK_TWO_PHASE=0).
+// Eq. 55's "currently available fluid volume" eps~ phi: the phase field holds eps_prev phi of free water
+// (eps_prev = last step's porosity, the one the last source term conserved), while R_i re-rasterised from
+// the moved particles may differ from last step's R'; taking the smaller porosity keeps dR at most the free
+// water actually present, so phi never goes negative (with 1 - eps_s - R_i alone it can, by ~1e-4).
+// eps_prev must not alias eps_fluid.
 // variants: CK_RETENTION=0,1 CK_TWO_PHASE=0,1
 #include "common.cuh"
 
@@ -35,11 +40,12 @@ DEVICE int coupling_source_index(const int X, const int n, const int periodic) {
     return X - 1;
 }
 
-// n = (nx + 2) * (ny + 2) * (nz + 2).  Arrays of switched-off effects (bound_in, d_bound, bound_out without
-// retention; phi single-phase) are not read or written: pass a 1-element array.
+// n = (nx + 2) * (ny + 2) * (nz + 2).  Arrays of switched-off effects (bound_in, eps_prev, d_bound, bound_out
+// without retention; phi single-phase) are not read or written: pass a 1-element array.
 KERNEL void coupling_fractions(const long long n, const float* RESTRICT grid_vol /* size: nx * ny * nz */,
                                const float* RESTRICT phi /* size >= 1 */,
                                const float* RESTRICT bound_in /* size >= 1 */,
+                               const float* RESTRICT eps_prev /* size >= 1 */,
                                float* RESTRICT eps_sand /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                                float* RESTRICT eps_fluid /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                                float* RESTRICT d_bound /* size >= 1 */, float* RESTRICT bound_out /* size >= 1 */,
@@ -54,9 +60,9 @@ KERNEL void coupling_fractions(const long long n, const float* RESTRICT grid_vol
         const int iz = coupling_source_index(Z, nz, pz);
         const long long node = ix + (long long)nx * (iy + (long long)ny * iz);
         const long long cell = X + PX * (long long)Y + PXY * Z;
+        const long long image = (ix + 1) + PX * (long long)(iy + 1) + PXY * (iz + 1);
         const float es = fminf(eps_max, grid_vol[node] * inv_cell_volume);  // Eq. 25
 #if CK_TWO_PHASE
-        const long long image = (ix + 1) + PX * (long long)(iy + 1) + PXY * (iz + 1);
         const float ph = fminf(fmaxf(phi[image], 0.f), 1.f);
 #else
         const float ph = 1.f;
@@ -64,13 +70,17 @@ KERNEL void coupling_fractions(const long long n, const float* RESTRICT grid_vol
 #if CK_RETENTION
         const float R = bound_in[node];
         const float cap = r_max * es;                                                   // retention capacity
-        const float dR = fminf(fmaxf(1.f - es - R, 0.f) * ph, fminf(absorption * cap, cap - R));  // Eq. 55
+        const float free_water = fmaxf(fminf(1.f - es - R, eps_prev[image]), 0.f) * ph;
+        const float dR = fminf(free_water, fminf(absorption * cap, cap - R));  // Eq. 55
         const float Rn = R + dR;                                                        // Eq. 56
         const float ef = 1.f - es - Rn;                                                 // Eq. 54
         const float wet = Rn + ef * ph;                                                 // Eq. 59
 #else
         const float ef = 1.f - es;  // Eq. 33
         const float wet = ef * ph;
+#endif
+#if !CK_TWO_PHASE && !CK_RETENTION
+        (void)image;
 #endif
         eps_sand[cell] = es;
         eps_fluid[cell] = ef;
@@ -85,6 +95,7 @@ KERNEL void coupling_fractions(const long long n, const float* RESTRICT grid_vol
     }
 #if !CK_RETENTION
     (void)bound_in;
+    (void)eps_prev;
     (void)d_bound;
     (void)bound_out;
     (void)r_max;

@@ -52,6 +52,7 @@ class KernelOps:
         grid_vol,
         phi,
         bound_in,
+        eps_prev,
         eps_sand,
         eps_fluid,
         d_bound,
@@ -66,7 +67,7 @@ class KernelOps:
         ret = self.retention
         self._fn("coupling_fractions.cu", "coupling_fractions", "CK_RETENTION", "CK_TWO_PHASE")(
             (nx + 2) * (ny + 2) * (nz + 2), grid_vol, self._opt(phi, self.two_phase, "phi"),
-            self._opt(bound_in, ret, "bound_in"), eps_sand, eps_fluid, self._opt(d_bound, ret, "d_bound"),
+            self._opt(bound_in, ret, "bound_in"), self._opt(eps_prev, ret, "eps_prev"), eps_sand, eps_fluid, self._opt(d_bound, ret, "d_bound"),
             self._opt(bound_out, ret, "bound_out"), water, np.int32(nx), np.int32(ny), np.int32(nz),
             *(np.int32(bool(v)) for v in periodic), np.float32(1.0 / dx**3), np.float32(p.eps_max),
             np.float32(p.r_max), np.float32(p.absorption_rate),

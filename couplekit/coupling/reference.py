@@ -116,6 +116,7 @@ class ReferenceOps:
         grid_vol,
         phi,
         bound_in,
+        eps_prev,
         eps_sand,
         eps_fluid,
         d_bound,
@@ -129,6 +130,8 @@ class ReferenceOps:
 
         ``periodic`` = (x, y, z): a ghost on a periodic axis copies its periodic image, else its nearest
         interior node (zero normal gradient).  ``bound_in``: R from :meth:`bound_water_p2g` (retention).
+        ``eps_prev``: last step's porosity (padded; retention): the free water Eq. 55 may take is
+        min(1 − ε − R, ε̃_prev) φ, the water the phase field actually holds (kernels/coupling_fractions.cu).
         """
         p = self.params
         nz, ny, nx = grid_vol.shape
@@ -140,7 +143,7 @@ class ReferenceOps:
         if self.retention:
             R = bound_in.astype(np.float64)
             cap = p.r_max * eps_node  # retention capacity r_max ε
-            free = np.maximum(1.0 - eps_node - R, 0.0)  # Eq. 54 before the update
+            free = np.maximum(np.minimum(1.0 - eps_node - R, _interior(eps_prev)), 0.0)  # Eq. 54 before the update
             dR = np.minimum(free * ph_node, np.minimum(p.absorption_rate * cap, cap - R))  # Eq. 55 (Δt = 1)
             R_new = R + dR  # Eq. 56
             ef_node = 1.0 - eps_node - R_new  # Eq. 54

@@ -47,6 +47,8 @@ def grid_state(rng: np.random.Generator, params: CouplingParams, shape=SHAPE, un
     eps_c = np.minimum(params.eps_max, eps_raw)
     bound = (rng.uniform(0.0, 1.1, shape) * params.r_max * eps_c).astype(np.float32)
     pz, py, px = padded(shape)
+    # last step's porosity: around the current one, sometimes below it (limits Eq. 55's free water)
+    eps_prev = (rng.uniform(0.3, 1.0, (pz, py, px))).astype(np.float32)
     phi = rng.uniform(-0.05, 1.05, (pz, py, px)).astype(np.float32)
     u = rng.uniform(-0.05, 0.05, (3, pz, py, px)).astype(np.float32)
     return {
@@ -54,6 +56,7 @@ def grid_state(rng: np.random.Generator, params: CouplingParams, shape=SHAPE, un
         "grid_m": grid_m,
         "grid_mv": grid_mv,
         "bound": bound,
+        "eps_prev": eps_prev,
         "phi": phi,
         "u": u,
         "flags": fluid_flags(rng, shape),

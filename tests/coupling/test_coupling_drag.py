@@ -40,7 +40,7 @@ def _fractions(ops, st, shape=SHAPE):
     es = np.zeros(padded(shape), np.float32)
     ef = np.zeros(padded(shape), np.float32)
     water = np.zeros(shape, np.float32)
-    ops.fractions(st["grid_vol"], st["phi"], None, es, ef, None, None, water, UNITS.dx, (True, True, False))
+    ops.fractions(st["grid_vol"], st["phi"], None, None, es, ef, None, None, water, UNITS.dx, (True, True, False))
     return es, ef
 
 
@@ -200,7 +200,7 @@ def _settle(ops, cases, units):
     es = np.zeros(padded(shape), np.float32)
     ef = np.zeros(padded(shape), np.float32)
     water = np.zeros(shape, np.float32)
-    ops.fractions(st["grid_vol"], st["phi"], None, es, ef, None, None, water, units.dx, (True, True, True))
+    ops.fractions(st["grid_vol"], st["phi"], None, None, es, ef, None, None, water, units.dx, (True, True, True))
     rho = RHO_H * units.rho
     g = (0.0, 0.0, -9.81)
     v_t = np.array([node_terminal_velocity(d, rho, 9.81, e, units.dx, ops.params) for d, e in cases])

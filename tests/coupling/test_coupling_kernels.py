@@ -39,7 +39,7 @@ def _fraction_outputs(shape=SHAPE):
 def _run_fractions(ops, st, periodic, shape=SHAPE):
     out = _fraction_outputs(shape)
     ops.fractions(
-        st["grid_vol"], st["phi"], st["bound"], out["eps_sand"], out["eps_fluid"], out["d_bound"],
+        st["grid_vol"], st["phi"], st["bound"], st["eps_prev"], out["eps_sand"], out["eps_fluid"], out["d_bound"],
         out["bound_out"], out["water"], UNITS.dx, periodic,
     )  # fmt: skip
     return out
