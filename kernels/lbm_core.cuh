@@ -8,6 +8,9 @@
 // Odd parity: f_j = F[opp j][c - c_j] (pull), store F[j][c + c_j] = f*_j (push).  Boundary rules, odd only:
 //   neighbour c - c_j is WALL/INFLOW: f_j = F[j][c] + 6 w_j c_j.u_w  (u_w = velocity stored at the wall cell)
 //   push to WALL/INFLOW c + c_j:      F[opp j][c] = f*_j - 6 w_j c_j.u_w
+// The kernels implement them with a link list (lbm_halo.cu): before the odd step lbm_wall_prefill parks the
+// bounced value in the wall cell's slot the pull reads, after it lbm_wall_bounce moves the value pushed into
+// the wall cell back; so the bulk loops carry no per-link flag test.
 // OUTFLOW ghosts are read and pushed to like fluid cells: lbm_halo_copy fills them from their nearest interior
 // cell before an odd step (zero-gradient f*), lbm_outflow_fix sets what they would have pushed after it.
 #pragma once
@@ -19,81 +22,69 @@
 #define FLAG_INFLOW 2
 #define FLAG_OUTFLOW 3
 
+// helpers are force-inlined on the host too: an out-of-line call inside the `omp simd` x loop stops the
+// vectoriser ("statement clobbers memory")
 #if defined(__CUDACC__)
-#define LBM_UNROLL _Pragma("unroll")
+#define LBM_INLINE __device__ __forceinline__
 #else
-#define LBM_UNROLL _Pragma("GCC unroll 32")
+#define LBM_INLINE static inline __attribute__((always_inline))
 #endif
+
+// a neighbour whose scalar values enter the stencils: fluid, or an outflow ghost;
+// for f: cells that are pulled from / pushed to (outflow ghosts are refilled by lbm_halo_copy / lbm_outflow_fix) (which holds the outlet's
+// reference value, e.g. p = 0: a pressure Dirichlet condition half a link beyond the last cell)
+#define LBM_STENCIL_CELL(fl) ((fl) == FLAG_FLUID || (fl) == FLAG_OUTFLOW)
+
+// straight-line repetition (no loops left for the host vectoriser, whose x loop must contain no inner loop)
+#define LBM_REP9(M, b) M(b + 0) M(b + 1) M(b + 2) M(b + 3) M(b + 4) M(b + 5) M(b + 6) M(b + 7) M(b + 8)
+#define LBM_FOR27(M) LBM_REP9(M, 0) LBM_REP9(M, 9) LBM_REP9(M, 18)
+#define LBM_FOR26(M)                                                                                    \
+    M(1) M(2) M(3) M(4) M(5) M(6) M(7) M(8) LBM_REP9(M, 9) LBM_REP9(M, 18)
 
 // neighbour offset of direction q in a padded grid with row length px and plane size pxy
 #define LBM_OFFSET(q, px, pxy) ((long long)CX27[q] + (long long)(px) * CY27[q] + (long long)(pxy) * CZ27[q])
 
-// populations f_j(x, t) of padded cell c under the read rule of the parity
-DEVICE void lbm_load(const float* RESTRICT f, const unsigned char* RESTRICT flags, const float* RESTRICT vel,
-                     const long long c, const long long N, const int px, const long long pxy, const int odd,
-                     float* RESTRICT fj) {
-    if (!odd) {
-        LBM_UNROLL
-        for (int q = 0; q < 27; ++q) fj[q] = f[q * N + c];
-        return;
-    }
-    fj[0] = f[c];
-    LBM_UNROLL
-    for (int q = 1; q < 27; ++q) {
-        const int qo = opposite_dir(q);
-        const long long nb = c - LBM_OFFSET(q, px, pxy);
-        const int fl = flags[nb];
-        if (fl == FLAG_FLUID || fl == FLAG_OUTFLOW) {
-            fj[q] = f[qo * N + nb];
-        } else {
-            const float cu = CX27[q] * vel[nb] + CY27[q] * vel[N + nb] + CZ27[q] * vel[2 * N + nb];
-            fj[q] = f[q * N + c] + 6.f * W27[q] * cu;
-        }
-    }
+// populations f_j(x, t) of padded cell c under the read rule of the parity (ODD = parity & 1).  The odd pull
+// reads every neighbour alike: wall links were prepared by lbm_wall_prefill, outflow / periodic ghosts by
+// lbm_halo_copy, so the host loop has contiguous loads only and vectorises.
+template <int ODD>
+LBM_INLINE void lbm_load(const float* RESTRICT f, const long long c, const long long N, const int px,
+                         const long long pxy, float* RESTRICT fj) {
+#define LBM_LOAD(q) fj[q] = ODD ? f[opposite_dir(q) * N + c - LBM_OFFSET(q, px, pxy)] : f[(q) * N + c];
+    LBM_FOR27(LBM_LOAD)
+#undef LBM_LOAD
 }
 
-// write post-collision populations of padded cell c under the write rule of the parity
-DEVICE void lbm_store(float* RESTRICT f, const unsigned char* RESTRICT flags, const float* RESTRICT vel,
-                      const long long c, const long long N, const int px, const long long pxy, const int odd,
-                      const float* RESTRICT fs) {
-    if (!odd) {
-        LBM_UNROLL
-        for (int q = 0; q < 27; ++q) f[opposite_dir(q) * N + c] = fs[q];
-        return;
-    }
-    f[c] = fs[0];
-    LBM_UNROLL
-    for (int q = 1; q < 27; ++q) {
-        const int qo = opposite_dir(q);
-        const long long nb = c + LBM_OFFSET(q, px, pxy);
-        const int fl = flags[nb];
-        if (fl == FLAG_FLUID || fl == FLAG_OUTFLOW) {
-            f[q * N + nb] = fs[q];
-        } else {
-            const float cu = CX27[q] * vel[nb] + CY27[q] * vel[N + nb] + CZ27[q] * vel[2 * N + nb];
-            f[qo * N + c] = fs[q] - 6.f * W27[q] * cu;
-        }
-    }
+// write post-collision populations of padded cell c under the write rule of the parity (ODD = parity & 1);
+// pushes into wall cells are turned into bounce-back by lbm_wall_bounce, into ghosts by lbm_fold /
+// lbm_outflow_fix
+template <int ODD>
+LBM_INLINE void lbm_store(float* RESTRICT f, const long long c, const long long N, const int px, const long long pxy,
+                          const float* RESTRICT fs) {
+#define LBM_STORE(q)                                            \
+    if (ODD)                                                    \
+        f[(q) * N + c + LBM_OFFSET(q, px, pxy)] = fs[q];        \
+    else                                                        \
+        f[opposite_dir(q) * N + c] = fs[q];
+    LBM_FOR27(LBM_STORE)
+#undef LBM_STORE
 }
-
-// a neighbour whose scalar values enter the stencils: fluid, or an outflow ghost (which holds the outlet's
-// reference value, e.g. p = 0: a pressure Dirichlet condition half a link beyond the last cell)
-#define LBM_STENCIL_CELL(fl) ((fl) == FLAG_FLUID || (fl) == FLAG_OUTFLOW)
 
 // Eq. 18 isotropic gradient; wall / inflow / solid neighbours take the centre value (their term vanishes)
-DEVICE void lbm_gradient(const float* RESTRICT s, const unsigned char* RESTRICT flags, const long long c,
+LBM_INLINE void lbm_gradient(const float* RESTRICT s, const unsigned char* RESTRICT flags, const long long c,
                          const int px, const long long pxy, float* RESTRICT g) {
     const float sc = s[c];
     float gx = 0.f, gy = 0.f, gz = 0.f;
-    LBM_UNROLL
-    for (int q = 1; q < 27; ++q) {
-        const long long nb = c + LBM_OFFSET(q, px, pxy);
-        const float d = LBM_STENCIL_CELL(flags[nb]) ? (s[nb] - sc) : 0.f;
-        const float wd = 3.f * W27[q] * d;
-        gx += CX27[q] * wd;
-        gy += CY27[q] * wd;
-        gz += CZ27[q] * wd;
+#define LBM_GRAD_TERM(q)                                                                                  \
+    {                                                                                                    \
+        const long long nb = c + LBM_OFFSET(q, px, pxy);                                                 \
+        const float wd = LBM_STENCIL_CELL(flags[nb]) ? 3.f * W27[q] * (s[nb] - sc) : 0.f;                \
+        if (CX27[q]) gx += CX27[q] * wd;                                                                 \
+        if (CY27[q]) gy += CY27[q] * wd;                                                                 \
+        if (CZ27[q]) gz += CZ27[q] * wd;                                                                 \
     }
+    LBM_FOR26(LBM_GRAD_TERM)
+#undef LBM_GRAD_TERM
     g[0] = gx;
     g[1] = gy;
     g[2] = gz;

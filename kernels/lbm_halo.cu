@@ -49,3 +49,39 @@ KERNEL void lbm_outflow_fix(const long long n, float* RESTRICT f /* size: 27 * (
         }
     }
 }
+
+// before an odd step: for every wall link (fluid cell c, direction j, wall / inflow cell w = c - c_j) park the
+// bounced population where the pull of c reads it: F[opp j][w] = F[j][c] + 6 w_j c_j.u_w  (n = link count)
+KERNEL void lbm_wall_prefill(const long long n, float* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
+                             const float* RESTRICT vel /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
+                             const long long* RESTRICT cell /* size: n */, const int* RESTRICT dir /* size: n */,
+                             const int nx, const int ny, const int nz) {
+    const int px = nx + 2;
+    const long long pxy = (long long)px * (ny + 2);
+    const long long N = pxy * (nz + 2);
+    FOR_EACH(i, n) {
+        const long long c = cell[i];
+        const int q = dir[i];
+        const long long w = c - LBM_OFFSET(q, px, pxy);
+        const float cu = CX27[q] * vel[w] + CY27[q] * vel[N + w] + CZ27[q] * vel[2 * N + w];
+        f[opposite_dir(q) * N + w] = f[q * N + c] + 6.f * W27[q] * cu;
+    }
+}
+
+// after an odd step: the population c pushed into the wall cell w = c - c_j (direction opp j) bounces back:
+// F[j][c] = F[opp j][w] + 6 w_j c_j.u_w
+KERNEL void lbm_wall_bounce(const long long n, float* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
+                            const float* RESTRICT vel /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
+                            const long long* RESTRICT cell /* size: n */, const int* RESTRICT dir /* size: n */,
+                            const int nx, const int ny, const int nz) {
+    const int px = nx + 2;
+    const long long pxy = (long long)px * (ny + 2);
+    const long long N = pxy * (nz + 2);
+    FOR_EACH(i, n) {
+        const long long c = cell[i];
+        const int q = dir[i];
+        const long long w = c - LBM_OFFSET(q, px, pxy);
+        const float cu = CX27[q] * vel[w] + CY27[q] * vel[N + w] + CZ27[q] * vel[2 * N + w];
+        f[q * N + c] = f[opposite_dir(q) * N + w] + 6.f * W27[q] * cu;
+    }
+}

@@ -29,19 +29,20 @@ KERNEL void lbm_macro_pressure(const long long n, const float* RESTRICT f /* siz
         const long long c = (x + 1) + px * (long long)(y + 1) + pxy * (z + 1);
         if (flags[c] != FLAG_FLUID) continue;
         float fj[27];
-        lbm_load(f, flags, vel, c, N, px, pxy, odd, fj);
+        if (odd)
+            lbm_load<1>(f, c, N, px, pxy, fj);
+        else
+            lbm_load<0>(f, c, N, px, pxy, fj);
         float s0 = 0.f;
-        LBM_UNROLL
-        for (int q = 0; q < 27; ++q) s0 += fj[q];
+#define LBM_SUM(q) s0 += fj[q];
+        LBM_FOR27(LBM_SUM)
+#undef LBM_SUM
         float divergence = 1.f - s0;
 #if CK_MIXTURE
         float ux = 0.f, uy = 0.f, uz = 0.f;
-        LBM_UNROLL
-        for (int q = 1; q < 27; ++q) {
-            ux += CX27[q] * fj[q];
-            uy += CY27[q] * fj[q];
-            uz += CZ27[q] * fj[q];
-        }
+#define LBM_MOM(q) ux += CX27[q] * fj[q], uy += CY27[q] * fj[q], uz += CZ27[q] * fj[q];
+        LBM_FOR26(LBM_MOM)
+#undef LBM_MOM
         float ge[3], gvx[3], gvy[3], gvz[3];
         lbm_gradient(eps, flags, c, px, pxy, ge);
         lbm_gradient(sand_v, flags, c, px, pxy, gvx);
@@ -74,11 +75,13 @@ KERNEL void lbm_pressure_filter(const long long n, const float* RESTRICT p /* si
         if (flags[c] != FLAG_FLUID) continue;
         const float pc = p[c];
         float acc = 0.f;
-        LBM_UNROLL
-        for (int q = 1; q < 27; ++q) {
-            const long long nb = c + LBM_OFFSET(q, px, pxy);
-            acc += W27[q] * (LBM_STENCIL_CELL(flags[nb]) ? p[nb] - pc : 0.f);
-        }
+#define LBM_AVG(q)                                                        \
+    {                                                                    \
+        const long long nb = c + LBM_OFFSET(q, px, pxy);                 \
+        acc += W27[q] * (LBM_STENCIL_CELL(flags[nb]) ? p[nb] - pc : 0.f); \
+    }
+        LBM_FOR26(LBM_AVG)
+#undef LBM_AVG
         pbar[c] = pc + acc;
     }
 }

@@ -174,3 +174,25 @@ def outflow_lists(shape: tuple[int, int, int], flags: np.ndarray) -> tuple[np.nd
     sz, sy, sx = np.clip(zz, 1, nz), np.clip(yy, 1, ny), np.clip(xx, 1, nx)
     ghost = (xx + px * (yy + py * zz)).astype(np.int64)
     return ghost, (sx + px * (sy + py * sz)).astype(np.int64)
+
+
+def wall_links(flags: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(cell, dir)``: every link from an interior FLUID cell ``c`` whose neighbour ``c − c_dir`` is a WALL or
+    INFLOW cell, as padded index (int64) and D3Q27 direction (int32), sorted by cell."""
+    from ..lattice import C27
+
+    pz, py, px = flags.shape
+    fluid = np.zeros(flags.shape, bool)
+    fluid[INTERIOR] = flags[INTERIOR] == FLUID
+    cells, dirs = [], []
+    zz, yy, xx = np.nonzero(fluid)
+    for j in range(1, 27):
+        cx, cy, cz = C27[j]
+        nb = flags[zz - cz, yy - cy, xx - cx]
+        hit = (nb == WALL) | (nb == INFLOW)
+        cells.append((xx + px * (yy + py * zz))[hit])
+        dirs.append(np.full(int(hit.sum()), j, np.int32))
+    cell = np.concatenate(cells).astype(np.int64)
+    d = np.concatenate(dirs).astype(np.int32)
+    order = np.argsort(cell, kind="stable")
+    return cell[order], d[order]

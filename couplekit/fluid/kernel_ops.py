@@ -41,6 +41,10 @@ class KernelOps:
         self._halo = halo.function("lbm_halo_copy")
         self._fold = halo.function("lbm_fold")
         self._outflow_fix = halo.function("lbm_outflow_fix")
+        self._prefill = halo.function("lbm_wall_prefill")
+        self._bounce = halo.function("lbm_wall_bounce")
+        self._links_flags = None  # the flags array the cached wall links belong to
+        self._links = None
         self._dummy = backend.xp.zeros(1, dtype=np.float32)
 
     def defines(self) -> dict[str, int]:
@@ -51,6 +55,27 @@ class KernelOps:
             "CK_MIXTURE": int(self.mixture),
             "CK_EXT_FORCE": int(self.external_force),
         }
+
+    def _wall_links(self, flags):
+        """Wall links of ``flags`` (built once per flags array; flags are treated as immutable — call
+        :meth:`forget_links` after changing one in place)."""
+        if self._links_flags is not flags:
+            from .grid import wall_links
+
+            cell, d = wall_links(self.backend.to_host(flags))
+            self._links = (self.backend.asarray(cell), self.backend.asarray(d))
+            self._links_flags = flags
+        return self._links
+
+    def forget_links(self) -> None:
+        """Drop the cached wall links (after editing a flags array in place)."""
+        self._links_flags = self._links = None
+
+    def _wall_call(self, fn, f, flags, velocity) -> None:
+        cell, d = self._wall_links(flags)
+        if cell.size:
+            pz, py, px = flags.shape
+            fn(int(cell.size), f, velocity, cell, d, np.int32(px - 2), np.int32(py - 2), np.int32(pz - 2))
 
     def _or_dummy(self, a, used: bool):
         return a if (used and a is not None) else self._dummy
@@ -64,6 +89,8 @@ class KernelOps:
     def macro_pressure(self, f, flags, velocity, phi, eps, sand_v, p, parity: int, rho_h: float, rho_l: float) -> None:
         """Eq. 39 pressure update in place (see ReferenceOps.macro_pressure)."""
         n, nx, ny, nz = self._interior(flags)
+        if parity & 1:
+            self._wall_call(self._prefill, f, flags, velocity)
         self._macro(
             n,
             f,
@@ -107,6 +134,8 @@ class KernelOps:
     ) -> None:
         """Fused forces + NOCM-MRT collision + AA streaming (see ReferenceOps.collide_stream)."""
         n, nx, ny, nz = self._interior(flags)
+        if parity & 1:
+            self._wall_call(self._prefill, f, flags, velocity)
         self._collide(
             n,
             f,
@@ -123,6 +152,8 @@ class KernelOps:
             np.int32(nz),
             *(np.float32(v) for v in (rho_h, rho_l, nu_h, nu_l, gx, gy, gz)),
         )
+        if parity & 1:
+            self._wall_call(self._bounce, f, flags, velocity)
 
     def halo_copy(self, a, ghost, image) -> None:
         """Copy every component of ``a`` from the interior images to the periodic ghosts."""

@@ -16,8 +16,8 @@ Effects (DESIGN "Effects"): a single-phase solver (``phi=None``) allocates no ph
 chemical potential out of both the phase field and the flow kernel; the fluid-fraction / sand-velocity
 inputs (``mixture=True``) and the force-density input (``external_force=True``) exist only when asked for.
 
-Streaming: f uses the AA pattern (reference module docstring), h the phase field's esoteric pull; each is
-self-consistent and they share only the padded field layout.
+Streaming: f and h both use the AA pattern with the same cell flags (walls, inflow carrying a phase value
+stored in ``phi`` at the inflow cells, outflow), so one step parity and one flag array serve both.
 """
 
 from __future__ import annotations
@@ -158,22 +158,21 @@ class FluidSolver:
             phi0 = np.asarray(phi, np.float32)
             if phi0.shape != self.shape:
                 raise ValueError(f"phi must have the interior shape {self.shape}, got {phi0.shape}")
-            self.pf_solid = backend.asarray(pf.pad_solid(flags[INTERIOR] != FLUID, self.shape, periodic))
-            phi_p = np.zeros(pshape, np.float32)
+            phi_p = wall_phi.astype(np.float32)  # inflow cells carry their phase value
             phi_p[INTERIOR] = phi0
             self.phi = backend.asarray(phi_p)
             self.grad = xp.zeros((3,) + pshape, dtype=np.float32)
             self.mu = xp.zeros(pshape, dtype=np.float32) if self.surface_tension else None
             self.h = xp.zeros((7,) + pshape, dtype=np.float32)
             self.source_term = xp.zeros(pshape, dtype=np.float32)
-            self.pf_ops.set_equilibrium(self.h, self.phi, self.velocity, self.pf_solid, 0)
+            self.pf_ops.set_equilibrium(self.h, self.phi, self.velocity, self.flags, 0)
             self._phase_macroscopic()
         self.volume0 = self._volume()
 
     # ------------------------------------------------------------------------------------------ stepping
     def _phase_macroscopic(self) -> None:
-        self.pf_ops.macroscopic(self.h, self.phi, self.pf_solid, self.step_count)
-        self.pf_ops.gradients(self.phi, self.pf_solid, self.grad, self.mu, self.beta, self.kappa)
+        self.pf_ops.macroscopic(self.h, self.phi, self.velocity, self.flags, self.step_count)
+        self.pf_ops.gradients(self.phi, self.flags, self.grad, self.mu, self.beta, self.kappa)
 
     def step(self, n: int = 1) -> None:
         """Advance ``n`` LBM steps."""
@@ -202,10 +201,10 @@ class FluidSolver:
                 ops.outflow_fix(self.f, self._out_ghost, self._out_src)
             if self.two_phase:
                 if prm.eta > 0:
-                    volume, source_sum = self.pf_ops.volume_sums(self.phi, self.source_term, self.pf_solid)
+                    volume, source_sum = self.pf_ops.volume_sums(self.phi, self.source_term, self.flags)
                     self.gamma = self._pf.volume_controller_gamma(self.volume0, volume, source_sum, prm.eta)
                 self.pf_ops.collide_stream(
-                    self.h, self.grad, self.velocity, self.source_term, self.pf_solid, self.step_count,
+                    self.h, self.phi, self.grad, self.velocity, self.source_term, self.flags, self.step_count,
                     prm.mobility, prm.width, self.gamma,
                 )  # fmt: skip
             self.step_count += 1
@@ -218,7 +217,7 @@ class FluidSolver:
 
     def _volume(self) -> float:
         if self.two_phase:
-            return self.pf_ops.volume_sums(self.phi, self.source_term, self.pf_solid)[0]
+            return self.pf_ops.volume_sums(self.phi, self.source_term, self.flags)[0]
         return float(self._fluid_host.sum())
 
     def density(self) -> np.ndarray:

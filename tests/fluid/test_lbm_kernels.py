@@ -5,6 +5,9 @@ population (≤ 0.3) passes through ~30 multiply-adds (moments, forces, chimera 
 float32 round-off bound is ~30 · 2⁻²⁴ · 0.3 ≈ 5e-7; we allow 2e-6 absolute (4× margin), far below any
 modelling error we could introduce (a wrong sign or weight shows up at ≥ 1e-4 with these states).
 Pure copies (halo, fold, outflow) must be bitwise equal.
+
+Slots of wall / inflow / solid cells hold no state: the kernels use them as scratch for the bounce-back links
+(lbm_wall_prefill / lbm_wall_bounce), so f is compared on fluid cells and fluid / outflow ghosts only.
 """
 
 from __future__ import annotations
@@ -47,7 +50,8 @@ def test_collide_stream_matches_reference(cpu, effects, boundaries, parity):
             s["f"], s["flags"], s["velocity"], s["phi"], s["mu"], s["eps"], s["force"], s["pbar"], parity,
             *PARAMS, *GRAVITY,
         )  # fmt: skip
-    np.testing.assert_allclose(sk["f"], sr["f"], rtol=0, atol=ATOL)
+    state = (sk["flags"] == 0) | (sk["flags"] == 3)
+    np.testing.assert_allclose(sk["f"][:, state], sr["f"][:, state], rtol=0, atol=ATOL)
     np.testing.assert_allclose(sk["velocity"], sr["velocity"], rtol=0, atol=ATOL)
     # the state really changed (the test cannot pass by doing nothing)
     assert np.abs(sk["f"] - random_state(11 + parity, BOUNDARY_SETS[boundaries])["f"]).max() > 1e-3
