@@ -33,10 +33,10 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     for src in kernel_sources():
         for defines in build_variants(src):
+            t0 = time.perf_counter()
+            reports = nvcc_build(src, args.arch, defines)
             for arch in args.arch:
-                t0 = time.perf_counter()
-                report = nvcc_build(src, arch, defines)
-                for kernel, info in sorted(report.items()):
+                for kernel, info in sorted(reports[arch].items()):
                     rows.append({"source": src.name, "defines": defines, "arch": arch, "kernel": kernel, **info})
                     print(
                         f"{src.name:24s} {arch} {kernel:28s} regs {info.get('registers', '?'):>3} "

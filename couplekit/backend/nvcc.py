@@ -47,42 +47,45 @@ def nvcc_path() -> str | None:
     return shutil.which("nvcc")
 
 
-def nvcc_build(source: Path, arch: str, defines: dict | None = None) -> dict[str, dict[str, int]]:
-    """Build ``source`` to a cubin for ``arch`` (e.g. ``"sm_90"``) and return ptxas' report per kernel:
-    ``{kernel: {"registers", "stack_bytes", "spill_store_bytes", "spill_load_bytes"}}``.
+def nvcc_build(
+    source: Path, archs: str | list[str], defines: dict | None = None
+) -> dict[str, dict[str, dict[str, int]]]:
+    """Build ``source`` for each of ``archs`` (e.g. ``["sm_80", "sm_90"]``) in one nvcc call and return
+    ptxas' report ``{arch: {kernel: {"registers", "stack_bytes", "spill_store_bytes", "spill_load_bytes"}}}``.
 
     Raises RuntimeError with the command and nvcc's output if the build fails.
     """
     nvcc = nvcc_path()
     if nvcc is None:
         raise RuntimeError("nvcc is not on the PATH")
+    archs = [archs] if isinstance(archs, str) else list(archs)
+    gencode = [f"-gencode=arch=compute_{a[3:]},code={a}" for a in archs]
     with tempfile.TemporaryDirectory() as tmp:
         cmd = [
             nvcc,
             "-std=c++17",
-            f"-arch={arch}",
-            "-cubin",
+            "-c",
+            *gencode,
             "-Xptxas",
             "-v",
             f"-I{source.parent}",
             *define_flags(defines),
             str(source),
             "-o",
-            str(Path(tmp) / "out.cubin"),
+            str(Path(tmp) / "out.o"),
         ]
         proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
     if proc.returncode != 0:
-        raise RuntimeError(f"nvcc failed on {source.name} ({arch}, {defines}):\n{' '.join(cmd)}\n{proc.stderr}")
-    report: dict[str, dict[str, int]] = {}
+        raise RuntimeError(f"nvcc failed on {source.name} ({archs}, {defines}):\n{' '.join(cmd)}\n{proc.stderr}")
+    report: dict[str, dict[str, dict[str, int]]] = {a: {} for a in archs}
     current = None
     for line in proc.stderr.splitlines():
         if m := _FUNC.search(line):
-            current = m.group(1)
-            report[current] = {}
-        elif current and (m := _SPILL.search(line)):
-            report[current].update(
+            current = report.setdefault(m.group(2), {}).setdefault(m.group(1), {})
+        elif current is not None and (m := _SPILL.search(line)):
+            current.update(
                 stack_bytes=int(m.group(1)), spill_store_bytes=int(m.group(2)), spill_load_bytes=int(m.group(3))
             )
-        elif current and (m := _REGS.search(line)):
-            report[current]["registers"] = int(m.group(1))
+        elif current is not None and (m := _REGS.search(line)):
+            current["registers"] = int(m.group(1))
     return report
