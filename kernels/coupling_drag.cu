@@ -7,15 +7,20 @@
 //   F_b     = -V_cell eps_s rho g                           (Eq. 31, SI newtons) -> written to f_ext
 //   v*      = ((mv)_i + dt F_b) / m_i + dt g                 (sand velocity after the explicit forces, SI;
 //                                                             the elastic impulse is already in (mv)_i)
-//   in lattice units (V_cell = 1, u the fluid velocity, mass_scale = kg per lattice mass, velocity_scale =
-//   m/s per lattice velocity, dt_lattice = dt / LBM step, 1 in lockstep):
+//   in lattice units (V_cell = 1, mass_scale = kg per lattice mass, velocity_scale = m/s per lattice
+//   velocity, dt_lattice = dt / LBM step, 1 in lockstep):
 //   m_s     = m_i / mass_scale,   m_f = rho eps_f            (eps_f: the porosity the fluid solver uses)
+//   u*      = u + F_prev / (2 m_f)                            (u: the fluid's velocity field, which with Guo
+//             forcing carries only half of the last step's force F_prev = the `force` array on entry; u* is
+//             the fluid velocity after the whole of last step's drag.  Using u alone makes the exchange
+//             chase a fluid velocity lagging by half an impulse: with strong drag the slip then flips sign
+//             every step, tests/coupling/test_coupling_with_fluid.py)
 //   A       = pi (3 eps_s / (4 pi))^(2/3)                    (ball of the node's sand volume, Sec. 4.3)
 //           or 1.5 eps_s / d_grain  when grain_diameter > 0  (total cross-section of grains of diameter d,
 //                                                             notes Sec. 3.2 option)
 //   beta    = 1/2 c (1 - eps_s)^(-chi) rho A,  drag force w (u - v) with w = beta |u - v|
 //   backward Euler on the exchange, implicit in |u - v| too:   r' = r* / (1 + k |r'|),  k = dt beta (1/m_s + 1/m_f)
-//           |r'| = 2 |r*| / (1 + sqrt(1 + 4 k |r*|)),  r* = u - v*
+//           |r'| = 2 |r*| / (1 + sqrt(1 + 4 k |r*|)),  r* = u* - v*
 //   J       = m_s m_f / (m_s + m_f) (r* - r')               (impulse on the sand; the fluid gets -J)
 // Outputs: (mv)_i += J (SI), force = -J / dt_lattice (lattice force density for the fluid's forcing term),
 // f_ext = F_b.  Nodes without sand mass, or whose cell is not a FLUID cell (flags != 0), get f_ext = 0 and
@@ -75,10 +80,14 @@ KERNEL void coupling_drag_buoyancy(
             const float vx = ((grid_mv[i] + dt * fbx) * inv_m + dt * gx) * inv_vs;
             const float vy = ((grid_mv[ncell + i] + dt * fby) * inv_m + dt * gy) * inv_vs;
             const float vz = ((grid_mv[2 * ncell + i] + dt * fbz) * inv_m + dt * gz) * inv_vs;
-            const float rx = u[c] - vx, ry = u[N + c] - vy, rz = u[2 * N + c] - vz;
-            const float rn = sqrtf(rx * rx + ry * ry + rz * rz);
             const float ms = m / mass_scale;
             const float mf = rho * ef;
+            // fluid velocity after ALL of last step's drag: u holds only half of it (Guo forcing)
+            const float half = 0.5f / mf;
+            const float rx = u[c] + half * force[c] - vx;
+            const float ry = u[N + c] + half * force[N + c] - vy;
+            const float rz = u[2 * N + c] + half * force[2 * N + c] - vz;
+            const float rn = sqrtf(rx * rx + ry * ry + rz * rz);
             const float area = grain_diameter > 0.f ? 1.5f * es / grain_diameter
                                                     : CK_PI_F * powf(3.f * es / (4.f * CK_PI_F), 2.f / 3.f);
             const float beta = 0.5f * c_drag * powf(fmaxf(1.f - es, 1e-6f), -chi) * rho * area;

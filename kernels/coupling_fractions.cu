@@ -105,3 +105,25 @@ KERNEL void coupling_fractions(const long long n, const float* RESTRICT grid_vol
     (void)phi;
 #endif
 }
+
+// The sand velocity input of the mixture pressure update (Eq. 39): the MPM grid velocity (SI, unpadded,
+// zero on nodes without sand) in lattice units on the padded fluid layout, ghosts filled by the same rule
+// as the fractions (periodic image / nearest interior node).  n = (nx + 2) * (ny + 2) * (nz + 2).
+KERNEL void coupling_sand_velocity(const long long n, const float* RESTRICT grid_v /* size: 3 * nx * ny * nz */,
+                                   float* RESTRICT sand_v /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
+                                   const int nx, const int ny, const int nz, const int px, const int py,
+                                   const int pz, const float inv_velocity_scale) {
+    const long long ncell = (long long)nx * ny * nz;
+    const int PX = nx + 2;
+    const long long PXY = (long long)PX * (ny + 2);
+    const long long N = PXY * (nz + 2);
+    FOR_EACH_CELL(X, Y, Z, nx + 2, ny + 2, nz + 2) {
+        const long long node = coupling_source_index(X, nx, px) +
+                               (long long)nx * (coupling_source_index(Y, ny, py) +
+                                                (long long)ny * coupling_source_index(Z, nz, pz));
+        const long long cell = X + PX * (long long)Y + PXY * Z;
+        sand_v[cell] = grid_v[node] * inv_velocity_scale;
+        sand_v[N + cell] = grid_v[ncell + node] * inv_velocity_scale;
+        sand_v[2 * N + cell] = grid_v[2 * ncell + node] * inv_velocity_scale;
+    }
+}

@@ -73,6 +73,14 @@ class KernelOps:
             np.float32(p.r_max), np.float32(p.absorption_rate),
         )  # fmt: skip
 
+    def sand_velocity(self, grid_v, sand_v, units: Units, periodic: Sequence[bool] = (True, True, True)) -> None:
+        """MPM grid velocity (SI) -> padded lattice ``sand_velocity`` input of Eq. 39, ghosts filled."""
+        nz, ny, nx = grid_v.shape[1:]
+        self._fn("coupling_fractions.cu", "coupling_sand_velocity", "CK_RETENTION", "CK_TWO_PHASE")(
+            (nx + 2) * (ny + 2) * (nz + 2), grid_v, sand_v, np.int32(nx), np.int32(ny), np.int32(nz),
+            *(np.int32(bool(v)) for v in periodic), np.float32(units.dt / units.dx),
+        )  # fmt: skip
+
     def drag_buoyancy(
         self,
         grid_m,

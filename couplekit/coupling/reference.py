@@ -157,6 +157,15 @@ class ReferenceOps:
         eps_fluid[...] = ef_node[iz, iy, ix]
         water[...] = wet
 
+    def sand_velocity(self, grid_v, sand_v, units: Units, periodic: Sequence[bool] = (True, True, True)) -> None:
+        """The MPM grid velocity (SI, unpadded) in lattice units on the padded layout: the ``sand_velocity``
+        input of the mixture pressure update (Eq. 39); ghosts as in :meth:`fractions`."""
+        nz, ny, nx = grid_v.shape[1:]
+        iz = source_index(nz, periodic[2])[:, None, None]
+        iy = source_index(ny, periodic[1])[None, :, None]
+        ix = source_index(nx, periodic[0])[None, None, :]
+        sand_v[...] = grid_v.astype(np.float64)[:, iz, iy, ix] / (units.dx / units.dt)
+
     # ------------------------------------------------------------------ buoyancy (Eq. 31) + implicit drag (§4.3)
     def drag_buoyancy(
         self,
@@ -177,7 +186,8 @@ class ReferenceOps:
     ) -> None:
         """Buoyancy into ``f_ext`` (N), implicit drag impulse J added to ``grid_mv`` (kg·m/s) and −J/Δt to
         the fluid ``force`` (lattice force density).  See kernels/coupling_drag.cu for the formulas
-        (notes §3.4).
+        (notes §3.4).  ``force`` holds last step's drag on entry (zeros at the start): the fluid velocity
+        field carries only half of it (Guo forcing), the exchange adds the other half back.
 
         ``units``: the lattice unit system (dx, LBM step, reference density); ``gravity`` in m/s²;
         ``rho_h``, ``rho_l`` lattice densities; ``dt``: the MPM step in s (default: the LBM step).
@@ -197,9 +207,11 @@ class ReferenceOps:
         f_b = -es * rho * mass_scale * g  # Eq. 31: −V_cell ε ρ g  (ρ·mass_scale = ρ_SI V_cell)
         m_safe = np.where(active, m, 1.0)
         v_star = ((grid_mv.astype(np.float64) + dt * f_b) / m_safe + dt * g) / velocity_scale  # lattice
-        r_star = _interior(u).astype(np.float64) - v_star  # slip u − v before the exchange
         m_s = m_safe / mass_scale
         m_f = rho * ef  # fluid mass of the cell, V_cell = 1
+        # the fluid velocity after all of last step's drag: the field u carries half of it (Guo forcing)
+        u_star = _interior(u).astype(np.float64) + 0.5 * _interior(force).astype(np.float64) / m_f
+        r_star = u_star - v_star  # slip u − v before the exchange
         if grain_diameter > 0:
             area = 1.5 * es / grain_diameter  # all grains' cross-sections (notes §3.2 option)
         else:

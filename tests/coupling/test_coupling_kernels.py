@@ -59,7 +59,8 @@ def test_fractions_match_reference(cpu, retention, two_phase, periodic):
 def _run_drag(ops, st, eps_sand, eps_fluid, dt=None):
     grid_mv = st["grid_mv"].copy()
     f_ext = np.full((3, *SHAPE), -7.0, np.float32)
-    force = np.zeros((3, *padded()), np.float32)
+    # last step's drag, still in the force array (the exchange adds its second half to u)
+    force = (np.random.default_rng(7).uniform(-1e-4, 1e-4, (3, *padded()))).astype(np.float32)
     ops.drag_buoyancy(
         st["grid_m"], grid_mv, f_ext, force, st["u"], st["phi"], eps_sand, eps_fluid, st["flags"], UNITS,
         GRAVITY, RHO_H, RHO_L, dt,
@@ -134,3 +135,16 @@ def test_particle_moisture_matches_reference(cpu, retention):
     np.testing.assert_allclose(res[0][0], res[1][0], rtol=1e-5, atol=1e-6)
     if not retention:
         assert np.array_equal(res[0][0], pt["r"]), "without retention the moisture ratio is not touched"
+
+
+def test_sand_velocity_matches_reference(cpu):
+    kops, rops = _pair(cpu, False, True)
+    grid_v = np.random.default_rng(6).uniform(-0.3, 0.3, (3, *SHAPE)).astype(np.float32)
+    out = []
+    for ops in (kops, rops):
+        sand_v = np.full((3, *padded()), -7.0, np.float32)
+        ops.sand_velocity(grid_v, sand_v, UNITS, (True, False, True))
+        out.append(sand_v)
+    np.testing.assert_allclose(out[0], out[1], rtol=1e-6, atol=1e-9)
+    np.testing.assert_array_equal(out[0][:, :, :, 0], out[0][:, :, :, -2])  # periodic x ghost = image
+    np.testing.assert_array_equal(out[0][:, :, 0, :], out[0][:, :, 1, :])  # wall y ghost = nearest node
