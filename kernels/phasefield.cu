@@ -42,8 +42,11 @@
 
 #if CK_ON_GPU
 #define PF_UNROLL _Pragma("unroll")
+#define PF_INLINE DEVICE
 #else
 #define PF_UNROLL _Pragma("GCC unroll 27")
+// the cell loops only vectorise on the host when the per-cell helpers are inlined into them
+#define PF_INLINE static inline __attribute__((always_inline))
 #endif
 
 // D3Q27 weights in 3x3x3 cube order, index (dz+1)*9 + (dy+1)*3 + (dx+1) (the isotropic stencils, Eqs. 21, 23)
@@ -67,15 +70,15 @@ DEVICE void pf_neighbours(const int X, const int Y, const int Z, const int nx, c
     nb[6] = (Z == 1 && pz) ? c + sz * (nz - 1) : c - sz;
 }
 
-DEVICE int pf_opp(const int q) { return q == 0 ? 0 : ((q & 1) ? q + 1 : q - 1); }
+PF_INLINE int pf_opp(const int q) { return q == 0 ? 0 : ((q & 1) ? q + 1 : q - 1); }
 
 // d_q . u for the D3Q7 direction q
-DEVICE float pf_dot(const int q, const float ux, const float uy, const float uz) {
+PF_INLINE float pf_dot(const int q, const float ux, const float uy, const float uz) {
     return (float)CX7[q] * ux + (float)CY7[q] * uy + (float)CZ7[q] * uz;
 }
 
 // D3Q7 equilibrium h_q^eq = w_q phi (1 + d_q.u / cs^2), cs^2 = 1/4 (first order in u, notes §1c).
-DEVICE float pf_feq(const int q, const float phi, const float ux, const float uy, const float uz) {
+PF_INLINE float pf_feq(const int q, const float phi, const float ux, const float uy, const float uz) {
     return W7[q] * phi * (1.f + pf_dot(q, ux, uy, uz) / CS2_7);
 }
 
@@ -264,6 +267,76 @@ KERNEL void phase_gradients(const long long n, const float* RESTRICT phi /* size
     }
 }
 
+// Error-free transformation (Knuth's TwoSum): s + e == a + b exactly, in float arithmetic.  Used to keep
+// Sigma phi exact to one rounding per cell without double precision (which blocks host vectorisation).
+PF_INLINE void pf_two_sum(const float a, const float b, float& s, float& e) {
+    s = a + b;
+    const float bb = s - a;
+    e = (a - (s - bb)) + (b - bb);
+}
+
+// Compensated accumulation: (sum + comp) carries the running total to about one rounding.
+PF_INLINE void pf_accumulate(float& sum, float& comp, const float term) {
+    float err;
+    pf_two_sum(sum, term, sum, err);
+    comp += err;
+}
+
+// The 7 populations of one cell, by value (a local array inside the cell loop, or scalars passed by
+// reference, stop the host compiler from vectorising the loop).
+struct PfCell {
+    float f0, f1, f2, f3, f4, f5, f6;
+};
+
+// Post-collision value of one moving population q (Eq. 48): relaxation to h_q^eq plus the interface and
+// source terms; accumulates -h*_q into the compensated rest balance.
+PF_INLINE float pf_relax(const int q, const float fq, const float p0, const float ux, const float uy, const float uz,
+                         const float hx, const float hy, const float hz, const float s, const float omega,
+                         float& rest, float& rest_comp) {
+    const float post = fq - omega * (fq - pf_feq(q, p0, ux, uy, uz)) + W7[q] * (pf_dot(q, hx, hy, hz) + s);
+    pf_accumulate(rest, rest_comp, -post);
+    return post;
+}
+
+// Collision of Eq. 48 of cell c (see phase_collide_stream): pre-collision populations in, post out.
+PF_INLINE PfCell pf_collide(const PfCell in, const long long c, const long long ncell, const float* RESTRICT grad,
+                            const float* RESTRICT u, const float* RESTRICT source, const float omega,
+                            const float interface_factor, const float source_scale) {
+    // Eq. 47 with compensated sums: together with the rest population below, Sigma phi changes per step
+    // only by the source and one float32 rounding per cell (plain float32 sums drifted ~50x more in
+    // steady states, where the same rounding repeats every step)
+    float mass = in.f0, mass_comp = 0.f;
+    pf_accumulate(mass, mass_comp, in.f1);
+    pf_accumulate(mass, mass_comp, in.f2);
+    pf_accumulate(mass, mass_comp, in.f3);
+    pf_accumulate(mass, mass_comp, in.f4);
+    pf_accumulate(mass, mass_comp, in.f5);
+    pf_accumulate(mass, mass_comp, in.f6);
+    const float p0 = mass + mass_comp;
+    const float gx = grad[c], gy = grad[ncell + c], gz = grad[2 * ncell + c];
+    const float g2 = gx * gx + gy * gy + gz * gz;
+    // (1 - omega/2) |H| / |grad phi|, Eq. 49.  The guarded sqrt argument is a plain select, not fmaxf: the
+    // host compiler vectorises the even-step loop with it (given -fno-math-errno for the sqrtf itself)
+    const float g2_safe = g2 > PF_GRAD_EPS2 ? g2 : PF_GRAD_EPS2;
+    const float hscale = g2 > PF_GRAD_EPS2 ? interface_factor * p0 * (1.f - p0) / sqrtf(g2_safe) : 0.f;
+    const float hx = hscale * gx, hy = hscale * gy, hz = hscale * gz;
+    const float s = source_scale * source[c];
+    const float ux = u[c], uy = u[ncell + c], uz = u[2 * ncell + c];
+    // rest population from the exact local balance sum_k h*_k = sum_k h_k + S_phi (the H_k sum to zero
+    // and the equilibria to phi); equal to the collision formula for q = 0 up to rounding
+    float rest = mass, rest_comp = mass_comp;
+    pf_accumulate(rest, rest_comp, s);
+    PfCell out;
+    out.f1 = pf_relax(1, in.f1, p0, ux, uy, uz, hx, hy, hz, s, omega, rest, rest_comp);
+    out.f2 = pf_relax(2, in.f2, p0, ux, uy, uz, hx, hy, hz, s, omega, rest, rest_comp);
+    out.f3 = pf_relax(3, in.f3, p0, ux, uy, uz, hx, hy, hz, s, omega, rest, rest_comp);
+    out.f4 = pf_relax(4, in.f4, p0, ux, uy, uz, hx, hy, hz, s, omega, rest, rest_comp);
+    out.f5 = pf_relax(5, in.f5, p0, ux, uy, uz, hx, hy, hz, s, omega, rest, rest_comp);
+    out.f6 = pf_relax(6, in.f6, p0, ux, uy, uz, hx, hy, hz, s, omega, rest, rest_comp);
+    out.f0 = rest + rest_comp;
+    return out;
+}
+
 // One phase-field step: load h at parity t (AA), collide (Eq. 48), store (stream in place).
 //   h*_k = h_k - omega (h_k - h_k^eq) + (1 - omega/2) H_k + S_k
 //   H_k = w_k d_k . H,  H = (4/W) phi (1 - phi) grad(phi)/|grad(phi)|   (Eqs. 49-50; the (1 - omega/2)
@@ -284,38 +357,49 @@ KERNEL void phase_collide_stream(const long long n, float* RESTRICT h /* size: 7
     const long long ncell = (long long)(nx + 2) * (ny + 2) * (nz + 2);
     const float omega = 1.f / (mobility / CS2_7 + 0.5f);
     const float interface_factor = (1.f - 0.5f * omega) * 4.f / width;
-    const int odd = parity & 1;
-    FOR_EACH_CELL(x, y, z, nx, ny, nz) {
-        long long nb[7];
-        pf_neighbours(x + 1, y + 1, z + 1, nx, ny, nz, px, py, pz, nb);
-        const long long c = nb[0];
-        if (flags[c] != PF_FLUID) continue;
-        float f[7];
-        pf_load(h, flags, phi, u, ncell, nb, odd, f);
-        // Eq. 47, summed in double: together with the rest population below, Sigma phi changes per step only
-        // by the source and one float32 rounding per cell (float32 sums drifted ~50x more in steady states)
-        const double mass = (double)f[0] + (double)f[1] + (double)f[2] + (double)f[3] + (double)f[4] +
-                            (double)f[5] + (double)f[6];
-        const float p0 = (float)mass;
-
-        const float gx = grad[c], gy = grad[ncell + c], gz = grad[2 * ncell + c];
-        const float g2 = gx * gx + gy * gy + gz * gz;
-        // (1 - omega/2) |H| / |grad phi|, Eq. 49
-        const float hscale = g2 > PF_GRAD_EPS2 ? interface_factor * p0 * (1.f - p0) / sqrtf(g2) : 0.f;
-        const float hx = hscale * gx, hy = hscale * gy, hz = hscale * gz;
-        const float s = source_scale * source[c];
-        const float ux = u[c], uy = u[ncell + c], uz = u[2 * ncell + c];
-        double moved = 0.0;
-        PF_UNROLL
-        for (int q = 1; q < 7; ++q) {
-            const float feq = pf_feq(q, p0, ux, uy, uz);
-            f[q] = f[q] - omega * (f[q] - feq) + W7[q] * (pf_dot(q, hx, hy, hz) + s);
-            moved += (double)f[q];
+    // two loops, so that the local even step has no neighbour logic and vectorises on the host
+    if (!(parity & 1)) {
+        const long long sy = (long long)(nx + 2), sz = sy * (ny + 2);
+        FOR_EACH_CELL(x, y, z, nx, ny, nz) {
+            const long long c = (x + 1) + sy * (y + 1) + sz * (z + 1);
+            if (flags[c] != PF_FLUID) continue;
+            PfCell in;
+            in.f0 = h[c];
+            in.f1 = h[ncell + c];
+            in.f2 = h[2 * ncell + c];
+            in.f3 = h[3 * ncell + c];
+            in.f4 = h[4 * ncell + c];
+            in.f5 = h[5 * ncell + c];
+            in.f6 = h[6 * ncell + c];
+            const PfCell out = pf_collide(in, c, ncell, grad, u, source, omega, interface_factor, source_scale);
+            h[c] = out.f0;  // store in the opposite slots (AA even step)
+            h[2 * ncell + c] = out.f1;
+            h[ncell + c] = out.f2;
+            h[4 * ncell + c] = out.f3;
+            h[3 * ncell + c] = out.f4;
+            h[6 * ncell + c] = out.f5;
+            h[5 * ncell + c] = out.f6;
         }
-        // rest population from the exact local balance sum_k h*_k = sum_k h_k + S_phi (the H_k sum to zero
-        // and the equilibria to phi); equal to the collision formula for q = 0 up to rounding
-        f[0] = (float)(mass + (double)s - moved);
-        pf_store(h, flags, phi, u, ncell, nb, odd, f);
+    } else {
+        FOR_EACH_CELL(x, y, z, nx, ny, nz) {
+            long long nb[7];
+            pf_neighbours(x + 1, y + 1, z + 1, nx, ny, nz, px, py, pz, nb);
+            const long long c = nb[0];
+            if (flags[c] != PF_FLUID) continue;
+            float f[7];
+            pf_load(h, flags, phi, u, ncell, nb, 1, f);
+            PfCell in;
+            in.f0 = f[0];
+            in.f1 = f[1];
+            in.f2 = f[2];
+            in.f3 = f[3];
+            in.f4 = f[4];
+            in.f5 = f[5];
+            in.f6 = f[6];
+            const PfCell out = pf_collide(in, c, ncell, grad, u, source, omega, interface_factor, source_scale);
+            const float post[7] = {out.f0, out.f1, out.f2, out.f3, out.f4, out.f5, out.f6};
+            pf_store(h, flags, phi, u, ncell, nb, 1, post);
+        }
     }
 }
 
