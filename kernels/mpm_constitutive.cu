@@ -3,6 +3,7 @@
 // constitutive update F_trial -> (F_new, tau, q, vc).  Same defines as mpm_g2p.cu (see mpm_model.cuh).
 #include "common.cuh"
 #include "mpm_model.cuh"
+#include "mpm_loops.cuh"
 
 // A (9, n) row-major matrices -> U (9, n), sigma (3, n), V (9, n) with A = U diag(sigma) V^T.
 KERNEL void mpm_svd3_batch(const long long n, const float* RESTRICT A, float* RESTRICT U, float* RESTRICT sigma,

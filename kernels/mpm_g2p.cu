@@ -12,6 +12,7 @@
 // broken setup).  One thread per particle; n = number of particles.
 #include "common.cuh"
 #include "mpm_model.cuh"
+#include "mpm_loops.cuh"
 
 DEVICE int mpm_bspline_g(const float X, float w[3], float& f) {
     const int base = (int)floorf(X - 0.5f);
@@ -37,7 +38,7 @@ KERNEL void mpm_g2p(const long long n, float* RESTRICT x, float* RESTRICT v, flo
     const long long np = n;
     const long long ncell = (long long)nx * ny * nz;
     const float inv_dx = 1.f / dx;
-    FOR_EACH(p, n) {
+    MPM_FOR_EACH_PARTICLE(p, n) {
         const float xp = x[p], yp = x[np + p], zp = x[2 * np + p];
         float wx[3], wy[3], wz[3], fx, fy, fz;
         const int bx = mpm_bspline_g(xp * inv_dx - 0.5f, wx, fx);

@@ -19,6 +19,7 @@
 // Grid SDF collider: a node field of signed distance (has_sdf = 1), normal by central differences,
 // parameters sdf_params = (mode, friction, vx, vy, vz).
 #include "common.cuh"
+#include "mpm_loops.cuh"
 
 #define MPM_COLLIDER_STRIDE 16
 #define MPM_BC_STICKY 0
@@ -119,7 +120,7 @@ KERNEL void mpm_grid_update(const long long n, const float* RESTRICT grid_m, con
                             const float* RESTRICT colliders, const int ncolliders, const float* RESTRICT sdf,
                             const int has_sdf, const float* RESTRICT sdf_params) {
     const long long ncell = (long long)nx * ny * nz;
-    FOR_EACH_CELL(x, y, z, nx, ny, nz) {
+    MPM_FOR_EACH_CELL(x, y, z, nx, ny, nz) {
         const long long i = x + (long long)nx * (y + (long long)ny * z);
         const float m = grid_m[i];
         float vx = 0.f, vy = 0.f, vz = 0.f;

@@ -14,10 +14,12 @@
 // CUDA: float atomics straight into the grid (order-dependent round-off, as any GPU MPM).
 // Host: deterministic.  Each OpenMP thread scatters its static block of particles into a private grid
 // (scratch: nthreads * 5 * ncell floats, node-interleaved), then the private grids are summed node by
-// node in thread order, so for a fixed thread count the result is bitwise reproducible.
+// node in thread order, so for a fixed thread count the result is bitwise reproducible (up to
+// MPM_SERIAL_PARTICLES particles the team is one thread: the same rule every run).
 // Define MPM_HOST_ATOMICS=1 to use `omp atomic` on the host instead (for benchmarking only:
 // not reproducible).
 #include "common.cuh"
+#include "mpm_loops.cuh"
 
 #ifndef MPM_HOST_ATOMICS
 #define MPM_HOST_ATOMICS 0
@@ -88,7 +90,7 @@ KERNEL void mpm_p2g(const long long n, const float* RESTRICT x, const float* RES
     (void)scratch;
     (void)nthreads;
 #else
-    CK_PRAGMA(omp parallel num_threads(nthreads)) {
+    CK_PRAGMA(omp parallel num_threads(np > MPM_SERIAL_PARTICLES ? nthreads : 1)) {
         const int t = omp_get_thread_num();
         const int team = omp_get_num_threads();
         float* RESTRICT g = scratch + (long long)t * 5 * ncell;

@@ -74,9 +74,11 @@ def test_seeding_volumes_and_shapes():
 
 def _collapse(cpu, **kw):
     dx = 0.01
-    body = seed_box((0.03, 0.03, 0.02), (0.11, 0.07, 0.14), dx, ppc=2, jitter=0.5, seed=1)
+    # 12 288 particles: above MPM_SERIAL_PARTICLES, so the multi-threaded private-grid P2G is exercised
+    body = seed_box((0.03, 0.03, 0.02), (0.19, 0.11, 0.14), dx, ppc=2, jitter=0.5, seed=1)
+    assert body.count > 8192
     walls = DomainWalls.uniform("separate", 0.5)
-    return SandSolver(cpu, (20, 10, 30), dx, 1.5e-4, SandParams(), body.x, body.volume, walls=walls, **kw)
+    return SandSolver(cpu, (20, 14, 40), dx, 1.5e-4, SandParams(), body.x, body.volume, walls=walls, **kw)
 
 
 def test_cpu_run_is_bitwise_deterministic_and_restartable(cpu):
@@ -84,14 +86,14 @@ def test_cpu_run_is_bitwise_deterministic_and_restartable(cpu):
     host P2G sums per-thread private grids in thread order (kernels/mpm_p2g.cu), everything else is
     per particle or per node."""
     a = _collapse(cpu)
-    a.step(40)
+    a.step(25)
     mid = a.state()
-    a.step(40)
+    a.step(25)
     b = _collapse(cpu)
-    b.step(80)
+    b.step(50)
     c = _collapse(cpu)
     c.load_state(mid)
-    c.step(40)
+    c.step(25)
     pa, pb, pc = a.particles(), b.particles(), c.particles()
     assert pa["v"].std() > 0.0  # the sand did move
     for k in ("x", "v", "C", "F", "tau", "q", "vc"):
