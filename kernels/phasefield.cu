@@ -181,9 +181,10 @@ KERNEL void phase_set_equilibrium(const long long n,
     }
 }
 
-// phi = sum_k h_k (Eq. 47) at parity t, on every padded cell: a ghost cell takes the value of its image
-// (wrap on periodic axes, nearest interior cell otherwise); WALL/OUTFLOW cells (images) get 0; INFLOW cells
-// keep their phi (the phase value they carry).  n = (nx+2)*(ny+2)*(nz+2).
+// phi = sum_k h_k (Eq. 47) at parity t, on every padded cell.  A ghost cell takes the value of its image
+// (wrap on periodic axes, nearest interior cell otherwise); an interior WALL / OUTFLOW cell (or a ghost whose
+// image is one) gets 0; INFLOW cells, ghost or interior, keep the phase value they carry (set by the
+// caller).  n = (nx+2)*(ny+2)*(nz+2).
 KERNEL void phase_macroscopic(const long long n,
                               const float* RESTRICT h /* size: 7 * (nx + 2) * (ny + 2) * (nz + 2) */,
                               float* RESTRICT phi /* size: (nx + 2) * (ny + 2) * (nz + 2) */,

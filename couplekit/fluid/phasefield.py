@@ -48,6 +48,19 @@ h[opp q, c], where the next even step reads it.  INFLOW / OUTFLOW links are fill
 described above (on a push: into h[opp q, c] for the next even step).  After an even step the
 populations sit in reversed slots, after an odd step in natural order; :meth:`set_equilibrium` writes a
 state that loads as h^eq at a given parity (use it to initialise).  Non-FLUID cells are never updated.
+
+Numerical choices
+-----------------
+* Source term in the paper's form (Eq. 48/51): S_k = w_k gamma S_phi added without the (1 - omega/2)
+  factor and phi = sum_k h_k, so one step changes Sigma phi by exactly gamma Sigma S_phi (first order in
+  time for the source, notes §1c); the interface term H_k does carry the (1 - omega/2) factor.
+* h^eq is first order in u (notes §1c); the normal is zero where |grad phi|^2 <= 1e-12.
+* Mass in float32: the kernel sums the populations with compensated (TwoSum) float arithmetic and sets
+  the rest population from the exact local balance sum h* = sum h + S, so Sigma phi changes only by one
+  float32 rounding per cell and step (plain float32 sums drifted ~50x more in steady states, where the
+  same rounding repeats every step).  The reference computes in float64 and rounds each h* once.
+* Volume V (Eq. 52): Sigma phi over interior FLUID cells, or Sigma eps phi with the mixture's fluid
+  fraction (``volume_sums(..., eps=...)``); gamma from :func:`volume_controller_gamma` (eta = 0: off).
 """
 
 from __future__ import annotations

@@ -141,7 +141,8 @@ class PhaseFieldReferenceOps:
         """phi = sum_k h_k (Eq. 47) in interior fluid cells; see the kernel for ghost, wall and inflow cells.
 
         A ghost cell takes the value of its image (wrap on periodic axes, nearest interior cell otherwise);
-        WALL/OUTFLOW cells get 0; INFLOW cells keep the phase value they carry.
+        an interior WALL / OUTFLOW cell (or a ghost whose image is one) gets 0; INFLOW cells keep the phase
+        value they carry.
         """
         grid = self._grid(flags)
         f = self._load(h, phi, u, grid, parity)
