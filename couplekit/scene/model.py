@@ -1,0 +1,964 @@
+"""The scene: typed dataclasses, loading from TOML, and every check that needs more than one key.
+
+:meth:`Scene.load` (a TOML file) and :meth:`Scene.from_dict` (a dict, e.g. built in Python) run the schema
+checks of :mod:`couplekit.scene.schema` and then the cross-key checks below, and raise one
+:class:`~couplekit.scene.schema.SceneError` listing every problem (dotted key, what is wrong, the fix)
+before anything is allocated:
+
+* the grid: ``dx`` or ``resolution`` (not both, consistent with ``size``, whole number of cells);
+* boundaries: periodic on both faces of an axis; an ``inflow`` face needs an ``[[inflows]]`` entry and an
+  entry needs an ``inflow`` face (an inflow on a periodic face is refused); inflow velocity pointing in;
+* bodies: geometry inside the domain (sand at least two cells from each face, where the MPM walls are);
+  files exist; what each body kind needs ([fluid] for water and inflows, sand keys only on sand bodies);
+* time step: the lattice Mach number of the fastest expected flow (:class:`couplekit.units.Units`), the
+  relaxation time of both viscosities, weak compressibility under gravity, the capillary time-step limit,
+  and the MPM elastic and particle CFL limits (:func:`couplekit.sand.solver.elastic_dt_limit`).
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..lattice import CS2
+from ..units import Units
+from .geometry import Box, Cylinder, Inverted, Shape, Sphere, Transformed
+from .schema import (
+    BODY_KEYS,
+    FACES,
+    GEOMETRY_COMMON_KEYS,
+    GEOMETRY_KEYS,
+    INFLOW_KEYS,
+    REQUIRED,
+    SECTIONS,
+    TOP_LEVEL,
+    Problem,
+    SceneError,
+    read_table,
+)
+
+__all__ = ["Scene", "Domain", "Time", "Fluid", "Sand", "Body", "Geometry", "Inflow", "Outputs", "Effects", "LIMITS"]
+
+LIMITS = {
+    "min_lattice_viscosity": 1e-5,
+    "max_lattice_viscosity": 1.0,
+    "max_density_variation": 0.1,
+    "sand_wall_cells": 2,
+}
+"""Fixed limits of the cross checks (see docs/scene-reference.md, 'Time-step checks'):
+lattice viscosity in [1e-5, 1] (τ in [0.50003, 3.5]; the paper's smallest is 1e-4, the NOCM-MRT scheme is
+untested below a tenth of that); hydrostatic density variation g_lat·H_lat/c_s² ≤ 0.1 (weak compressibility);
+sand kept 2 cells from each face (the MPM walls take two node layers)."""
+
+_DEFAULT_LATTICE_VISCOSITY = {"water": 1e-4, "air": 1e-2}  # the most common Table 1 values
+
+
+@dataclass(frozen=True)
+class Domain:
+    size: tuple[float, float, float]
+    dx: float
+    resolution: tuple[int, int, int]  # (nx, ny, nz)
+    gravity: tuple[float, float, float]
+    boundary: dict[str, str]
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        """Array shape (nz, ny, nx) of a field."""
+        nx, ny, nz = self.resolution
+        return (nz, ny, nx)
+
+    @property
+    def cells(self) -> int:
+        return int(np.prod(self.resolution))
+
+
+@dataclass(frozen=True)
+class Time:
+    dt: float
+    frame_duration: float
+    frames: int
+    max_speed: float | None
+    mach_limit: float
+
+    @property
+    def steps_per_frame(self) -> int:
+        """Whole steps per output frame (at least 1)."""
+        return max(1, int(round(self.frame_duration / self.dt)))
+
+
+@dataclass(frozen=True)
+class Fluid:
+    phases: int
+    water_density: float
+    air_density: float
+    water_lattice_viscosity: float
+    air_lattice_viscosity: float
+    surface_tension: float
+    interface_width: float
+    mobility: float
+    controller_eta: float
+
+
+@dataclass(frozen=True)
+class Sand:
+    density: float
+    youngs_modulus: float
+    poisson_ratio: float
+    hardening: tuple[float, float, float, float]
+    cohesion: float
+    cohesion_saturation: tuple[float, float, float]
+    particles_per_cell: int
+    jitter: float
+    seed: int
+    wall_friction: float
+    cfl: float
+    elastic_cfl: float
+    retention: bool
+    absorption_rate: float
+    max_moisture: float
+
+    @property
+    def particles_per_axis(self) -> int:
+        return round(self.particles_per_cell ** (1 / 3))
+
+    def p_wave_speed(self, density: float | None = None) -> float:
+        """c_p = sqrt((λ + 2μ)/ϱ) of this material (at ``density`` if given)."""
+        e, nu = self.youngs_modulus, self.poisson_ratio
+        modulus = e * (1 - nu) / ((1 + nu) * (1 - 2 * nu))
+        return math.sqrt(modulus / (density or self.density))
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """A checked ``geometry`` table; :meth:`shape` builds the SDF (files resolved against ``base_dir``)."""
+
+    type: str
+    params: dict[str, Any]
+    scale: float = 1.0
+    rotate: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    translate: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    invert: bool = False
+
+    def shape(self, domain: Domain | None = None, sample_spacing: float | None = None) -> Shape:
+        """The solid as a :class:`~couplekit.scene.geometry.Shape` in world coordinates."""
+        from .mesh import HeightField, load_heights, load_mesh
+
+        p = self.params
+        if self.type == "box":
+            s: Shape = Box(p["min"], p["max"])
+        elif self.type == "sphere":
+            s = Sphere(p["center"], p["radius"])
+        elif self.type == "cylinder":
+            s = Cylinder(p["center"], p["radius"], p["height"], p["axis"])
+        elif self.type == "heightfield":
+            h = np.asarray(p["heights"]) if p.get("heights") is not None else load_heights(p["file"])
+            base = p.get("base")
+            if base is None:
+                base = -(domain.dx if domain else 1e-3)
+            s = HeightField(h, p["x_range"], p["y_range"], base, sample_spacing)
+        elif self.type == "mesh":
+            s = load_mesh(p["file"], sample_spacing)
+        else:
+            raise ValueError(f"unknown geometry type {self.type!r}")
+        if self.scale != 1.0 or any(self.rotate) or any(self.translate):
+            s = Transformed(s, self.scale, self.rotate, self.translate)
+        if self.invert:
+            if domain is None:
+                raise ValueError("an inverted shape needs the domain for its bounds")
+            s = Inverted(s, (0.0, 0.0, 0.0), domain.size)
+        return s
+
+    def bounds(self, domain: Domain | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Axis-aligned bounds in world coordinates (a mesh file is read to get them)."""
+        return self.shape(domain).bounds()
+
+
+@dataclass(frozen=True)
+class Body:
+    kind: str
+    name: str
+    geometry: Geometry
+    velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    density: float | None = None
+    retention: bool | None = None
+    friction: float | None = None
+
+
+@dataclass(frozen=True)
+class Inflow:
+    face: str
+    kind: str
+    velocity: tuple[float, float, float]
+    sand_fraction: float = 0.0
+
+
+@dataclass(frozen=True)
+class Outputs:
+    directory: str | None
+    fields: tuple[str, ...]
+    vtk: bool
+    ply: bool
+    preview: bool
+    preview_every: int
+    checkpoint_every: int
+    diagnostics: bool
+
+
+@dataclass(frozen=True)
+class Effects:
+    surface_tension: bool = True
+    volume_controller: bool = True
+    source_term: bool = True
+    drag: bool = True
+    buoyancy: bool = True
+    cohesion: bool = True
+    hardening: bool = True
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A validated scene (SI units). Build it with :meth:`load` or :meth:`from_dict`; never half-valid."""
+
+    name: str
+    description: str
+    domain: Domain
+    time: Time
+    fluid: Fluid | None
+    sand: Sand | None
+    bodies: tuple[Body, ...]
+    inflows: tuple[Inflow, ...]
+    outputs: Outputs
+    effects: Effects
+    source: dict = field(default_factory=dict, compare=False, repr=False)
+    """The checked input dict with file paths made absolute (kept in checkpoints to rebuild the scene)."""
+
+    # ------------------------------------------------------------------------------------ construction
+    @classmethod
+    def load(cls, path: str | Path) -> Scene:
+        """Read and validate a TOML scene file; raises :class:`SceneError` naming every problem."""
+        path = Path(path)
+        try:
+            text = path.read_text()
+        except OSError as exc:
+            raise SceneError(
+                [Problem("(file)", f"cannot read {path}: {exc.strerror}", "check the path")], str(path)
+            ) from None
+        try:
+            data = tomllib.loads(text)
+        except tomllib.TOMLDecodeError as exc:
+            raise SceneError(
+                [Problem("(syntax)", f"not valid TOML: {exc}", "fix the TOML syntax at that line")], str(path)
+            ) from None
+        return cls.from_dict(data, base_dir=path.parent, source_name=str(path))
+
+    @classmethod
+    def from_dict(cls, data: dict, base_dir: str | Path = ".", source_name: str = "scene") -> Scene:
+        """Validate a scene given as a dict (the TOML structure); relative files resolve against ``base_dir``."""
+        problems: list[Problem] = []
+        scene = _build(data, Path(base_dir), problems)
+        if problems or scene is None:
+            raise SceneError(problems, source_name)
+        return scene
+
+    def to_dict(self) -> dict:
+        """The scene as a TOML-structured dict (file paths absolute); ``from_dict`` of it gives this scene."""
+        return _deep_copy(self.source)
+
+    # ------------------------------------------------------------------------------------ derived
+    @property
+    def has_fluid(self) -> bool:
+        return self.fluid is not None
+
+    @property
+    def has_sand(self) -> bool:
+        return any(b.kind == "sand" for b in self.bodies)
+
+    def units(self) -> Units:
+        """The lattice unit system (dx, dt, ρ_ref = water density)."""
+        rho = self.fluid.water_density if self.fluid else 1000.0
+        return Units(dx=self.domain.dx, dt=self.time.dt, rho=rho)
+
+    def expected_max_speed(self) -> tuple[float, str]:
+        """(speed m/s, what it comes from) used by the Mach and particle-CFL checks."""
+        return _speed_estimate(self.domain, self.time, self.bodies, self.inflows, {})
+
+    def summary(self) -> str:
+        """A few lines: grid, time, physics present."""
+        d, t = self.domain, self.time
+        kinds = {k: sum(b.kind == k for b in self.bodies) for k in ("water", "sand", "obstacle")}
+        lines = [
+            f"scene {self.name}: grid {d.resolution[0]}x{d.resolution[1]}x{d.resolution[2]} ({d.cells:,} cells), dx = {d.dx:g} m",
+            f"time: dt = {t.dt:g} s, {t.steps_per_frame} steps per frame ({t.steps_per_frame * t.dt:g} s), {t.frames} frames",
+            f"bodies: {kinds['water']} water, {kinds['sand']} sand, {kinds['obstacle']} obstacle; inflows: {len(self.inflows)}",
+            f"fluid: {'none' if not self.fluid else f'{self.fluid.phases} phase(s)'}; sand: {'yes' if self.has_sand else 'none'}",
+        ]
+        return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------------------------- building
+def _deep_copy(x: Any) -> Any:
+    if isinstance(x, dict):
+        return {k: _deep_copy(v) for k, v in x.items()}
+    if isinstance(x, list):
+        return [_deep_copy(v) for v in x]
+    return x
+
+
+def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
+    if not isinstance(data, dict):
+        problems.append(Problem("(scene)", "a scene must be a table of tables", "start from an example in examples/"))
+        return None
+    source = _deep_copy(data)
+    for name in data:
+        if name not in TOP_LEVEL:
+            import difflib
+
+            close = difflib.get_close_matches(name, TOP_LEVEL, n=1)
+            problems.append(
+                Problem(
+                    name,
+                    "unknown table",
+                    f"did you mean [{close[0]}]?" if close else f"remove it; the tables are {', '.join(TOP_LEVEL)}",
+                )
+            )
+    for required in ("domain", "time"):
+        if required not in data:
+            problems.append(Problem(required, "is required", f"add a [{required}] table"))
+    n_before = len(problems)
+
+    sc = read_table(data.get("scene", {}), "scene", SECTIONS["scene"], problems)
+    dom_raw = data.get("domain", {})
+    dom_raw = dict(dom_raw) if isinstance(dom_raw, dict) else dom_raw
+    boundary_raw = dom_raw.pop("boundary", {}) if isinstance(dom_raw, dict) else {}
+    dom_raw = dom_raw if isinstance(dom_raw, dict) else {}
+    dom = read_table(dom_raw, "domain", SECTIONS["domain"], problems)
+    bnd = read_table(boundary_raw, "domain.boundary", SECTIONS["domain.boundary"], problems)
+    tim = read_table(data.get("time", {}), "time", SECTIONS["time"], problems)
+    flu = read_table(data["fluid"], "fluid", SECTIONS["fluid"], problems) if "fluid" in data else None
+    snd = read_table(data.get("sand", {}), "sand", SECTIONS["sand"], problems)
+    out = read_table(data.get("outputs", {}), "outputs", SECTIONS["outputs"], problems)
+    eff = read_table(data.get("effects", {}), "effects", SECTIONS["effects"], problems)
+
+    # ---- domain
+    domain = None
+    if dom["size"] is not None:
+        size = dom["size"]
+        dx, res = dom["dx"], dom["resolution"]
+        if dx is None and res is None and "dx" not in dom_raw and "resolution" not in dom_raw:
+            problems.append(
+                Problem(
+                    "domain.dx",
+                    "neither dx nor resolution is given",
+                    "add dx = <cell size in m> (or resolution = [nx, ny, nz])",
+                )
+            )
+        elif "dx" in dom_raw and "resolution" in dom_raw:
+            problems.append(
+                Problem(
+                    "domain.resolution",
+                    "both dx and resolution are given",
+                    "keep one of domain.dx and domain.resolution",
+                )
+            )
+        elif dx is not None:
+            counts = [s / dx for s in size]
+            res = [int(round(c)) for c in counts]
+            for i, (c, n) in enumerate(zip(counts, res, strict=True)):
+                if abs(c - n) > 1e-6 * max(1.0, c):
+                    problems.append(
+                        Problem(
+                            f"domain.size[{i}]",
+                            f"{size[i]:g} m is not a whole number of cells of dx = {dx:g} m ({c:.4f})",
+                            f"use size[{i}] = {max(n, 1) * dx:.6g}",
+                        )
+                    )
+                elif n < 5:
+                    problems.append(
+                        Problem(
+                            f"domain.size[{i}]",
+                            f"only {n} cells along {'xyz'[i]} (at least 5 are needed)",
+                            f"make size[{i}] >= {5 * dx:g} m or dx smaller",
+                        )
+                    )
+        elif res is not None:
+            dxs = [s / n for s, n in zip(size, res, strict=True)]
+            if max(dxs) - min(dxs) > 1e-6 * max(dxs):
+                problems.append(
+                    Problem(
+                        "domain.resolution",
+                        f"cells are not cubic: size/resolution = {', '.join(f'{d:.6g}' for d in dxs)} m",
+                        "choose resolution proportional to size (or give dx)",
+                    )
+                )
+            dx = dxs[0]
+        if dx is not None and res is not None and len(problems) == n_before:
+            domain = Domain(
+                tuple(size), float(dx), tuple(int(n) for n in res), tuple(dom["gravity"] or (0, 0, -9.81)), dict(bnd)
+            )
+
+    # ---- boundaries: periodic pairs
+    for axis in "xyz":
+        lo, hi = bnd[f"{axis}_min"], bnd[f"{axis}_max"]
+        if lo and hi and (lo == "periodic") != (hi == "periodic"):
+            problems.append(
+                Problem(
+                    f"domain.boundary.{axis}_{'max' if lo == 'periodic' else 'min'}",
+                    f"{axis}_min is {lo!r} but {axis}_max is {hi!r}; periodic needs both faces of an axis",
+                    f"set both domain.boundary.{axis}_min and {axis}_max to 'periodic', or neither",
+                )
+            )
+
+    # ---- fluid
+    fluid = None
+    if flu is not None:
+        fluid = _fluid(flu, data["fluid"], domain, tim, problems)
+
+    # ---- sand material
+    sand = _sand(snd, problems)
+
+    # ---- bodies
+    bodies = []
+    raw_bodies = data.get("bodies", [])
+    if not isinstance(raw_bodies, list):
+        problems.append(Problem("bodies", "must be an array of tables", "write each body as [[bodies]] ..."))
+        raw_bodies = []
+    for i, rb in enumerate(raw_bodies):
+        body = _body(rb, f"bodies[{i}]", base_dir, source["bodies"][i] if isinstance(rb, dict) else None, problems)
+        if body is not None:
+            bodies.append(body)
+
+    # ---- inflows
+    inflows = []
+    raw_inflows = data.get("inflows", [])
+    if not isinstance(raw_inflows, list):
+        problems.append(Problem("inflows", "must be an array of tables", "write each inflow as [[inflows]] ..."))
+        raw_inflows = []
+    for i, ri in enumerate(raw_inflows):
+        v = read_table(ri, f"inflows[{i}]", INFLOW_KEYS, problems)
+        if None in (v["face"], v["velocity"]):
+            continue
+        inflows.append(Inflow(v["face"], v["kind"], tuple(v["velocity"]), v["sand_fraction"]))
+    _check_inflows(inflows, bnd, fluid, problems)
+
+    # ---- what each body needs
+    for i, b in enumerate(bodies):
+        if b.kind == "water" and fluid is None:
+            problems.append(
+                Problem(
+                    f"bodies[{i}].kind",
+                    "a water body needs a [fluid] table",
+                    "add [fluid] (phases = 2 for water and air)",
+                )
+            )
+        if b.kind == "water" and fluid is not None and fluid.phases == 1:
+            problems.append(
+                Problem(
+                    f"bodies[{i}].kind",
+                    "fluid.phases = 1 fills the whole domain with water; a water body needs two phases",
+                    "set fluid.phases = 2, or remove the water body",
+                )
+            )
+        if b.kind != "sand" and (b.density is not None or b.retention is not None):
+            problems.append(
+                Problem(
+                    f"bodies[{i}].{'density' if b.density is not None else 'retention'}",
+                    f"only sand bodies take this key (this body is {b.kind!r})",
+                    "remove it, or make the body kind = 'sand'",
+                )
+            )
+        if b.kind != "obstacle" and b.friction is not None:
+            problems.append(
+                Problem(
+                    f"bodies[{i}].friction",
+                    f"only obstacles take friction (this body is {b.kind!r})",
+                    "remove it; sand friction on walls is sand.wall_friction",
+                )
+            )
+        if b.kind == "obstacle" and any(b.velocity):
+            problems.append(
+                Problem(f"bodies[{i}].velocity", "obstacles are fixed", "remove velocity from the obstacle")
+            )
+    if "sand" in data and not any(b.kind == "sand" for b in bodies):
+        problems.append(
+            Problem(
+                "sand", "a [sand] table but no sand body", "add a [[bodies]] entry with kind = 'sand', or remove [sand]"
+            )
+        )
+    if fluid is None and not any(b.kind == "sand" for b in bodies):
+        problems.append(
+            Problem(
+                "bodies",
+                "the scene has neither a fluid nor sand: nothing to simulate",
+                "add a [fluid] table or a sand body",
+            )
+        )
+
+    # ---- geometry inside the domain
+    if domain is not None:
+        for i, b in enumerate(bodies):
+            _check_inside(b, i, domain, problems)
+        for name, kind in domain.boundary.items():
+            if kind == "periodic" and any(b.kind == "sand" for b in bodies):
+                problems.append(
+                    Problem(
+                        f"domain.boundary.{name}",
+                        "sand does not support periodic faces (the MPM grid has walls on every face)",
+                        f"set domain.boundary.{name} = 'wall'",
+                    )
+                )
+                break
+
+    time = None
+    if tim["dt"] is not None and tim["frame_duration"] is not None:
+        time = Time(tim["dt"], tim["frame_duration"], tim["frames"] or 1, tim["max_speed"], tim["mach_limit"] or 0.3)
+        if time.frame_duration < time.dt:
+            problems.append(
+                Problem(
+                    "time.frame_duration",
+                    f"{time.frame_duration:g} s is shorter than one step dt = {time.dt:g} s",
+                    "make frame_duration >= dt",
+                )
+            )
+
+    # ---- time-step limits
+    if domain is not None and time is not None:
+        _check_time_step(domain, time, fluid, sand, bodies, inflows, problems)
+
+    if problems:
+        return None
+    outputs = Outputs(
+        out["directory"],
+        tuple(out["fields"]),
+        out["vtk"],
+        out["ply"],
+        out["preview"],
+        out["preview_every"],
+        out["checkpoint_every"],
+        out["diagnostics"],
+    )
+    effects = Effects(**eff)
+    has_sand = any(b.kind == "sand" for b in bodies)
+    return Scene(
+        name=sc["name"],
+        description=sc["description"],
+        domain=domain,
+        time=time,
+        fluid=fluid,
+        sand=sand if has_sand else None,
+        bodies=tuple(bodies),
+        inflows=tuple(inflows),
+        outputs=outputs,
+        effects=effects,
+        source=source,
+    )
+
+
+def _fluid(flu: dict, raw: dict, domain: Domain | None, tim: dict, problems: list[Problem]) -> Fluid | None:
+    visc = {}
+    for phase in ("water", "air"):
+        si, lat = f"{phase}_viscosity", f"{phase}_lattice_viscosity"
+        if si in raw and lat in raw:
+            problems.append(
+                Problem(
+                    f"fluid.{si}", f"both {si} and {lat} are given", f"keep one of fluid.{si} (m²/s) and fluid.{lat}"
+                )
+            )
+            continue
+        if flu[si] is not None:
+            if domain is None or tim["dt"] is None:
+                continue
+            visc[phase] = Units(domain.dx, tim["dt"]).viscosity(flu[si], "SI")
+            key = f"fluid.{si}"
+        else:
+            visc[phase] = flu[lat] if flu[lat] is not None else _DEFAULT_LATTICE_VISCOSITY[phase]
+            key = f"fluid.{lat}"
+        lo, hi = LIMITS["min_lattice_viscosity"], LIMITS["max_lattice_viscosity"]
+        if not lo <= visc[phase] <= hi:
+            tau = visc[phase] / CS2 + 0.5
+            problems.append(
+                Problem(
+                    key,
+                    f"gives a lattice viscosity of {visc[phase]:.3g} (τ = {tau:.6g}), outside [{lo:g}, {hi:g}]",
+                    f"give fluid.{lat} in [{lo:g}, {hi:g}] directly (Table 1 uses 1e-4 … 1e-1), or change dx/dt (ν_lat = ν dt/dx²)",
+                )
+            )
+    if (
+        flu["water_density"] is not None
+        and flu["air_density"] is not None
+        and flu["air_density"] >= flu["water_density"]
+    ):
+        problems.append(
+            Problem(
+                "fluid.air_density",
+                f"{flu['air_density']:g} kg/m³ is not below water_density {flu['water_density']:g}",
+                "the light phase must be lighter (paper: 1.25 vs 1000)",
+            )
+        )
+    if len(visc) < 2 or any(
+        flu[k] is None
+        for k in (
+            "phases",
+            "water_density",
+            "air_density",
+            "surface_tension",
+            "interface_width",
+            "mobility",
+            "controller_eta",
+        )
+    ):
+        return None
+    return Fluid(
+        flu["phases"],
+        flu["water_density"],
+        flu["air_density"],
+        visc["water"],
+        visc["air"],
+        flu["surface_tension"],
+        flu["interface_width"],
+        flu["mobility"],
+        flu["controller_eta"],
+    )
+
+
+def _sand(snd: dict, problems: list[Problem]) -> Sand | None:
+    if any(v is None for v in snd.values() if not isinstance(v, bool)):
+        return None
+    ppc = snd["particles_per_cell"]
+    k = round(ppc ** (1 / 3))
+    if k**3 != ppc:
+        problems.append(
+            Problem(
+                "sand.particles_per_cell",
+                f"{ppc} is not a cube (particles are seeded k per axis)",
+                f"use {k**3 if k**3 > 0 else 1} or {(k + 1) ** 3}",
+            )
+        )
+    s1, s2, s3 = snd["cohesion_saturation"]
+    if not 0 < s1 <= s2 < s3:
+        problems.append(
+            Problem(
+                "sand.cohesion_saturation",
+                f"breakpoints {snd['cohesion_saturation']} must satisfy 0 < S1 <= S2 < S3",
+                "e.g. [0.05, 0.18, 0.36]",
+            )
+        )
+    h = snd["hardening"]
+    if h[2] < 0:
+        problems.append(Problem("sand.hardening[2]", f"h2 must be >= 0, got {h[2]:g}", "the paper uses h2 = 0.2"))
+    return Sand(
+        snd["density"],
+        snd["youngs_modulus"],
+        snd["poisson_ratio"],
+        tuple(h),
+        snd["cohesion"],
+        tuple(snd["cohesion_saturation"]),
+        ppc,
+        snd["jitter"],
+        snd["seed"],
+        snd["wall_friction"],
+        snd["cfl"],
+        snd["elastic_cfl"],
+        snd["retention"],
+        snd["absorption_rate"],
+        snd["max_moisture"],
+    )
+
+
+def _body(raw: Any, path: str, base_dir: Path, source: dict | None, problems: list[Problem]) -> Body | None:
+    if not isinstance(raw, dict):
+        problems.append(Problem(path, "must be a table", "write it as [[bodies]] with key = value lines"))
+        return None
+    raw = dict(raw)
+    geo_raw = raw.pop("geometry", None)
+    v = read_table(raw, path, BODY_KEYS, problems)
+    if geo_raw is None:
+        problems.append(
+            Problem(
+                f"{path}.geometry",
+                "is required",
+                f"add a [{path.split('[')[0]}.geometry] table with type = 'box', 'sphere', 'cylinder', 'heightfield' or 'mesh'",
+            )
+        )
+        return None
+    geo = _geometry(geo_raw, f"{path}.geometry", base_dir, source.get("geometry") if source else None, problems)
+    if geo is None or v["kind"] is None or v["velocity"] is None:
+        return None
+    return Body(v["kind"], v["name"] or path, geo, tuple(v["velocity"]), v["density"], v["retention"], v["friction"])
+
+
+def _geometry(raw: Any, path: str, base_dir: Path, source: dict | None, problems: list[Problem]) -> Geometry | None:
+    if not isinstance(raw, dict):
+        problems.append(Problem(path, "must be a table", f"write [{path}] with type = ... and the shape's keys"))
+        return None
+    gtype = raw.get("type")
+    if gtype not in GEOMETRY_KEYS:
+        read_table({"type": gtype} if gtype is not None else {}, path, GEOMETRY_COMMON_KEYS[:1], problems)
+        return None
+    v = read_table(raw, path, GEOMETRY_COMMON_KEYS + GEOMETRY_KEYS[gtype], problems)
+    if any(v[k.name] is None for k in GEOMETRY_KEYS[gtype] if k.default is REQUIRED):
+        return None
+    params = {k.name: v[k.name] for k in GEOMETRY_KEYS[gtype]}
+    if gtype == "box" and params["min"] and params["max"]:
+        for a in range(3):
+            if params["max"][a] <= params["min"][a]:
+                problems.append(
+                    Problem(
+                        f"{path}.max[{a}]",
+                        f"max {params['max'][a]:g} is not above min {params['min'][a]:g}",
+                        "swap min and max, or make the box thicker",
+                    )
+                )
+    if gtype == "heightfield":
+        if (params["heights"] is None) == (params["file"] is None):
+            problems.append(
+                Problem(
+                    f"{path}.heights",
+                    "give exactly one of heights and file",
+                    "inline heights = [[...], ...] or file = 'terrain.npy'",
+                )
+            )
+        for rk in ("x_range", "y_range"):
+            r = params[rk]
+            if r is not None and not r[1] > r[0]:
+                problems.append(Problem(f"{path}.{rk}", f"must be increasing, got {r}", f"write {rk} = [low, high]"))
+    for fk in ("file",):
+        if params.get(fk):
+            f = Path(params[fk])
+            f = f if f.is_absolute() else (base_dir / f)
+            if not f.is_file():
+                problems.append(
+                    Problem(f"{path}.{fk}", f"file {str(f)!r} does not exist", "give a path relative to the scene file")
+                )
+            else:
+                params[fk] = str(f.resolve())
+                if source is not None:
+                    source[fk] = params[fk]
+    if gtype == "heightfield" and params.get("file") and Path(params["file"]).is_file():
+        try:
+            from .mesh import load_heights
+
+            load_heights(params["file"])
+        except (ValueError, OSError) as exc:
+            problems.append(
+                Problem(f"{path}.file", f"unreadable height grid: {exc}", "save a 2-D array with numpy.save or as CSV")
+            )
+    if gtype == "heightfield" and params.get("heights") is not None and params.get("base") is not None:
+        if min(min(r) for r in params["heights"]) <= params["base"]:
+            problems.append(Problem(f"{path}.base", "the base is not below every height", "lower base"))
+    if len([p for p in problems if p.key.startswith(path)]):
+        return None
+    return Geometry(gtype, params, v["scale"], tuple(v["rotate"]), tuple(v["translate"]), v["invert"])
+
+
+def _check_inflows(inflows: list[Inflow], bnd: dict, fluid: Fluid | None, problems: list[Problem]) -> None:
+    faces_used = {}
+    for i, inf in enumerate(inflows):
+        key = f"inflows[{i}]"
+        kind = bnd.get(inf.face)
+        if inf.face in faces_used:
+            problems.append(
+                Problem(
+                    f"{key}.face", f"face {inf.face} already has inflows[{faces_used[inf.face]}]", "one inflow per face"
+                )
+            )
+        faces_used[inf.face] = i
+        if kind == "periodic":
+            problems.append(
+                Problem(
+                    f"{key}.face",
+                    f"face {inf.face} is periodic (domain.boundary.{inf.face} = 'periodic'); an inflow cannot enter through a periodic face",
+                    f"set domain.boundary.{inf.face} = 'inflow' and its opposite face to 'wall' or 'outflow'",
+                )
+            )
+        elif kind != "inflow":
+            problems.append(
+                Problem(
+                    f"{key}.face",
+                    f"domain.boundary.{inf.face} is {kind!r}, not 'inflow'",
+                    f"set domain.boundary.{inf.face} = 'inflow'",
+                )
+            )
+        axis, side = "xyz".index(inf.face[0]), (1 if inf.face.endswith("min") else -1)
+        if inf.velocity[axis] * side <= 0:
+            problems.append(
+                Problem(
+                    f"{key}.velocity",
+                    f"the {inf.face[0]} component {inf.velocity[axis]:g} m/s does not point into the domain through {inf.face}",
+                    f"make velocity[{axis}] {'positive' if side > 0 else 'negative'}",
+                )
+            )
+        if inf.kind == "wind" and inf.sand_fraction > 0:
+            problems.append(
+                Problem(f"{key}.sand_fraction", "wind carries no sand", "set sand_fraction = 0 or kind = 'water'")
+            )
+        if fluid is None:
+            problems.append(Problem(f"{key}", "an inflow needs a [fluid] table", "add [fluid]"))
+        elif fluid.phases == 1 and inf.kind == "wind":
+            problems.append(Problem(f"{key}.kind", "wind needs two fluid phases", "set fluid.phases = 2"))
+    for face in FACES:
+        if bnd.get(face) == "inflow" and face not in faces_used:
+            problems.append(
+                Problem(
+                    f"domain.boundary.{face}",
+                    "is 'inflow' but no [[inflows]] entry has this face",
+                    f"add [[inflows]] with face = '{face}' and a velocity, or make the face a 'wall'",
+                )
+            )
+
+
+def _check_inside(body: Body, i: int, domain: Domain, problems: list[Problem]) -> None:
+    try:
+        lo, hi = body.geometry.bounds(domain)
+    except (ValueError, OSError) as exc:
+        problems.append(
+            Problem(f"bodies[{i}].geometry", f"cannot build the shape: {exc}", "check the geometry keys and file")
+        )
+        return
+    size = np.asarray(domain.size)
+    tol = 1e-9 * size.max()
+    if body.kind == "obstacle":
+        if np.any(hi <= 0) or np.any(lo >= size):
+            problems.append(
+                Problem(
+                    f"bodies[{i}].geometry",
+                    f"the obstacle (bounds {np.round(lo, 6).tolist()} .. {np.round(hi, 6).tolist()} m) does not meet the domain [0, {size.tolist()}]",
+                    "move it into the domain",
+                )
+            )
+        return
+    margin = LIMITS["sand_wall_cells"] * domain.dx if body.kind == "sand" else 0.0
+    if np.any(lo < margin - tol) or np.any(hi > size - margin + tol):
+        axis = int(np.argmax(np.maximum(margin - lo, hi - (size - margin))))
+        where = (
+            f" (sand must stay {LIMITS['sand_wall_cells']} cells = {margin:g} m from each face, where the MPM walls are)"
+            if margin
+            else ""
+        )
+        problems.append(
+            Problem(
+                f"bodies[{i}].geometry",
+                f"the {body.kind} body {body.name!r} reaches outside the domain along {'xyz'[axis]}: bounds {lo[axis]:.6g} .. {hi[axis]:.6g} m, domain 0 .. {size[axis]:g} m{where}",
+                f"move or shrink it so that it lies within [{margin:g}, {size[axis] - margin:.6g}] m along {'xyz'[axis]}",
+            )
+        )
+
+
+def _speed_estimate(domain: Domain, time: Time | dict, bodies, inflows, _cache) -> tuple[float, str]:
+    g = np.asarray(domain.gravity, dtype=np.float64)
+    gmag = float(np.linalg.norm(g))
+    down = g / gmag if gmag > 0 else np.array([0.0, 0.0, -1.0])
+    size = np.asarray(domain.size)
+    floor = float(
+        max(np.dot(np.array([x, y, z]), down) for x in (0, size[0]) for y in (0, size[1]) for z in (0, size[2]))
+    )
+    best, why = 0.0, "nothing moves"
+    for b in bodies:
+        if b.kind == "obstacle":
+            continue
+        lo, hi = b.geometry.bounds(domain)
+        top = float(
+            min(
+                np.dot(np.array([x, y, z]), down)
+                for x in (lo[0], hi[0])
+                for y in (lo[1], hi[1])
+                for z in (lo[2], hi[2])
+            )
+        )
+        drop = max(0.0, floor - top)
+        s = float(np.linalg.norm(b.velocity)) + math.sqrt(2 * gmag * drop)
+        if s > best:
+            best, why = s, f"body {b.name!r}: |v0| + sqrt(2 g h) with a fall of h = {drop:.4g} m"
+    height = float(
+        np.ptp([np.dot(np.array([x, y, z]), down) for x in (0, size[0]) for y in (0, size[1]) for z in (0, size[2])])
+    )
+    for i, inf in enumerate(inflows):
+        s = float(np.linalg.norm(inf.velocity)) + math.sqrt(2 * gmag * height)
+        if s > best:
+            best, why = s, f"inflows[{i}]: |v| + sqrt(2 g H) over the domain height H = {height:.4g} m"
+    max_speed = time.max_speed if isinstance(time, Time) else time.get("max_speed")
+    if max_speed is not None:
+        return float(max_speed), "time.max_speed"
+    return best, why
+
+
+def _check_time_step(
+    domain: Domain, time: Time, fluid: Fluid | None, sand: Sand | None, bodies, inflows, problems
+) -> None:
+    dt, dx = time.dt, domain.dx
+    try:
+        speed, why = _speed_estimate(domain, time, bodies, inflows, {})
+    except (ValueError, OSError):
+        return  # the geometry problem is already reported
+    if fluid is not None:
+        units = Units(dx=dx, dt=dt, rho=fluid.water_density)
+        if speed > 0 and units.mach(speed) > time.mach_limit:
+            problems.append(
+                Problem(
+                    "time.dt",
+                    f"dt = {dt:g} s makes the fastest expected flow ({speed:.3g} m/s, from {why}) Mach {units.mach(speed):.3g} on the lattice (limit time.mach_limit = {time.mach_limit:g})",
+                    f"use dt <= {units.max_dt(speed, time.mach_limit):.3g} s, or a larger dx; if the flow is slower than estimated, set time.max_speed",
+                )
+            )
+        g_lat = units.to_lattice(float(np.linalg.norm(domain.gravity)), "acceleration")
+        height_cells = max(domain.resolution)
+        variation = g_lat * height_cells / CS2
+        if variation > LIMITS["max_density_variation"]:
+            limit = math.sqrt(
+                LIMITS["max_density_variation"] * CS2 * dx / (float(np.linalg.norm(domain.gravity)) * height_cells)
+            )
+            problems.append(
+                Problem(
+                    "time.dt",
+                    f"gravity in lattice units ({g_lat:.3g}) over {height_cells} cells compresses the fluid by {100 * variation:.0f}% (limit {100 * LIMITS['max_density_variation']:.0f}%: weakly compressible LBM)",
+                    f"use dt <= {limit:.3g} s",
+                )
+            )
+        if fluid.phases == 2 and fluid.surface_tension > 0:
+            sigma_lat = units.to_lattice(fluid.surface_tension, "surface_tension")
+            rho_l = fluid.air_density / fluid.water_density
+            cap = (1.0 + rho_l) / (4 * math.pi)
+            if sigma_lat > cap:
+                limit = math.sqrt(cap * fluid.water_density * dx**3 / fluid.surface_tension)
+                problems.append(
+                    Problem(
+                        "time.dt",
+                        f"surface tension {fluid.surface_tension:g} N/m is {sigma_lat:.3g} in lattice units, above the capillary-wave limit (ρ_h + ρ_l)/(4π) = {cap:.3g} (Brackbill et al. 1992)",
+                        f"use dt <= {limit:.3g} s, or lower fluid.surface_tension",
+                    )
+                )
+    if sand is not None and any(b.kind == "sand" for b in bodies):
+        for i, b in enumerate(bodies):
+            if b.kind != "sand":
+                continue
+            rho = b.density or sand.density
+            cp = sand.p_wave_speed(rho)
+            elastic = sand.elastic_cfl * dx / cp
+            if dt > elastic:
+                problems.append(
+                    Problem(
+                        "time.dt",
+                        f"dt = {dt:g} s breaks the MPM elastic limit of bodies[{i}]: C_e dx / c_p = {sand.elastic_cfl:g} x {dx:g} / {cp:.3g} m/s = {elastic:.3g} s",
+                        f"use dt <= {elastic:.3g} s, or a softer sand (lower sand.youngs_modulus)",
+                    )
+                )
+                break
+        sand_speed, why = speed, why
+        if sand_speed > 0 and dt > sand.cfl * dx / sand_speed:
+            limit = sand.cfl * dx / sand_speed
+            problems.append(
+                Problem(
+                    "time.dt",
+                    f"dt = {dt:g} s breaks the MPM particle CFL limit C_v dx / v = {limit:.3g} s for the expected speed {sand_speed:.3g} m/s ({why})",
+                    f"use dt <= {limit:.3g} s; if the sand moves slower, set time.max_speed",
+                )
+            )
+
+
+def scene_dict(scene: Scene) -> dict:
+    """The parsed dataclasses as a plain dict (for reports and tests)."""
+    return asdict(scene)

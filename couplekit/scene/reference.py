@@ -1,0 +1,167 @@
+"""Render the scene reference (``docs/scene-reference.md``) from the schema, so every key is documented.
+
+``python -m couplekit.scene.reference > docs/scene-reference.md`` regenerates it; a test checks that the file
+in the repository matches.
+"""
+
+from __future__ import annotations
+
+from .model import LIMITS
+from .schema import BODY_KEYS, GEOMETRY_COMMON_KEYS, GEOMETRY_KEYS, INFLOW_KEYS, REQUIRED, SECTIONS, Key
+
+__all__ = ["render"]
+
+_INTRO = """# Scene reference
+
+A scene is a TOML file in SI units. `couplekit validate SCENE` checks it; `couplekit run SCENE` runs it;
+in Python, `couplekit.Scene.load(path)`. A scene is refused before anything is allocated when a key is
+unknown, has the wrong type or an out-of-range value, when geometry lies outside the domain, when an inflow
+sits on a periodic face, or when the time step breaks the lattice Mach or MPM limits; the message names the
+dotted key (e.g. `bodies[0].geometry.radius`) and the fix, and lists every problem at once.
+
+Conventions: z is up (gravity defaults to (0, 0, -9.81) m/s²); the domain is the box [0, size_x] × [0, size_y]
+× [0, size_z]; cell (i, j, k) is centred at ((i + ½) dx, (j + ½) dx, (k + ½) dx); one grid serves the LBM and
+the MPM (paper 000 Table 1 lists one resolution). Paper 000's figures have y up: its resolution
+`X × Y × Z` is written here as `resolution = [X, Z, Y]`.
+
+What runs today: fluid-only scenes (one or two phases, water bodies, obstacles, inflows, outflows) and
+sand-only scenes (sand bodies, obstacles). A scene with both sand and a fluid validates, but `run` refuses
+it until the coupling module (drag, buoyancy, Algorithm 1's scheduler) lands. A water jet carrying sand
+(`sand_fraction > 0`) is a coupled scene too.
+
+Example (the demo, `examples/sand_drop_small.toml`):
+
+```toml
+[scene]
+name = "sand_drop_small"
+
+[domain]
+size = [0.2, 0.2, 0.2]
+dx = 0.005
+
+[time]
+dt = 1e-4
+frame_duration = 0.02
+frames = 20
+
+[sand]
+density = 1500.0
+
+[[bodies]]
+kind = "sand"
+velocity = [0.0, 0.0, -0.5]
+[bodies.geometry]
+type = "sphere"
+center = [0.1, 0.1, 0.12]
+radius = 0.04
+```
+"""
+
+_CHECKS = f"""## Time-step checks
+
+All run at load time, from the scene alone:
+
+- **Lattice Mach number.** The fastest expected speed U is `time.max_speed` if given, else the largest of
+  |v0| + √(2 g h) over water and sand bodies (h: the fall from the body's top to the lowest point of the
+  domain along gravity) and |v| + √(2 g H) over inflows (H: the domain's extent along gravity). With a fluid,
+  U Δt / (Δx c_s) must not exceed `time.mach_limit` (c_s = 1/√3).
+- **Relaxation time.** Each lattice viscosity (given, or ν Δt/Δx² from SI) must lie in
+  [{LIMITS["min_lattice_viscosity"]:g}, {LIMITS["max_lattice_viscosity"]:g}], i.e. τ = ν/c_s² + ½ in
+  [0.50003, 3.5]; Table 1 of paper 000 uses 1e-4 … 1e-1, and the scheme is untested below a tenth of its
+  smallest value. SI water viscosity (1e-6 m²/s) at the paper's Δx/Δt is far below this: give the lattice
+  value as the paper does.
+- **Weak compressibility.** g Δt²/Δx × (largest cell count) / c_s², the relative hydrostatic density
+  variation, must not exceed {LIMITS["max_density_variation"]:g}.
+- **Capillary time step** (two phases, σ > 0): σ Δt²/(ρ_h Δx³) ≤ (1 + ρ_l/ρ_h)/(4π) (Brackbill et al. 1992).
+- **MPM elastic limit:** Δt ≤ C_e Δx / c_p, c_p = √((λ + 2μ)/ϱ) of each sand body (C_e = `sand.elastic_cfl`).
+- **MPM particle CFL:** Δt ≤ C_v Δx / U (C_v = `sand.cfl`, U as above).
+
+Geometry: water and sand bodies must lie inside the domain, sand at least {LIMITS["sand_wall_cells"]} cells
+from every face (the MPM walls take two node layers); an obstacle must meet the domain.
+"""
+
+
+def _default(key: Key) -> str:
+    if key.default is REQUIRED:
+        return "**required**"
+    if key.default is None:
+        return "—"
+    if isinstance(key.default, bool):
+        return "true" if key.default else "false"
+    if isinstance(key.default, str):
+        return f'"{key.default}"'
+    if isinstance(key.default, float):
+        return f"{key.default:.6g}"
+    if isinstance(key.default, list):
+        return "[" + ", ".join(f'"{v}"' if isinstance(v, str) else f"{v:g}" for v in key.default) + "]"
+    return str(key.default)
+
+
+def _type(key: Key) -> str:
+    return {
+        "float": "number",
+        "int": "integer",
+        "bool": "boolean",
+        "str": "string",
+        "choice": "string",
+        "vec3": "3 numbers",
+        "ivec3": "3 integers",
+        "floats": f"{key.length} numbers" if key.length else "numbers",
+        "strs": "list of strings",
+        "grid": "2-D list of numbers",
+    }[key.kind]
+
+
+def _table(keys: list[Key]) -> str:
+    rows = ["| key | type | default | unit | allowed | meaning |", "| --- | --- | --- | --- | --- | --- |"]
+    for k in keys:
+        rows.append(f"| `{k.name}` | {_type(k)} | {_default(k)} | {k.unit or ''} | {k.range_text()} | {k.doc} |")
+    return "\n".join(rows)
+
+
+def render() -> str:
+    """The whole reference as Markdown."""
+    parts = [_INTRO]
+    notes = {
+        "scene": "Optional.",
+        "domain": "Required. Give `dx` or `resolution`.",
+        "domain.boundary": "Optional; every face defaults to a wall.",
+        "time": "Required.",
+        "fluid": "Present ⇒ the scene has a fluid. Viscosities: give the SI or the lattice form per phase, not both.",
+        "sand": 'Material of the sand bodies (used only when a body has `kind = "sand"`).',
+        "outputs": "Optional. Files go to `directory`, frame by frame.",
+        "effects": "Optional switches for ablations: an effect the scene does not need is off anyway (DESIGN 'Effects').",
+    }
+    for name, keys in SECTIONS.items():
+        parts.append(f"## [{name}]\n\n{notes.get(name, '')}\n\n{_table(keys)}\n")
+    parts.append(
+        "## [[bodies]]\n\nAny number of bodies; each has a `kind` and a `[bodies.geometry]` table (below).\n"
+        "Water bodies set the initial liquid (φ = 1 inside, a tanh profile of width ξ across the surface); sand\n"
+        "bodies are seeded with particles; obstacles are fixed solids for the fluid (bounce-back) and colliders\n"
+        f"for the sand.\n\n{_table(BODY_KEYS)}\n"
+    )
+    parts.append(
+        "## [bodies.geometry]\n\nKeys every shape takes (transforms apply in the order scale, rotate, translate,\n"
+        "which keep distances exact):\n\n" + _table(GEOMETRY_COMMON_KEYS) + "\n"
+    )
+    descriptions = {
+        "box": "Axis-aligned box (rotate it for any orientation).",
+        "sphere": "Ball.",
+        "cylinder": "Capped cylinder.",
+        "heightfield": "The solid under a surface z = h(x, y), down to `base`; rows of the grid run along y, columns along x.",
+        "mesh": "A closed triangle mesh. Inside: parity of +x ray crossings (orientation-independent); "
+        "distance: exact point–triangle distance to candidate triangles found through dense surface samples.",
+    }
+    for gtype, keys in GEOMETRY_KEYS.items():
+        parts.append(f'### type = "{gtype}"\n\n{descriptions[gtype]}\n\n{_table(keys)}\n')
+    parts.append(
+        "## [[inflows]]\n\nA velocity inlet over a whole face whose `domain.boundary` is `inflow`. A water jet fills\n"
+        "the face with water (φ = 1), wind with air (φ = 0). An inflow on a periodic face is refused.\n"
+        "Outflows need no entry: set the face's boundary to `outflow`.\n\n" + _table(INFLOW_KEYS) + "\n"
+    )
+    parts.append(_CHECKS)
+    return "\n".join(parts)
+
+
+if __name__ == "__main__":
+    print(render(), end="")

@@ -1,0 +1,605 @@
+"""The scene file schema: every key, its type, default, unit, admissible range and documentation.
+
+The schema is data (:data:`SECTIONS`, :data:`BODY_KEYS`, :data:`GEOMETRY_KEYS`, :data:`INFLOW_KEYS`), read by
+two consumers: :func:`read_table`, which checks one TOML table against a key list (unknown key, wrong type,
+out-of-range value, missing required key) and collects :class:`Problem` records naming the dotted key and the
+fix; and :mod:`couplekit.scene.reference`, which renders ``docs/scene-reference.md`` from the same data, so
+the documentation cannot drift from what is validated.
+
+Conventions: SI units; z is up (gravity defaults to (0, 0, -9.81)); the domain is the box
+[0, size_x] × [0, size_y] × [0, size_z]; cell (i, j, k) has its centre at ((i + ½) dx, (j + ½) dx, (k + ½) dx).
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+from dataclasses import dataclass
+from typing import Any
+
+__all__ = [
+    "REQUIRED",
+    "Key",
+    "Problem",
+    "SceneError",
+    "SECTIONS",
+    "BODY_KEYS",
+    "GEOMETRY_KEYS",
+    "GEOMETRY_COMMON_KEYS",
+    "INFLOW_KEYS",
+    "FACES",
+    "BOUNDARY_KINDS",
+    "FIELD_NAMES",
+    "read_table",
+]
+
+
+class _Required:
+    def __repr__(self) -> str:
+        return "required"
+
+
+REQUIRED: Any = _Required()
+"""Marker default of a key that must be given."""
+
+FACES = ("x_min", "x_max", "y_min", "y_max", "z_min", "z_max")
+BOUNDARY_KINDS = ("wall", "periodic", "inflow", "outflow")
+FIELD_NAMES = ("phi", "velocity", "pressure", "density", "solid", "sand_fraction", "sand_velocity")
+"""Grid fields an output can ask for (a field that the scene's physics does not produce is skipped)."""
+
+
+@dataclass(frozen=True)
+class Key:
+    """One scene key.
+
+    kind: ``float``, ``int``, ``bool``, ``str``, ``choice`` (one of ``choices``), ``vec3`` (3 floats),
+    ``ivec3`` (3 ints), ``floats`` (a list of ``length`` floats, any length when 0), ``strs`` (list of
+    strings from ``choices``), ``grid`` (a 2-D list of floats). ``lo``/``hi`` bound numbers (and every
+    component of vectors); ``lo_open``/``hi_open`` make the bound strict.
+    """
+
+    name: str
+    kind: str
+    default: Any = REQUIRED
+    doc: str = ""
+    unit: str = ""
+    lo: float | None = None
+    hi: float | None = None
+    lo_open: bool = False
+    hi_open: bool = False
+    choices: tuple = ()
+    length: int = 0
+
+    def range_text(self) -> str:
+        """The admissible range in words (for messages and the reference)."""
+        if self.choices:
+            return "one of " + ", ".join(repr(c) for c in self.choices)
+        parts = []
+        if self.lo is not None:
+            parts.append(f"{'>' if self.lo_open else '>='} {self.lo:g}")
+        if self.hi is not None:
+            parts.append(f"{'<' if self.hi_open else '<='} {self.hi:g}")
+        return " and ".join(parts)
+
+
+@dataclass(frozen=True)
+class Problem:
+    """One thing wrong with a scene: the dotted key, what is wrong, and how to fix it."""
+
+    key: str
+    message: str
+    fix: str
+
+    def __str__(self) -> str:
+        return f"{self.key}: {self.message}. Fix: {self.fix}"
+
+
+class SceneError(ValueError):
+    """A scene was refused; ``problems`` lists every :class:`Problem` found (the message shows them all)."""
+
+    def __init__(self, problems: list[Problem], source: str = "scene"):
+        self.problems = list(problems)
+        self.source = source
+        lines = [f"{source} is invalid ({len(problems)} problem{'s' if len(problems) != 1 else ''}):"]
+        lines += [f"  - {p}" for p in problems]
+        super().__init__("\n".join(lines))
+
+    @property
+    def keys(self) -> list[str]:
+        """The dotted keys of the problems."""
+        return [p.key for p in self.problems]
+
+
+# ------------------------------------------------------------------------------------------------ the schema
+_FACE_DOC = "boundary of the {face} face: 'wall' (no-slip, sand slides with wall friction), 'periodic' (both faces of the axis), 'inflow' (needs an [[inflows]] entry on this face), 'outflow' (zero-gradient, fluid leaves)"
+
+SECTIONS: dict[str, list[Key]] = {
+    "scene": [
+        Key("name", "str", "scene", "a short name; the default output folder is runs/<name>"),
+        Key("description", "str", "", "free text, e.g. which figure of which paper the scene reproduces"),
+    ],
+    "domain": [
+        Key("size", "vec3", REQUIRED, "extent of the box (x, y, z); z is up", "m", lo=0.0, lo_open=True),
+        Key(
+            "dx",
+            "float",
+            None,
+            "grid spacing (one LBM node = one MPM node = one cell); give dx or resolution",
+            "m",
+            lo=0.0,
+            lo_open=True,
+        ),
+        Key(
+            "resolution",
+            "ivec3",
+            None,
+            "cells along (x, y, z); give dx or resolution (size / resolution must be the same on every axis)",
+            "",
+            lo=5,
+        ),
+        Key("gravity", "vec3", [0.0, 0.0, -9.81], "gravitational acceleration", "m/s²"),
+    ],
+    "domain.boundary": [Key(f, "choice", "wall", _FACE_DOC.format(face=f), choices=BOUNDARY_KINDS) for f in FACES],
+    "time": [
+        Key("dt", "float", REQUIRED, "time step of both solvers (Table 1 'Time Step')", "s", lo=0.0, lo_open=True),
+        Key(
+            "frame_duration",
+            "float",
+            1.0 / 30.0,
+            "simulated time between two output frames (rounded to whole steps)",
+            "s",
+            lo=0.0,
+            lo_open=True,
+        ),
+        Key("frames", "int", 10, "number of frames `couplekit run` simulates (overridden by --frames)", "", lo=1),
+        Key(
+            "max_speed",
+            "float",
+            None,
+            "fastest flow speed you expect; default: estimated from gravity, body velocities and inflows "
+            "(see 'Time-step checks')",
+            "m/s",
+            lo=0.0,
+            lo_open=True,
+        ),
+        Key(
+            "mach_limit",
+            "float",
+            0.3,
+            "largest admissible lattice Mach number u Δt/(Δx c_s) of max_speed",
+            "",
+            lo=0.0,
+            lo_open=True,
+            hi=1.0,
+        ),
+    ],
+    "fluid": [
+        Key(
+            "phases", "int", 2, "2: water and air with the phase field; 1: the domain is full of water", "", lo=1, hi=2
+        ),
+        Key(
+            "water_density",
+            "float",
+            1000.0,
+            "density ρ_h of the heavy phase (paper: 1000)",
+            "kg/m³",
+            lo=0.0,
+            lo_open=True,
+        ),
+        Key(
+            "air_density", "float", 1.25, "density ρ_l of the light phase (paper: 1.25)", "kg/m³", lo=0.0, lo_open=True
+        ),
+        Key(
+            "water_viscosity",
+            "float",
+            None,
+            "kinematic viscosity ν_h in SI units; give this or water_lattice_viscosity",
+            "m²/s",
+            lo=0.0,
+            lo_open=True,
+        ),
+        Key("air_viscosity", "float", None, "kinematic viscosity ν_l in SI units", "m²/s", lo=0.0, lo_open=True),
+        Key(
+            "water_lattice_viscosity",
+            "float",
+            None,
+            "ν_h in lattice units, as Table 1 gives it (default 1e-4 when neither form is given)",
+            "lattice",
+            lo=0.0,
+            lo_open=True,
+        ),
+        Key(
+            "air_lattice_viscosity",
+            "float",
+            None,
+            "ν_l in lattice units (Table 1; default 1e-2 when neither form is given)",
+            "lattice",
+            lo=0.0,
+            lo_open=True,
+        ),
+        Key(
+            "surface_tension",
+            "float",
+            0.0728,
+            "surface tension σ (water-air at 20 °C: 0.0728); 0 switches it off",
+            "N/m",
+            lo=0.0,
+        ),
+        Key("interface_width", "float", 4.0, "phase-field interface width ξ", "cells", lo=2.0, hi=10.0),
+        Key("mobility", "float", 0.02, "phase-field mobility M", "lattice", lo=0.0, lo_open=True, hi=1.0),
+        Key(
+            "controller_eta",
+            "float",
+            2.0,
+            "volume-controller bound η of Eq. 52 (Table 1: 1 or 2); 0 = off",
+            "",
+            lo=0.0,
+            hi=10.0,
+        ),
+    ],
+    "sand": [
+        Key(
+            "density",
+            "float",
+            1500.0,
+            "density ϱ of the sand material (Table 1 'Sand Density'); a body may override it",
+            "kg/m³",
+            lo=0.0,
+            lo_open=True,
+        ),
+        Key(
+            "youngs_modulus",
+            "float",
+            3.537e5,
+            "Young's modulus E (Hencky elasticity; not reported by the paper)",
+            "Pa",
+            lo=0.0,
+            lo_open=True,
+        ),
+        Key("poisson_ratio", "float", 0.3, "Poisson ratio", "", lo=-1.0, lo_open=True, hi=0.5, hi_open=True),
+        Key(
+            "hardening",
+            "floats",
+            [35.0, 9.0, 0.2, 10.0],
+            "Klár hardening (h0 °, h1 °, h2, h3 °); paper: 35, 9, 0.2, 10",
+            "",
+            length=4,
+        ),
+        Key(
+            "cohesion",
+            "float",
+            1000.0,
+            "largest cohesion c_C of the saturation-dependent Drucker–Prager cone (Eq. 28); 0 = cohesionless",
+            "Pa",
+            lo=0.0,
+        ),
+        Key(
+            "cohesion_saturation",
+            "floats",
+            [0.05, 0.18, 0.36],
+            "breakpoints S1 ≤ S2 < S3 of the trapezoid c_C(S): rises to `cohesion` at S1, falls to 0 at S3",
+            "",
+            length=3,
+            lo=0.0,
+            hi=1.0,
+        ),
+        Key("particles_per_cell", "int", 8, "particles seeded per cell: a cube k³ (1, 8, 27, 64)", "", lo=1, hi=512),
+        Key(
+            "jitter", "float", 0.5, "random displacement of seeded particles, in sub-cell spacings", "", lo=0.0, hi=1.0
+        ),
+        Key("seed", "int", 0, "random seed of the jitter", "", lo=0),
+        Key("wall_friction", "float", 0.5, "Coulomb friction of sand on domain walls and obstacles", "", lo=0.0),
+        Key("cfl", "float", 0.5, "particle CFL number C_v: Δt ≤ C_v Δx / max speed", "", lo=0.0, lo_open=True, hi=1.0),
+        Key(
+            "elastic_cfl",
+            "float",
+            0.5,
+            "elastic CFL number C_e: Δt ≤ C_e Δx / c_p (P-wave speed)",
+            "",
+            lo=0.0,
+            lo_open=True,
+            hi=1.0,
+        ),
+        Key("retention", "bool", False, "water retention (Sec. 4.5, Figs. 4, 10, 17, 18); a body may override it", ""),
+        Key(
+            "absorption_rate",
+            "float",
+            0.003,
+            "absorption coefficient R_a of Eq. 55 (Table 1, lattice units)",
+            "lattice",
+            lo=0.0,
+        ),
+        Key("max_moisture", "float", 0.3, "largest moisture ratio r_max of a particle (Eq. 55)", "", lo=0.0, hi=1.0),
+    ],
+    "outputs": [
+        Key("directory", "str", None, "output folder (default runs/<scene.name>; `couplekit run --out` overrides it)"),
+        Key("fields", "strs", list(FIELD_NAMES), "grid fields written to the .vti files", choices=FIELD_NAMES),
+        Key(
+            "vtk",
+            "bool",
+            True,
+            "ParaView series: fields_NNNN.vti (image data), particles_NNNN.vtp (poly data), .pvd indexes",
+        ),
+        Key("ply", "bool", True, "particle PLY sequence particles_NNNN.ply (Blender)"),
+        Key("preview", "bool", True, "PNG preview of every preview_every-th frame, rendered off-screen"),
+        Key("preview_every", "int", 1, "frames between previews", "", lo=1),
+        Key(
+            "checkpoint_every",
+            "int",
+            10,
+            "frames between HDF5 checkpoints (the last frame is always written); 0 = only at the end",
+            "",
+            lo=0,
+        ),
+        Key("diagnostics", "bool", True, "per-frame diagnostics log diagnostics.jsonl (one JSON object per line)"),
+    ],
+    "effects": [
+        Key("surface_tension", "bool", True, "false switches the surface-tension force off (ablation)"),
+        Key("volume_controller", "bool", True, "false switches the Eq. 52 volume controller off (Fig. 14 b)"),
+        Key("source_term", "bool", True, "false drops the phase-field source term S_φ (Fig. 14 a; coupled scenes)"),
+        Key("drag", "bool", True, "false switches fluid-sand drag off (coupled scenes)"),
+        Key("buoyancy", "bool", True, "false switches buoyancy off (coupled scenes)"),
+        Key("cohesion", "bool", True, "false makes the sand cohesionless"),
+        Key("hardening", "bool", True, "false keeps the friction angle at h0"),
+    ],
+}
+"""The single tables of a scene, by dotted name."""
+
+BODY_KEYS: list[Key] = [
+    Key(
+        "kind",
+        "choice",
+        REQUIRED,
+        "'water' (initial liquid), 'sand' (seeded particles) or 'obstacle' (rigid, fixed)",
+        choices=("water", "sand", "obstacle"),
+    ),
+    Key("name", "str", "", "a label used in messages and outputs"),
+    Key("velocity", "vec3", [0.0, 0.0, 0.0], "initial velocity of the water or sand of this body", "m/s"),
+    Key("density", "float", None, "sand bodies: overrides sand.density", "kg/m³", lo=0.0, lo_open=True),
+    Key("retention", "bool", None, "sand bodies: overrides sand.retention (Fig. 10 has one pipe with, one without)"),
+    Key(
+        "friction", "float", None, "obstacles: Coulomb friction of sand on it (default sand.wall_friction)", "", lo=0.0
+    ),
+]
+"""Keys of one ``[[bodies]]`` entry (its shape is the ``geometry`` sub-table)."""
+
+GEOMETRY_COMMON_KEYS: list[Key] = [
+    Key("type", "choice", REQUIRED, "the shape", choices=("box", "sphere", "cylinder", "heightfield", "mesh")),
+    Key(
+        "scale", "float", 1.0, "uniform scale about the shape's own origin (first transform)", "", lo=0.0, lo_open=True
+    ),
+    Key("rotate", "vec3", [0.0, 0.0, 0.0], "rotation about the x, then y, then z axis (second transform)", "degrees"),
+    Key("translate", "vec3", [0.0, 0.0, 0.0], "translation (last transform)", "m"),
+    Key("invert", "bool", False, "swap inside and outside (e.g. a container: the solid is outside the shape)"),
+]
+
+GEOMETRY_KEYS: dict[str, list[Key]] = {
+    "box": [
+        Key("min", "vec3", REQUIRED, "lower corner", "m"),
+        Key("max", "vec3", REQUIRED, "upper corner", "m"),
+    ],
+    "sphere": [
+        Key("center", "vec3", REQUIRED, "centre", "m"),
+        Key("radius", "float", REQUIRED, "radius", "m", lo=0.0, lo_open=True),
+    ],
+    "cylinder": [
+        Key("center", "vec3", REQUIRED, "centre (middle of the axis)", "m"),
+        Key("radius", "float", REQUIRED, "radius", "m", lo=0.0, lo_open=True),
+        Key("height", "float", REQUIRED, "length along the axis", "m", lo=0.0, lo_open=True),
+        Key("axis", "choice", "z", "axis direction before rotation", choices=("x", "y", "z")),
+    ],
+    "heightfield": [
+        Key("heights", "grid", None, "surface heights z(x, y) as rows along y of values along x; or give file", "m"),
+        Key("file", "str", None, ".npy or .csv/.txt file of the height grid (relative to the scene file)"),
+        Key("x_range", "floats", REQUIRED, "x of the first and last column", "m", length=2),
+        Key("y_range", "floats", REQUIRED, "y of the first and last row", "m", length=2),
+        Key(
+            "base",
+            "float",
+            None,
+            "z of the bottom of the solid under the surface (default: one cell below the domain)",
+            "m",
+        ),
+    ],
+    "mesh": [
+        Key(
+            "file",
+            "str",
+            REQUIRED,
+            "closed triangle mesh, OBJ, STL or PLY (read with meshio), relative to the scene file",
+        ),
+    ],
+}
+"""Type-specific keys of a ``geometry`` table."""
+
+INFLOW_KEYS: list[Key] = [
+    Key(
+        "face",
+        "choice",
+        REQUIRED,
+        "the domain face it enters through (its domain.boundary must be 'inflow')",
+        choices=FACES,
+    ),
+    Key(
+        "kind",
+        "choice",
+        "water",
+        "'water' (a jet, optionally carrying sand) or 'wind' (air)",
+        choices=("water", "wind"),
+    ),
+    Key("velocity", "vec3", REQUIRED, "inflow velocity; its normal component must point into the domain", "m/s"),
+    Key(
+        "sand_fraction",
+        "float",
+        0.0,
+        "sand volume fraction carried by a water jet (coupled scenes)",
+        "",
+        lo=0.0,
+        hi=0.64,
+    ),
+]
+"""Keys of one ``[[inflows]]`` entry."""
+
+TOP_LEVEL = ("scene", "domain", "time", "fluid", "sand", "bodies", "inflows", "outputs", "effects")
+"""Top-level tables of a scene file."""
+
+
+# ------------------------------------------------------------------------------------------------ checking
+def _is_number(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _type_name(v: Any) -> str:
+    names = {bool: "a boolean", int: "an integer", float: "a number", str: "a string", list: "a list", dict: "a table"}
+    return names.get(type(v), type(v).__name__)
+
+
+def _check_range(key: Key, value: float, path: str) -> Problem | None:
+    if not math.isfinite(value):
+        return Problem(path, f"must be a finite number, got {value}", f"give {key.range_text() or 'a finite value'}")
+    bad = False
+    if key.lo is not None and (value < key.lo or (key.lo_open and value == key.lo)):
+        bad = True
+    if key.hi is not None and (value > key.hi or (key.hi_open and value == key.hi)):
+        bad = True
+    if bad:
+        return Problem(path, f"must be {key.range_text()}, got {value:g}", f"set {path} to a value {key.range_text()}")
+    return None
+
+
+def _check_value(key: Key, value: Any, path: str) -> tuple[Any, list[Problem]]:
+    k = key.kind
+    example = {
+        "float": "1.5",
+        "int": "8",
+        "bool": "true",
+        "str": '"text"',
+        "vec3": "[0.0, 0.0, 1.0]",
+        "ivec3": "[64, 64, 64]",
+    }
+    if k in ("float", "int"):
+        ok = _is_number(value) if k == "float" else isinstance(value, int) and not isinstance(value, bool)
+        if not ok:
+            what = "a number" if k == "float" else "an integer"
+            return None, [
+                Problem(
+                    path,
+                    f"must be {what}, got {_type_name(value)} ({value!r})",
+                    f"write e.g. {path.rsplit('.', 1)[-1]} = {example[k]}",
+                )
+            ]
+        value = float(value) if k == "float" else int(value)
+        p = _check_range(key, value, path)
+        return value, [p] if p else []
+    if k == "bool":
+        if not isinstance(value, bool):
+            return None, [
+                Problem(
+                    path,
+                    f"must be true or false, got {_type_name(value)} ({value!r})",
+                    f"write {path.rsplit('.', 1)[-1]} = true or false (no quotes)",
+                )
+            ]
+        return value, []
+    if k == "str":
+        if not isinstance(value, str):
+            return None, [
+                Problem(
+                    path, f"must be a string, got {_type_name(value)} ({value!r})", "put the value in double quotes"
+                )
+            ]
+        return value, []
+    if k == "choice":
+        if not isinstance(value, str) or value not in key.choices:
+            close = difflib.get_close_matches(str(value), [str(c) for c in key.choices], n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            return None, [
+                Problem(path, f"must be {key.range_text()}, got {value!r}{hint}", f"set {path} to {key.range_text()}")
+            ]
+        return value, []
+    if k in ("vec3", "ivec3", "floats"):
+        n = 3 if k != "floats" else key.length
+        integer = k == "ivec3"
+        if (
+            not isinstance(value, list)
+            or (n and len(value) != n)
+            or not all((isinstance(v, int) and not isinstance(v, bool)) if integer else _is_number(v) for v in value)
+        ):
+            what = f"a list of {n} {'integers' if integer else 'numbers'}" if n else "a list of numbers"
+            return None, [
+                Problem(
+                    path,
+                    f"must be {what}, got {value!r}",
+                    f"write e.g. {path.rsplit('.', 1)[-1]} = {example.get(k, '[1.0, 2.0]')}",
+                )
+            ]
+        out = [int(v) if integer else float(v) for v in value]
+        problems = []
+        for i, v in enumerate(out):
+            p = _check_range(key, float(v), f"{path}[{i}]")
+            if p:
+                problems.append(p)
+        return out, problems
+    if k == "strs":
+        if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+            return None, [
+                Problem(
+                    path,
+                    f"must be a list of strings, got {value!r}",
+                    f'write e.g. {path.rsplit(".", 1)[-1]} = ["{key.choices[0]}"]',
+                )
+            ]
+        bad = [v for v in value if v not in key.choices]
+        if bad:
+            return None, [Problem(path, f"unknown entries {bad}", f"use only {key.range_text()}")]
+        return list(value), []
+    if k == "grid":
+        if (
+            not isinstance(value, list)
+            or len(value) < 2
+            or not all(isinstance(r, list) and len(r) == len(value[0]) and len(r) >= 2 for r in value)
+            or not all(_is_number(v) for r in value for v in r)
+        ):
+            return None, [
+                Problem(
+                    path,
+                    "must be a rectangular list of at least 2 rows of at least 2 numbers",
+                    "write e.g. heights = [[0.0, 0.1], [0.1, 0.2]]",
+                )
+            ]
+        return [[float(v) for v in r] for r in value], []
+    raise AssertionError(f"unknown key kind {k}")
+
+
+def read_table(data: Any, path: str, keys: list[Key], problems: list[Problem]) -> dict[str, Any]:
+    """Check the TOML table ``data`` found at dotted ``path`` against ``keys``.
+
+    Appends a :class:`Problem` per unknown key (with the closest known name), wrong type, out-of-range
+    value or missing required key; returns the checked values with defaults filled in (``None`` for a
+    value that failed).
+    """
+    if not isinstance(data, dict):
+        problems.append(
+            Problem(path, f"must be a table, got {_type_name(data)}", f"write it as [{path}] with key = value lines")
+        )
+        data = {}
+    known = {k.name: k for k in keys}
+    for name in data:
+        if name not in known:
+            close = difflib.get_close_matches(name, list(known), n=1)
+            fix = f"did you mean {close[0]!r}?" if close else f"remove it; the keys of [{path}] are {', '.join(known)}"
+            problems.append(Problem(f"{path}.{name}", "unknown key", fix))
+    out: dict[str, Any] = {}
+    for key in keys:
+        sub = f"{path}.{key.name}"
+        if key.name not in data:
+            if key.default is REQUIRED:
+                problems.append(Problem(sub, "is required", f"add {key.name} = ... ({key.doc})"))
+                out[key.name] = None
+            else:
+                out[key.name] = list(key.default) if isinstance(key.default, list) else key.default
+            continue
+        value, found = _check_value(key, data[key.name], sub)
+        problems.extend(found)
+        out[key.name] = value
+    return out
