@@ -28,6 +28,7 @@
 #include "lattice.cuh"
 
 // 0: surface tension sigma = 0, the chemical potential (double well + Laplacian) is compiled out.
+// variants: CK_PF_SURFACE_TENSION=0,1
 #ifndef CK_PF_SURFACE_TENSION
 #define CK_PF_SURFACE_TENSION 1
 #endif

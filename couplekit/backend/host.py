@@ -19,7 +19,9 @@ from .errors import KernelBuildError
 from .signature import Signature, check_args, parse_kernels
 from .sources import kernel_path, source_digest
 
-HOST_FLAGS = ("-std=c++17", "-O3", "-march=native", "-fopenmp", "-shared", "-fPIC", "-x", "c++")
+# -fno-math-errno: kernels never read errno, and without it GCC will not vectorise a cell loop that calls
+# sqrtf (measured 1.3-1.6x on the phase-field collide step); results are unchanged (IEEE sqrt either way)
+HOST_FLAGS = ("-std=c++17", "-O3", "-march=native", "-fno-math-errno", "-fopenmp", "-shared", "-fPIC", "-x", "c++")
 
 _CTYPES = {
     np.dtype(np.float32): ctypes.c_float,
