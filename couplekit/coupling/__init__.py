@@ -3,7 +3,9 @@ phase-field source term S_φ and water retention with the saturation that drives
 
 * :mod:`.params` — :class:`CouplingParams` (defaults and their sources) and the node-level closed forms;
 * :mod:`.reference` — :class:`ReferenceOps`, the NumPy specification of every stage;
-* :mod:`.kernel_ops` — :class:`KernelOps`, the same stages compiled from ``kernels/coupling_*.cu``.
+* :mod:`.kernel_ops` — :class:`KernelOps`, the same stages compiled from ``kernels/coupling_*.cu``;
+* :mod:`.coupler` — :class:`SandFluidCoupler`, the coupling fields and stages between a SandSolver and a
+  FluidSolver in Algorithm 1's order.
 
 Per lockstep step (paper Algorithm 1), with the MPM grid after P2G:
 ``bound_water_p2g`` (retention only) → ``fractions`` → ``phase_source`` → ``drag_buoyancy`` (before the
@@ -37,3 +39,8 @@ def make_coupling_ops(
     if backend.has_kernels:
         return KernelOps(backend, params, two_phase)
     return ReferenceOps(params, two_phase)
+
+
+from .coupler import SandFluidCoupler  # noqa: E402  (uses make_coupling_ops)
+
+__all__ += ["SandFluidCoupler"]

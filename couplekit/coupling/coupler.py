@@ -1,0 +1,159 @@
+"""SandFluidCoupler: the coupling fields of one sand body and one fluid, and the coupling stages of paper
+Algorithm 1 between :class:`couplekit.sand.solver.SandSolver` and :class:`couplekit.fluid.solver.FluidSolver`.
+
+The coupler owns what belongs to neither solver: the padded sand fraction, last step's porosity, and with
+water retention the bound water R, its increment dR and the particles' moisture ratio r_p.  It writes the
+fluid's inputs (``fluid_fraction``, ``force``, ``source_term``, ``sand_velocity``) and the sand's
+(``grid_mv`` drag impulse, ``f_ext`` buoyancy, ``saturation``).  One lockstep step, in Algorithm 1's order::
+
+    sand.p2g()                 # Eq. 24
+    coupler.fractions()        # Eqs. 25, 33, 53–56 (retention), fluid_fraction
+    coupler.phase_source()     # Eqs. 45 / 57 -> fluid.source_term (two-phase fluid only)
+    coupler.exchange()         # Eq. 31 buoyancy -> sand.f_ext, implicit drag -> sand.grid_mv, fluid.force
+    sand.grid_update()         # Eqs. 26, 29 and the sand's boundaries
+    coupler.moisture()         # Eqs. 58, 59 -> sand.saturation (before G2P moves the particles)
+    sand.g2p()                 # Eq. 30
+    coupler.sand_velocity()    # grid velocity -> fluid.sand_velocity (Eq. 39 input)
+    fluid.step()
+    coupler.finish()           # this step's porosity becomes last step's
+
+:meth:`step` runs exactly that.  The scheduler (timing, sub-cycling) may call the stages itself.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..units import Units
+from . import make_coupling_ops
+from .params import CouplingParams
+
+__all__ = ["SandFluidCoupler"]
+
+
+class SandFluidCoupler:
+    """Coupling of ``sand`` (SandSolver) and ``fluid`` (FluidSolver) on the same grid.
+
+    ``units``: the lattice unit system (``units.dx`` must be the sand's dx; ``units.dt`` the LBM step);
+    ``params``: :class:`CouplingParams` (retention on/off, drag constants); ``moisture``: initial moisture
+    ratio r_p of the particles (retention only).  The fluid must be built with ``mixture=True`` and
+    ``external_force=True``; its phase field (if any) receives the source term.
+    """
+
+    def __init__(
+        self,
+        sand,
+        fluid,
+        units: Units,
+        params: CouplingParams | None = None,
+        moisture: np.ndarray | float = 0.0,
+    ):
+        if tuple(sand.shape) != tuple(fluid.shape):
+            raise ValueError(f"sand grid {tuple(sand.shape)} and fluid grid {tuple(fluid.shape)} must be the same")
+        if not np.isclose(sand.dx, units.dx, rtol=1e-9):
+            raise ValueError(f"units.dx = {units.dx} m but the sand grid has dx = {sand.dx} m")
+        if not (fluid.mixture and fluid.external_force):
+            raise ValueError("the fluid must be built with mixture=True and external_force=True to be coupled")
+        self.sand, self.fluid, self.units = sand, fluid, units
+        self.params = params or CouplingParams()
+        self.two_phase = bool(fluid.two_phase)
+        self.ops = make_coupling_ops(fluid.backend, self.params, self.two_phase)
+        self.periodic = tuple(fluid.boundaries.face(a + "-").kind == "periodic" for a in "xyz")
+        xp = fluid.backend.xp
+        shape = tuple(fluid.shape)
+        padded = tuple(s + 2 for s in shape)
+        self.eps_sand = xp.zeros(padded, dtype=np.float32)
+        self.eps_prev = xp.ones(padded, dtype=np.float32)
+        self.water = xp.zeros(shape, dtype=np.float32)
+        self.retention = bool(self.params.retention)
+        if self.retention:
+            self.bound_in = xp.zeros(shape, dtype=np.float32)
+            self.bound = xp.zeros(shape, dtype=np.float32)
+            self.d_bound = xp.zeros(shape, dtype=np.float32)
+            r = np.broadcast_to(np.asarray(moisture, dtype=np.float64), (sand.n_particles,))
+            self.moisture_ratio = fluid.backend.asarray(r, np.float32)
+        else:
+            self.bound_in = self.bound = self.d_bound = self.moisture_ratio = None
+        self._started = False
+
+    # ------------------------------------------------------------------ stages
+    def fractions(self) -> None:
+        """ε (Eq. 25), bound water (Eqs. 53–56, retention) and the porosity into ``fluid.fluid_fraction``."""
+        s, f = self.sand, self.fluid
+        if self.retention:
+            self.ops.bound_water_p2g(s.x, self.moisture_ratio, s.volume, self.bound_in, s.dx)
+        self.ops.fractions(
+            s.grid_vol, f.phi, self.bound_in, self.eps_prev, self.eps_sand, f.fluid_fraction, self.d_bound,
+            self.bound, self.water, s.dx, self.periodic,
+        )  # fmt: skip
+        if not self._started:
+            # first step: no sand motion yet, so last step's porosity is this one (without absorption)
+            self.eps_prev[...] = f.fluid_fraction
+            if self.retention:
+                self.eps_prev[...] = self.eps_prev + _pad(self.fluid.backend.xp, self.d_bound, self.eps_prev)
+            self._started = True
+
+    def phase_source(self) -> None:
+        """S_φ (Eq. 45, Eq. 57 with retention) into ``fluid.source_term`` (two-phase fluids only)."""
+        f = self.fluid
+        if self.two_phase:
+            self.ops.phase_source(
+                f.fluid_fraction, self.eps_prev, f.phi, f.velocity, f.flags, self.d_bound, f.source_term
+            )
+
+    def exchange(self) -> None:
+        """Buoyancy (Eq. 31) into ``sand.f_ext``; implicit drag into ``sand.grid_mv`` and ``fluid.force``."""
+        s, f = self.sand, self.fluid
+        prm = f.params
+        self.ops.drag_buoyancy(
+            s.grid_m, s.grid_mv, s.f_ext, f.force, f.velocity, f.phi, self.eps_sand, f.fluid_fraction, f.flags,
+            self.units, s.gravity, prm.rho_h, prm.rho_l, s.dt,
+        )  # fmt: skip
+
+    def moisture(self) -> None:
+        """Saturation of every particle (Eq. 59 or its no-retention form) and, with retention, r_p (Eq. 58)."""
+        s = self.sand
+        self.ops.particle_moisture(s.x, self.moisture_ratio, s.saturation, self.water, self.d_bound, s.grid_vol, s.dx)
+
+    def sand_velocity(self) -> None:
+        """The sand grid velocity (after the grid update) into ``fluid.sand_velocity`` (lattice units)."""
+        self.ops.sand_velocity(self.sand.grid_v, self.fluid.sand_velocity, self.units, self.periodic)
+
+    def finish(self) -> None:
+        """End of the step: this step's porosity becomes last step's."""
+        self.eps_prev[...] = self.fluid.fluid_fraction
+
+    def step(self, n: int = 1) -> None:
+        """``n`` lockstep steps of sand + fluid in Algorithm 1's order (module docstring)."""
+        for _ in range(int(n)):
+            self.sand.p2g()
+            self.fractions()
+            self.phase_source()
+            self.exchange()
+            self.sand.grid_update()
+            self.moisture()
+            self.sand.g2p()
+            self.sand_velocity()
+            self.fluid.step(1)
+            self.finish()
+
+    # ------------------------------------------------------------------ outputs
+    def fields(self) -> dict[str, np.ndarray]:
+        """Host copies of the interior coupling fields: sand_fraction, fluid_fraction, water (Eq. 59 summand),
+        and with retention bound_water."""
+        be = self.fluid.backend
+        out = {
+            "sand_fraction": be.to_host(self.eps_sand)[1:-1, 1:-1, 1:-1],
+            "fluid_fraction": be.to_host(self.fluid.fluid_fraction)[1:-1, 1:-1, 1:-1],
+            "water": be.to_host(self.water),
+        }
+        if self.retention:
+            out["bound_water"] = be.to_host(self.bound)
+        return out
+
+
+def _pad(xp, a, like):
+    """``a`` (nz, ny, nx) placed in the interior of an array shaped like ``like`` (zeros around)."""
+    out = xp.zeros_like(like)
+    out[1:-1, 1:-1, 1:-1] = a
+    return out
