@@ -18,3 +18,9 @@ __all__ = [
     "__version__",
     "get_backend",
 ]
+
+# The scripting API (DESIGN "Scenes, API, outputs"): ck.Scene.load(path), ck.Simulation(scene, backend="auto").
+from .scene import Scene, SceneError  # noqa: E402
+from .simulation import Simulation, SimulationDiverged  # noqa: E402
+
+__all__ += ["Scene", "SceneError", "Simulation", "SimulationDiverged"]

@@ -7,6 +7,7 @@ are ``libegl1 libegl-mesa0 libgl1`` (Mesa's software rasteriser is enough, no GP
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -35,6 +36,9 @@ def render_preview(
 ) -> Path:
     """Render a preview PNG of a frame. ``fields`` may hold ``phi``, ``solid``; ``particles`` ``x`` (3, P)
     and ``v`` (3, P). Returns the path written."""
+    if not os.environ.get("DISPLAY"):
+        # without an X server go straight to EGL (VTK would try X first and print a warning)
+        os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
     import pyvista as pv
 
     fields, particles = fields or {}, particles or {}
@@ -57,8 +61,10 @@ def render_preview(
         cloud = pv.PolyData(np.ascontiguousarray(x.T))
         v = particles.get("v")
         if v is not None:
-            cloud.point_data["speed (m/s)"] = np.linalg.norm(np.asarray(v, np.float32), axis=0)
-            p.add_mesh(cloud, scalars="speed (m/s)", cmap="copper", point_size=3, render_points_as_spheres=False)
+            speed = np.linalg.norm(np.asarray(v, np.float32), axis=0)
+            cloud.point_data["speed (m/s)"] = speed
+            top = float(np.nanmax(speed)) if np.isfinite(speed).any() else 1.0
+            p.add_mesh(cloud, scalars="speed (m/s)", cmap="copper", clim=(0.0, max(top, 1e-6)), point_size=3)
         else:
             p.add_mesh(cloud, color="#c2a46b", point_size=3)
     if title:

@@ -1,0 +1,616 @@
+"""``Simulation``: a scene turned into solvers, stepped, written out, checkpointed and restarted exactly.
+
+>>> import couplekit as ck
+>>> sim = ck.Simulation(ck.Scene.load("examples/sand_drop_small.toml"), backend="auto")
+>>> sim.run(frames=20, out="runs/sand_drop")     # progress bar; .vti/.vtp/.pvd, PLY, PNG, diagnostics, HDF5
+>>> sim.fields(), sim.particles(), sim.diagnostics()
+>>> sim.save("x.h5"); sim2 = ck.Simulation.load("x.h5")   # bitwise restart on the cpu backend
+
+What runs today (the solvers that exist): fluid-only scenes (:class:`couplekit.fluid.solver.FluidSolver`,
+one or two phases, obstacles as bounce-back cells, whole-face inflows and outflows) and sand-only scenes
+(:class:`couplekit.sand.solver.SandSolver`, obstacles as an SDF collider). A scene with both is refused with
+:class:`CouplingUnavailableError` until the coupling scheduler exists.
+
+Before anything is allocated the constructor prints the backend and why it was chosen, and a memory
+estimate; a scene that will not fit the device (or the host's available memory) is refused
+(:class:`InsufficientMemoryError`). After every frame the fields are checked for NaN/Inf; on a hit the
+frame is replayed step by step from the last good state to name the first bad step, the field and the cell
+(:class:`SimulationDiverged`), and ``run`` writes that last good state as a checkpoint.
+"""
+
+from __future__ import annotations
+
+import math
+import signal
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import __version__
+from .backend import Backend, get_backend
+from .lattice import CS2
+from .scene import Scene
+from .scene.geometry import Union, sdf_on_grid
+
+__all__ = [
+    "Simulation",
+    "SimulationDiverged",
+    "CouplingUnavailableError",
+    "InsufficientMemoryError",
+    "memory_estimate",
+    "RunResult",
+]
+
+_FACE = {"x_min": "x-", "x_max": "x+", "y_min": "y-", "y_max": "y+", "z_min": "z-", "z_max": "z+"}
+_SAND_FACE = {"x_min": "-x", "x_max": "+x", "y_min": "-y", "y_max": "+y", "z_min": "-z", "z_max": "+z"}
+
+
+class CouplingUnavailableError(NotImplementedError):
+    """The scene needs fluid–sand coupling, which is not built yet."""
+
+
+class InsufficientMemoryError(MemoryError):
+    """The memory estimate of a scene exceeds what the device (or host) has available."""
+
+
+class SimulationDiverged(FloatingPointError):
+    """A NaN or Inf appeared: ``step`` (first bad step), ``solver``, ``field``, ``index`` (cell (x, y, z) or
+    particle number)."""
+
+    def __init__(self, step: int, solver: str, field: str, index: tuple, value: float, where: str):
+        self.step, self.solver, self.field, self.index, self.value = step, solver, field, index, value
+        super().__init__(f"non-finite value {value} in {solver} field {field!r} at {where} {index} after step {step}")
+
+
+# ---------------------------------------------------------------------------------------------- memory
+_FLUID_FLOATS_PER_CELL = 27 + 3 + 3 + 1 + 1  # f, velocity, wall velocity, p, pbar
+_PHASE_FLOATS_PER_CELL = 7 + 1 + 3 + 1 + 1  # h, phi, grad phi, mu, source term
+_SAND_FLOATS_PER_NODE = 1 + 3 + 1 + 3 + 3 + 1  # mass, momentum, volume, velocity, f_ext, sdf
+_SAND_FLOATS_PER_PARTICLE = 3 + 3 + 9 + 9 + 6 + 1 + 1 + 1 + 1 + 1  # x v C F tau q vc saturation mass volume
+
+
+def memory_estimate(scene: Scene) -> dict[str, float]:
+    """Bytes the solvers will allocate for ``scene`` (an estimate from the array sizes, before allocation).
+
+    Particles are bounded by the sand bodies' bounding boxes × particles per cell (an upper bound)."""
+    nx, ny, nz = scene.domain.resolution
+    padded = (nx + 2) * (ny + 2) * (nz + 2)
+    out = {"fluid": 0.0, "sand_grid": 0.0, "particles": 0.0, "particle_count": 0.0}
+    if scene.fluid is not None:
+        floats = _FLUID_FLOATS_PER_CELL + (_PHASE_FLOATS_PER_CELL if scene.fluid.phases == 2 else 0)
+        out["fluid"] = padded * (4 * floats + 1)  # + 1 byte of flags
+    if scene.has_sand:
+        out["sand_grid"] = 4.0 * _SAND_FLOATS_PER_NODE * nx * ny * nz
+        count = 0.0
+        for b in scene.bodies:
+            if b.kind == "sand":
+                lo, hi = b.geometry.bounds(scene.domain)
+                count += float(np.prod(np.maximum(hi - lo, 0.0))) / scene.domain.dx**3 * scene.sand.particles_per_cell
+        out["particle_count"] = count
+        out["particles"] = 4.0 * _SAND_FLOATS_PER_PARTICLE * count
+    out["total"] = out["fluid"] + out["sand_grid"] + out["particles"]
+    return out
+
+
+def available_memory(backend: Backend) -> tuple[float, str]:
+    """(bytes, what): free device memory on cuda, MemAvailable of the host otherwise."""
+    if backend.name == "cuda":
+        import cupy
+
+        free, _total = cupy.cuda.runtime.memGetInfo()
+        return float(free), "free GPU memory"
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return float(line.split()[1]) * 1024.0, "available host memory"
+    except OSError:
+        pass
+    return math.inf, "host memory (unknown)"
+
+
+def _gib(b: float) -> str:
+    return f"{b / 2**30:.3g} GiB" if b >= 2**28 else f"{b / 2**20:.3g} MiB"
+
+
+# ---------------------------------------------------------------------------------------------- results
+class RunResult(dict):
+    """What :meth:`Simulation.run` did: ``status`` ("done", "interrupted", "diverged"), ``frames``,
+    ``steps``, ``out`` (folder), ``checkpoint`` (last checkpoint written), ``error`` (for "diverged")."""
+
+    @property
+    def status(self) -> str:
+        return self["status"]
+
+
+# ---------------------------------------------------------------------------------------------- simulation
+class Simulation:
+    """Solvers built from a :class:`~couplekit.scene.Scene` (or a scene file path).
+
+    backend: ``"auto"``, ``"cuda"``, ``"cpu"``, ``"numpy"`` or a :class:`Backend`; threads: OpenMP threads
+    of the cpu backend; log: where the start-up report goes (``None`` for silence); check_memory: refuse
+    a scene whose estimate exceeds the available memory.
+    """
+
+    def __init__(
+        self,
+        scene: Scene | str | Path,
+        backend: str | Backend | None = "auto",
+        threads: int | None = None,
+        log: Callable[[str], Any] | None = print,
+        check_memory: bool = True,
+    ):
+        self.scene = scene if isinstance(scene, Scene) else Scene.load(scene)
+        sc = self.scene
+        self._log = log or (lambda s: None)
+        if sc.has_fluid and sc.has_sand or any(i.sand_fraction > 0 for i in sc.inflows):
+            raise CouplingUnavailableError(
+                f"scene {sc.name!r} has both sand and a fluid: coupled scenes need the coupling module, not built "
+                "yet (drag, buoyancy and Algorithm 1's lockstep scheduler); run its fluid-only or sand-only parts"
+            )
+        self.backend = backend if isinstance(backend, Backend) else get_backend(backend, threads=threads)
+        self._log(self.backend.describe())
+        self._log(sc.summary())
+        est = memory_estimate(sc)
+        avail, what = available_memory(self.backend)
+        parts = ", ".join(f"{k} {_gib(v)}" for k, v in est.items() if k not in ("total", "particle_count") and v)
+        self._log(f"memory estimate: {_gib(est['total'])} ({parts}); {what}: {_gib(avail)}")
+        if check_memory and est["total"] > 0.9 * avail:
+            raise InsufficientMemoryError(
+                f"scene {sc.name!r} needs about {_gib(est['total'])} but only {_gib(avail)} of {what} is free: "
+                "use a coarser domain.dx, fewer sand.particles_per_cell, or a larger device"
+            )
+        self.memory = est
+        self.units = sc.units()
+        self.steps_per_frame = sc.time.steps_per_frame
+        self.step_count = 0
+        self.fluid = self._build_fluid() if sc.has_fluid else None
+        self.sand = self._build_sand() if sc.has_sand else None
+
+    # ------------------------------------------------------------------------------------ building
+    def _shape_of(self, kind: str) -> Union | None:
+        shapes = [
+            b.geometry.shape(self.scene.domain, 0.25 * self.scene.domain.dx)
+            for b in self.scene.bodies
+            if b.kind == kind
+        ]
+        return Union(shapes) if shapes else None
+
+    def _water_shape(self) -> Union | None:
+        """Water bodies for the initial φ. A box face lying on the domain boundary is pushed out by 10 cells,
+        so water that fills a box up to a wall has no interface (a tanh drop) along that wall."""
+        from .scene.geometry import Box
+
+        dom = self.scene.domain
+        size, pad = np.asarray(dom.size), 10 * dom.dx
+        shapes = []
+        for b in self.scene.bodies:
+            if b.kind != "water":
+                continue
+            g = b.geometry
+            if g.type == "box" and g.scale == 1.0 and not any(g.rotate) and not g.invert:
+                lo = np.asarray(g.params["min"], float) + np.asarray(g.translate)
+                hi = np.asarray(g.params["max"], float) + np.asarray(g.translate)
+                tol = 1e-9 * size.max()
+                lo = np.where(lo <= tol, lo - pad, lo)
+                hi = np.where(hi >= size - tol, hi + pad, hi)
+                shapes.append(Box(lo, hi))
+            else:
+                shapes.append(g.shape(dom, 0.25 * dom.dx))
+        return Union(shapes) if shapes else None
+
+    def _build_fluid(self):
+        from .fluid.grid import Boundaries, Face
+        from .fluid.solver import FluidParams, FluidSolver
+
+        sc, u = self.scene, self.units
+        fl, dom, eff = sc.fluid, sc.domain, sc.effects
+        two = fl.phases == 2
+        prm = FluidParams(
+            rho_h=1.0,
+            rho_l=fl.air_density / fl.water_density if two else 1.0,
+            nu_h=fl.water_lattice_viscosity,
+            nu_l=fl.air_lattice_viscosity if two else fl.water_lattice_viscosity,
+            gravity=tuple(u.to_lattice(g, "acceleration") for g in dom.gravity),
+            sigma=u.to_lattice(fl.surface_tension, "surface_tension") if two and eff.surface_tension else 0.0,
+            mobility=fl.mobility,
+            width=fl.interface_width,
+            eta=fl.controller_eta if eff.volume_controller else 0.0,
+        )
+        inflow = {i.face: i for i in sc.inflows}
+        faces = {}
+        for name, kind in dom.boundary.items():
+            if kind == "inflow":
+                i = inflow[name]
+                vel = tuple(u.to_lattice(v, "velocity") for v in i.velocity)
+                faces[_FACE[name]] = Face("inflow", vel, 1.0 if i.kind == "water" else 0.0)
+            else:
+                faces[_FACE[name]] = Face(kind)
+        obstacles = self._shape_of("obstacle")
+        solid = sdf_on_grid(obstacles, dom.resolution, dom.dx) < 0 if obstacles else None
+        phi = velocity = None
+        if two:
+            water = self._water_shape()
+            if water is None:
+                phi = np.zeros(dom.shape, np.float32)
+            else:
+                d_cells = sdf_on_grid(water, dom.resolution, dom.dx).astype(np.float64) / dom.dx
+                phi = (0.5 * (1.0 - np.tanh(2.0 * d_cells / fl.interface_width))).astype(
+                    np.float32
+                )  # text after Eq. 48
+            for b in sc.bodies:
+                if b.kind == "water" and any(b.velocity):
+                    if velocity is None:
+                        velocity = np.zeros((3, *dom.shape))
+                    inside = sdf_on_grid(b.geometry.shape(dom, 0.25 * dom.dx), dom.resolution, dom.dx) < 0
+                    for c in range(3):
+                        velocity[c][inside] = u.to_lattice(b.velocity[c], "velocity")
+        self._fluid_params = prm
+        return FluidSolver(self.backend, dom.shape, prm, Boundaries(faces), solid=solid, phi=phi, velocity=velocity)
+
+    def _build_sand(self):
+        from .sand.boundaries import DomainWalls, SdfCollider, Wall
+        from .sand.params import SandParams
+        from .sand.seeding import seed_sdf
+        from .sand.solver import SandSolver
+
+        sc = self.scene
+        sd, dom, eff = sc.sand, sc.domain, sc.effects
+        bodies = [b for b in sc.bodies if b.kind == "sand"]
+        densities = {b.density or sd.density for b in bodies}
+        if len(densities) > 1:
+            raise CouplingUnavailableError(
+                f"sand bodies of different densities {sorted(densities)} need per-body materials, which the sand "
+                "solver does not take yet; give them one density"
+            )
+        if any(b.retention if b.retention is not None else sd.retention for b in bodies):
+            self._log("note: water retention needs the coupling module; a sand-only scene has no water to retain")
+        h0, h1, h2, h3 = sd.hardening
+        s1, s2, s3 = sd.cohesion_saturation
+        params = SandParams(
+            density=densities.pop(),
+            youngs_modulus=sd.youngs_modulus,
+            poisson_ratio=sd.poisson_ratio,
+            h0=h0,
+            h1=h1,
+            h2=h2,
+            h3=h3,
+            cohesion_max=sd.cohesion if eff.cohesion else 0.0,
+            cohesion_s1=s1,
+            cohesion_s2=s2,
+            cohesion_s3=s3,
+            hardening=eff.hardening,
+        )
+        xs, vols, vels = [], [], []
+        size = np.asarray(dom.size)
+        for i, b in enumerate(bodies):
+            shape = b.geometry.shape(dom, 0.25 * dom.dx)
+            lo, hi = shape.bounds()
+            lo, hi = np.maximum(lo, 0.0), np.minimum(hi, size)
+            seeded = seed_sdf(shape.sdf, lo, hi, dom.dx, sd.particles_per_axis, sd.jitter, sd.seed + i)
+            if seeded.count == 0:
+                raise ValueError(f"sand body {b.name!r} is thinner than the particle spacing: no particle seeded")
+            xs.append(seeded.x)
+            vols.append(seeded.volume)
+            vels.append(np.repeat(np.asarray(b.velocity, np.float64)[:, None], seeded.count, axis=1))
+        walls = DomainWalls.from_dict({_SAND_FACE[f]: Wall("separate", sd.wall_friction) for f in dom.boundary})
+        obstacles = [b for b in sc.bodies if b.kind == "obstacle"]
+        collider = None
+        if obstacles:
+            union = Union([b.geometry.shape(dom, 0.25 * dom.dx) for b in obstacles])
+            friction = max(b.friction if b.friction is not None else sd.wall_friction for b in obstacles)
+            collider = SdfCollider(lambda p, t, s=union: s.sdf(p), mode="separate", friction=friction)
+        return SandSolver(
+            self.backend,
+            dom.shape,
+            dom.dx,
+            sc.time.dt,
+            params,
+            np.concatenate(xs, axis=1),
+            np.concatenate(vols),
+            velocities=np.concatenate(vels, axis=1),
+            gravity=dom.gravity,
+            walls=walls,
+            sdf_collider=collider,
+            cfl=sd.cfl,
+            elastic_cfl=sd.elastic_cfl,
+        )
+
+    # ------------------------------------------------------------------------------------ state
+    @property
+    def time(self) -> float:
+        """Simulated time, s (step count × dt)."""
+        return self.step_count * self.scene.time.dt
+
+    @property
+    def frame(self) -> int:
+        """Completed frames."""
+        return self.step_count // self.steps_per_frame
+
+    @property
+    def effects(self) -> dict[str, bool]:
+        """Which effects are on (DESIGN 'Effects'): decided by the scene's content and its [effects] table."""
+        sc, fl = self.scene, self.scene.fluid
+        two = bool(fl and fl.phases == 2)
+        sand = self.sand is not None
+        return {
+            "fluid": fl is not None,
+            "phase_field": two,
+            "surface_tension": bool(two and self.fluid and self.fluid.surface_tension),
+            "volume_controller": bool(two and self._fluid_params.eta > 0) if self.fluid else False,
+            "obstacles": any(b.kind == "obstacle" for b in sc.bodies),
+            "inflows": bool(sc.inflows),
+            "sand": sand,
+            "cohesion": bool(sand and self.sand.params.cohesion_on),
+            "hardening": bool(sand and self.sand.params.hardening),
+            "drag": False,
+            "buoyancy": False,
+            "source_term": False,
+            "retention": False,
+        }
+
+    def step(self, n: int = 1) -> None:
+        """Advance ``n`` time steps (every solver in the scene)."""
+        n = int(n)
+        if self.fluid is not None:
+            self.fluid.step(n)
+        if self.sand is not None:
+            self.sand.step(n)
+        self.step_count += n
+
+    def fields(self) -> dict[str, np.ndarray]:
+        """Host NumPy grid fields: velocity (m/s), pressure (lattice), density, phi, solid (fluid);
+        sand_fraction, sand_velocity (m/s) (sand). Shapes (nz, ny, nx) and (3, nz, ny, nx)."""
+        out: dict[str, np.ndarray] = {}
+        if self.fluid is not None:
+            f = self.fluid.fields()
+            f["velocity"] = f["velocity"] * (self.scene.domain.dx / self.scene.time.dt)
+            out.update(f)
+        if self.sand is not None:
+            s = self.sand.fields()
+            out["sand_fraction"] = s["sand_fraction"]
+            out["sand_velocity"] = s["velocity"]
+        return out
+
+    def particles(self) -> dict[str, np.ndarray]:
+        """Host NumPy particle arrays: x, v (3, P) in m and m/s; saturation, friction_angle, mass, volume (P,).
+        Empty when the scene has no sand."""
+        if self.sand is None:
+            return {}
+        p = self.sand.particles()
+        return {k: p[k] for k in ("x", "v", "saturation", "friction_angle", "mass", "volume") if k in p}
+
+    def diagnostics(self) -> dict[str, float]:
+        """Floats: time, step, frame; fluid_volume, fluid_volume_drift, max_lattice_speed, mach, max_speed,
+        momentum_x/y/z, kinetic_energy (fluid, lattice units); sand_mass, sand_momentum_x/y/z,
+        sand_kinetic_energy, sand_max_speed (SI)."""
+        out = {"time": self.time, "step": float(self.step_count), "frame": float(self.frame)}
+        if self.fluid is not None:
+            d = self.fluid.diagnostics()
+            d.pop("step", None)
+            out.update(d)
+            out["mach"] = d["max_lattice_speed"] / math.sqrt(CS2)
+            out["max_speed"] = d["max_lattice_speed"] * self.scene.domain.dx / self.scene.time.dt
+        if self.sand is not None:
+            for k, v in self.sand.diagnostics().items():
+                if k not in ("time", "step"):
+                    out[f"sand_{k}"] = v
+        return out
+
+    # ------------------------------------------------------------------------------------ NaN / Inf
+    def _solver_arrays(self) -> list[tuple[str, str, np.ndarray, str]]:
+        arrays = []
+        if self.fluid is not None:
+            for name, a in self.fluid.fields().items():
+                if a.dtype.kind == "f":
+                    arrays.append(("fluid", name, a, "cell (x, y, z)"))
+        if self.sand is not None:
+            p = self.sand.particles()
+            for name in ("x", "v", "F"):
+                arrays.append(("sand", name, p[name], "particle"))
+        return arrays
+
+    def check_finite(self) -> None:
+        """Raise :class:`SimulationDiverged` naming the field and cell (or particle) of a NaN/Inf."""
+        for solver, name, a, where in self._solver_arrays():
+            bad = ~np.isfinite(a)
+            if bad.any():
+                idx = np.unravel_index(int(np.argmax(bad)), a.shape)
+                value = float(a[idx])
+                if where == "particle":
+                    index: tuple = (int(idx[-1]),)
+                else:
+                    z, y, x = (int(i) for i in idx[-3:])
+                    index = (x, y, z)
+                raise SimulationDiverged(self.step_count, solver, name, index, value, where)
+
+    def _states(self) -> dict[str, dict[str, np.ndarray]]:
+        out = {}
+        if self.fluid is not None:
+            out["fluid"] = self.fluid.state()
+        if self.sand is not None:
+            out["sand"] = self.sand.state()
+        return out
+
+    def _load_states(self, states: dict[str, dict[str, np.ndarray]], step: int) -> None:
+        for name, solver in (("fluid", self.fluid), ("sand", self.sand)):
+            if solver is not None:
+                if name not in states:
+                    raise ValueError(f"the checkpoint has no {name} state, the scene needs one")
+                solver.load_state(states[name])
+        self.step_count = int(step)
+
+    def _rebuild(self) -> None:
+        """Fresh solvers (scratch arrays outside the solver state, e.g. ghost layers, may hold NaN)."""
+        self.fluid = self._build_fluid() if self.scene.has_fluid else None
+        self.sand = self._build_sand() if self.scene.has_sand else None
+
+    def _locate_divergence(self, good: dict, good_step: int, exc: SimulationDiverged) -> SimulationDiverged:
+        """Replay from the last good state one step at a time to find the first non-finite step."""
+        target = self.step_count
+        self._rebuild()
+        self._load_states(good, good_step)
+        try:
+            while self.step_count < target:
+                self.step(1)
+                self.check_finite()
+        except SimulationDiverged as first:
+            return first
+        return exc
+
+    # ------------------------------------------------------------------------------------ checkpoints
+    def save(self, path: str | Path) -> Path:
+        """Write an HDF5 checkpoint (scene, solver states, counters) for an exact restart."""
+        from .io.checkpoint import save_checkpoint
+
+        meta = {"step": self.step_count, "time": self.time, "backend": self.backend.name, "couplekit": __version__}
+        return save_checkpoint(path, self.scene.to_dict(), self._states(), meta)
+
+    @classmethod
+    def load(
+        cls, path: str | Path, backend: str | Backend | None = "auto", threads: int | None = None, log=print
+    ) -> Simulation:
+        """Rebuild the scene of a checkpoint and restore its state (bitwise on the backend that wrote it)."""
+        from .io.checkpoint import load_checkpoint
+
+        scene_dict, states, meta = load_checkpoint(path)
+        sim = cls(
+            Scene.from_dict(scene_dict, source_name=f"scene of {path}"), backend=backend, threads=threads, log=log
+        )
+        sim._load_states(states, int(meta["step"]))
+        if meta.get("backend") != sim.backend.name and log:
+            log(f"note: checkpoint written by the {meta.get('backend')} backend, resumed on {sim.backend.name}")
+        return sim
+
+    # ------------------------------------------------------------------------------------ run
+    def write_frame(self, out: Path, indexes: dict, log_file) -> None:
+        """Write the outputs of the current frame (per the scene's [outputs])."""
+        from .io import render_preview, write_fields_vti, write_particles_ply, write_particles_vtp
+
+        o, frame, t = self.scene.outputs, self.frame, self.time
+        fields = {k: v for k, v in self.fields().items() if k in o.fields}
+        parts = self.particles()
+        extra = {k: v for k, v in parts.items() if k != "x"}
+        if o.vtk:
+            if fields:
+                indexes["fields"].add(
+                    t, write_fields_vti(out / f"fields_{frame:04d}.vti", fields, self.scene.domain.dx)
+                )
+            if parts:
+                indexes["particles"].add(t, write_particles_vtp(out / f"particles_{frame:04d}.vtp", parts["x"], extra))
+        if o.ply and parts:
+            write_particles_ply(out / f"particles_{frame:04d}.ply", parts["x"], extra)
+        if o.preview and frame % o.preview_every == 0:
+            render_preview(
+                out / f"preview_{frame:04d}.png",
+                self.scene.domain.size,
+                self.scene.domain.dx,
+                self.fields(),
+                parts,
+                title=f"{self.scene.name}  frame {frame}  t = {t:.4g} s",
+            )
+        if log_file is not None:
+            log_file.write(self.diagnostics())
+
+    def run(
+        self,
+        frames: int | None = None,
+        out: str | Path | None = None,
+        progress: bool = True,
+        stream=None,
+        stop: Callable[[], bool] | None = None,
+    ) -> RunResult:
+        """Simulate until ``frames`` frames are complete (default ``time.frames``), writing outputs into
+        ``out`` (default ``outputs.directory`` or ``runs/<name>``).
+
+        Each frame: step, NaN/Inf check, outputs, diagnostics line, progress bar; checkpoints every
+        ``outputs.checkpoint_every`` frames and at the end (``checkpoint.h5``). Ctrl-C (SIGINT) or ``stop()``
+        returning True ends the run cleanly between steps with ``interrupted.h5``. On NaN/Inf the last good
+        state is written to ``last_good.h5`` and the report to ``diverged.txt``.
+        """
+        from .io import DiagnosticsLog, PvdIndex
+        from .io.progress import ProgressBar
+
+        sc = self.scene
+        total = int(frames if frames is not None else sc.time.frames)
+        out = Path(out or sc.outputs.directory or Path("runs") / sc.name)
+        out.mkdir(parents=True, exist_ok=True)
+        resumed = self.step_count > 0
+        indexes = {"fields": PvdIndex(out / "fields.pvd"), "particles": PvdIndex(out / "particles.pvd")}
+        log_file = DiagnosticsLog(out / "diagnostics.jsonl", append=resumed) if sc.outputs.diagnostics else None
+        self._log(f"effects on: {', '.join(k for k, v in self.effects.items() if v)}")
+        self._log(f"writing to {out}")
+        bar = ProgressBar(total, self.frame, stream=stream) if progress else None
+        interrupted = {"flag": False}
+        previous = None
+        if threading_main():
+
+            def _on_sigint(signum, frame):
+                interrupted["flag"] = True
+
+            previous = signal.signal(signal.SIGINT, _on_sigint)
+        result = RunResult(status="done", out=str(out), checkpoint=None, steps=0)
+        steps_done = 0
+        chunk = max(1, min(self.steps_per_frame, 10))
+        try:
+            if self.step_count == 0:
+                self.check_finite()
+                self.write_frame(out, indexes, log_file)
+            good, good_step = self._states(), self.step_count
+            while self.frame < total:
+                target = (self.frame + 1) * self.steps_per_frame
+                while self.step_count < target:
+                    if interrupted["flag"] or (stop is not None and stop()):
+                        path = self.save(out / "interrupted.h5")
+                        self._log(f"\ninterrupted at step {self.step_count} (frame {self.frame}); checkpoint {path}")
+                        result.update(status="interrupted", checkpoint=str(path))
+                        return result
+                    n = min(chunk, target - self.step_count)
+                    self.step(n)
+                    steps_done += n
+                try:
+                    self.check_finite()
+                except SimulationDiverged as exc:
+                    first = self._locate_divergence(good, good_step, exc)
+                    self._rebuild()
+                    self._load_states(good, good_step)
+                    path = self.save(out / "last_good.h5")
+                    report = f"{first}\nlast good state: step {good_step} (frame {good_step // self.steps_per_frame}), saved to {path}\n"
+                    (out / "diverged.txt").write_text(report)
+                    self._log("\n" + report.strip())
+                    result.update(status="diverged", checkpoint=str(path), error=str(first))
+                    return result
+                good, good_step = self._states(), self.step_count
+                self.write_frame(out, indexes, log_file)
+                every = sc.outputs.checkpoint_every
+                if every and self.frame % every == 0 and self.frame < total:
+                    result["checkpoint"] = str(self.save(out / "checkpoint.h5"))
+                if bar is not None:
+                    d = self.diagnostics()
+                    info = {k: d[k] for k in ("fluid_volume_drift", "mach", "sand_max_speed") if k in d}
+                    bar.update(self.frame, steps_done, info)
+            result["checkpoint"] = str(self.save(out / "checkpoint.h5"))
+            return result
+        finally:
+            result.update(frames=self.frame, steps=steps_done)
+            if bar is not None:
+                bar.close()
+            if log_file is not None:
+                log_file.close()
+            if previous is not None:
+                signal.signal(signal.SIGINT, previous)
+
+    def __repr__(self) -> str:
+        parts = [f"Simulation({self.scene.name!r}, backend={self.backend.name}, step={self.step_count}"]
+        if self.sand is not None:
+            parts.append(f"{self.sand.n_particles} particles")
+        return ", ".join(parts) + ")"
+
+
+def threading_main() -> bool:
+    """True in the main thread of the main interpreter (where signal handlers can be set)."""
+    import threading
+
+    return threading.current_thread() is threading.main_thread()

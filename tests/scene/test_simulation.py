@@ -1,0 +1,168 @@
+"""Simulation: wiring of scenes to the solvers, exact restart, NaN/Inf reports, refusals, run outputs."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from sim_scenes import tiny_fluid, tiny_sand
+
+import couplekit.simulation as simulation
+from couplekit.io import read_diagnostics, read_pvd
+from couplekit.scene import Scene
+from couplekit.simulation import CouplingUnavailableError, InsufficientMemoryError, Simulation
+
+
+def _sim(d: dict, backend: str = "cpu") -> Simulation:
+    return Simulation(Scene.from_dict(d), backend=backend, log=None)
+
+
+def _same_state(a: Simulation, b: Simulation) -> None:
+    sa, sb = a._states(), b._states()
+    assert sa.keys() == sb.keys()
+    for solver in sa:
+        assert sa[solver].keys() == sb[solver].keys()
+        for k in sa[solver]:
+            x, y = np.asarray(sa[solver][k]), np.asarray(sb[solver][k])
+            assert x.dtype == y.dtype and x.shape == y.shape, (solver, k)
+            assert x.tobytes() == y.tobytes(), f"{solver}.{k} differs after restart"
+
+
+@pytest.mark.parametrize("scene", [tiny_sand, tiny_fluid], ids=["sand", "fluid"])
+def test_restart_is_bitwise_on_cpu(tmp_path, scene):
+    """A run resumed from a checkpoint is bitwise identical to an uninterrupted one (cpu backend)."""
+    straight = _sim(scene())
+    straight.step(12)
+    first = _sim(scene())
+    first.step(5)
+    first.save(tmp_path / "c.h5")
+    resumed = Simulation.load(tmp_path / "c.h5", backend="cpu", log=None)
+    assert resumed.step_count == 5
+    resumed.step(7)
+    _same_state(straight, resumed)
+
+
+def test_sand_scene_wiring():
+    sim = _sim(tiny_sand())
+    p = sim.particles()
+    # a 4x4x3-cell block at 2 particles per axis: 8x8x6 particles of volume (dx/2)³
+    assert p["x"].shape == (3, 384)
+    np.testing.assert_allclose(p["volume"].sum(), 0.02 * 0.02 * 0.015, rtol=1e-6)
+    np.testing.assert_allclose(p["v"][2], -0.5)
+    assert sim.effects["sand"] and sim.effects["obstacles"] and not sim.effects["fluid"]
+    sim.step(3)
+    d = sim.diagnostics()
+    assert d["step"] == 3 and d["time"] == pytest.approx(6e-4)
+    np.testing.assert_allclose(d["sand_mass"], 1500 * 0.02 * 0.02 * 0.015, rtol=1e-6)
+    assert sim.fields()["sand_fraction"].shape == (12, 12, 12)
+
+
+def test_fluid_scene_wiring():
+    sim = _sim(tiny_fluid())
+    f = sim.fields()
+    assert f["phi"].shape == (12, 8, 12)
+    # water layer z < 1 cm (4 cells): φ = ½(1 − tanh(2d/ξ)), d the signed distance in cells, ξ = 4 (after Eq. 48);
+    # no interface along the floor and side walls the layer touches
+    k = np.arange(12) + 0.5
+    d_layer = k - 4
+    d_drop = np.sqrt((1.5 - 6) ** 2 + (1.5 - 4) ** 2 + (k - 8) ** 2) - 2  # the drop: centre (6, 4, 8), radius 2 cells
+    expect = 0.5 * (1 - np.tanh(2 * np.minimum(d_layer, d_drop) / 4))
+    np.testing.assert_allclose(f["phi"][:, 1, 1], expect, rtol=1e-5, atol=1e-6)
+    assert f["solid"][0, 4, 8] and not f["solid"][0, 4, 2]
+    # the drop moves down at 0.5 m/s, in SI units from fields()
+    np.testing.assert_allclose(f["velocity"][2, 8, 4, 6], -0.5, rtol=1e-5)
+    eff = sim.effects
+    assert eff["phase_field"] and eff["surface_tension"] and eff["volume_controller"] and eff["inflows"]
+    assert not eff["sand"] and not eff["drag"]
+    sim.step(2)
+    d = sim.diagnostics()
+    assert {"fluid_volume", "fluid_volume_drift", "mach", "max_speed"} <= d.keys()
+
+
+def test_single_phase_and_effects_off():
+    d = tiny_fluid()
+    d["fluid"]["phases"] = 1
+    d["bodies"] = [b for b in d["bodies"] if b["kind"] != "water"]
+    d["inflows"] = []
+    d["domain"]["boundary"] = {}
+    sim = _sim(d)
+    assert "phi" not in sim.fields() and not sim.effects["phase_field"]
+    d = tiny_fluid()
+    d["effects"] = {"surface_tension": False, "volume_controller": False}
+    eff = _sim(d).effects
+    assert not eff["surface_tension"] and not eff["volume_controller"]
+
+
+def test_coupled_scene_is_refused():
+    d = tiny_fluid()
+    d["bodies"].append({"kind": "sand", "geometry": {"type": "box", "min": [0.01] * 3, "max": [0.015] * 3}})
+    d["time"]["dt"] = 2e-5
+    with pytest.raises(CouplingUnavailableError, match="coupling module, not built yet"):
+        _sim(d)
+
+
+def test_memory_refusal(monkeypatch):
+    monkeypatch.setattr(simulation, "available_memory", lambda backend: (1000.0, "test memory"))
+    with pytest.raises(InsufficientMemoryError, match="coarser domain.dx"):
+        _sim(tiny_sand())
+
+
+def test_memory_estimate_counts_arrays():
+    sc = Scene.from_dict(tiny_fluid())
+    est = simulation.memory_estimate(sc)
+    padded = 14 * 10 * 14
+    assert est["fluid"] == padded * (4 * (35 + 13) + 1)
+    assert est["total"] == est["fluid"]
+
+
+def test_nan_is_reported_with_step_field_and_cell(tmp_path):
+    sim = _sim(tiny_fluid(frames=3))
+    real_step = sim.step
+
+    def poisoned(n=1):  # after step 7 a NaN appears in the pressure at cell (x=3, y=2, z=4)
+        for _ in range(n):
+            real_step(1)
+            if sim.step_count == 7:
+                sim.fluid.p[4 + 1, 2 + 1, 3 + 1] = np.nan  # padded array: interior cell + 1
+
+    sim.step = poisoned
+    result = sim.run(out=tmp_path, progress=False)
+    assert result.status == "diverged"
+    report = (tmp_path / "diverged.txt").read_text()
+    assert "after step 7" in report and "'pressure'" in report and "(3, 2, 4)" in report
+    assert "last good state: step 5" in report
+    good = Simulation.load(tmp_path / "last_good.h5", backend="cpu", log=None)
+    assert good.step_count == 5
+    assert np.isfinite(good.fields()["pressure"]).all()
+
+
+def test_run_writes_outputs_and_interrupt_resume_is_exact(tmp_path):
+    d = tiny_sand(frames=3)
+    d["outputs"] = {"preview": True, "preview_every": 3, "checkpoint_every": 1}
+    calls = {"n": 0}
+
+    def stop_after_some_steps():
+        calls["n"] += 1
+        return calls["n"] > 1  # first frame's first chunk runs, then stop
+
+    sim = _sim(d)
+    r = sim.run(out=tmp_path, progress=False, stop=stop_after_some_steps)
+    assert r.status == "interrupted" and (tmp_path / "interrupted.h5").exists()
+    resumed = Simulation.load(tmp_path / "interrupted.h5", backend="cpu", log=None)
+    assert resumed.step_count == 5
+    r = resumed.run(out=tmp_path, progress=False)
+    assert r.status == "done" and r["frames"] == 3
+    straight = _sim(tiny_sand(frames=3))
+    straight.step(15)
+    _same_state(straight, resumed)
+    entries = read_pvd(tmp_path / "particles.pvd")
+    assert [e[1] for e in entries] == [f"particles_{i:04d}.vtp" for i in range(4)]
+    assert [e[0] for e in entries] == pytest.approx([0.0, 1e-3, 2e-3, 3e-3])
+    assert (tmp_path / "particles_0003.ply").exists() and (tmp_path / "fields_0002.vti").exists()
+    assert (tmp_path / "preview_0000.png").exists() and (tmp_path / "preview_0003.png").exists()
+    assert not (tmp_path / "preview_0001.png").exists()
+    recs = read_diagnostics(tmp_path / "diagnostics.jsonl")
+    assert [r["frame"] for r in recs] == [0, 1, 2, 3]
+    import pyvista as pv
+
+    g = pv.read(tmp_path / "fields_0003.vti")
+    np.testing.assert_array_equal(g.point_data["sand_fraction"].reshape(12, 12, 12), straight.fields()["sand_fraction"])

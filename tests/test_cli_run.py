@@ -1,0 +1,138 @@
+"""The command line: `couplekit validate`, `couplekit run` (outputs, refusals, Ctrl-C, --resume), `info` kept."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from couplekit.cli import main
+from couplekit.io import read_diagnostics, read_pvd
+
+ROOT = Path(__file__).resolve().parents[1]
+
+TINY_SAND = """
+[scene]
+name = "tiny"
+
+[domain]
+size = [0.06, 0.06, 0.06]
+dx = 0.005
+
+[time]
+dt = 2e-4
+frame_duration = 1e-3
+frames = {frames}
+
+[sand]
+density = 1500.0
+youngs_modulus = 1e5
+
+[[bodies]]
+kind = "sand"
+velocity = [0.0, 0.0, -0.5]
+[bodies.geometry]
+type = "box"
+min = [0.02, 0.02, 0.03]
+max = [0.04, 0.04, 0.045]
+
+[outputs]
+preview = {preview}
+"""
+
+
+def _scene(tmp_path: Path, frames: int = 2, preview: bool = False, name: str = "tiny.toml") -> Path:
+    p = tmp_path / name
+    p.write_text(TINY_SAND.format(frames=frames, preview="true" if preview else "false"))
+    return p
+
+
+def test_validate_valid_and_invalid(tmp_path, capsys):
+    assert main(["validate", str(_scene(tmp_path))]) == 0
+    assert "valid" in capsys.readouterr().out
+    bad = tmp_path / "bad.toml"
+    bad.write_text(_scene(tmp_path).read_text().replace("dx = 0.005", "dx = -0.005\nspeed = 3"))
+    assert main(["validate", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert "domain.dx" in err and "domain.speed" in err and "Fix:" in err
+
+
+def test_validate_every_example():
+    for path in sorted((ROOT / "examples").glob("*.toml")):
+        assert main(["validate", str(path)]) == 0, path
+
+
+def test_run_writes_frames(tmp_path, capsys):
+    out = tmp_path / "out"
+    rc = main(["run", str(_scene(tmp_path, preview=True)), "--frames", "1", "--out", str(out), "--backend", "cpu"])
+    assert rc == 0
+    text = capsys.readouterr()
+    assert "backend: cpu" in text.out and "memory estimate" in text.out
+    assert "frame 1/1" in text.err  # the progress bar (one line per frame when not a terminal)
+    assert [e[1] for e in read_pvd(out / "particles.pvd")] == ["particles_0000.vtp", "particles_0001.vtp"]
+    assert (out / "preview_0001.png").exists() and (out / "checkpoint.h5").exists()
+    assert len(read_diagnostics(out / "diagnostics.jsonl")) == 2
+
+
+def test_run_refuses_coupled_scene(tmp_path, capsys):
+    text = _scene(tmp_path).read_text() + "\n[fluid]\nphases = 2\n"
+    p = tmp_path / "coupled.toml"
+    p.write_text(text.replace("dt = 2e-4", "dt = 2e-5").replace("frame_duration = 1e-3", "frame_duration = 1e-4"))
+    assert main(["run", str(p), "--out", str(tmp_path / "o"), "--backend", "cpu"]) == 3
+    assert "coupling module, not built yet" in capsys.readouterr().err
+
+
+def test_info_still_works(capsys):
+    assert main(["info", "--backend", "numpy"]) == 0
+    assert "backend: numpy" in capsys.readouterr().out
+
+
+def test_ctrl_c_writes_checkpoint_and_resume_finishes(tmp_path):
+    """SIGINT during a run: exit 130 with interrupted.h5; --resume from it completes the run."""
+    scene = _scene(tmp_path, frames=400)
+    out = tmp_path / "out"
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "couplekit", "run", str(scene), "--out", str(out), "--backend", "cpu"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
+    deadline = time.time() + 120
+    while time.time() < deadline and not (out / "diagnostics.jsonl").exists():
+        time.sleep(0.2)
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 130, stdout + stderr
+    assert (out / "interrupted.h5").exists() and "--resume" in stdout
+    rc = main(
+        [
+            "run",
+            str(scene),
+            "--frames",
+            "2",
+            "--out",
+            str(out),
+            "--backend",
+            "cpu",
+            "--resume",
+            str(out / "interrupted.h5"),
+            "--no-progress",
+        ]
+    )
+    assert rc == 0
+
+
+@pytest.mark.parametrize("name", ["sand_drop_small.toml"])
+def test_demo_scene_loads(name):
+    from couplekit.scene import Scene
+
+    scene = Scene.load(ROOT / "examples" / name)
+    assert scene.has_sand and not scene.has_fluid
