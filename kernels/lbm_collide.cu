@@ -7,7 +7,8 @@
 // Because every relaxation rate except the shear rate r_s is 1, the post-collision central moments depend on
 // the pre-collision state only through m0, u and the second-order central moments (lbm-method note §1b):
 // the forward transform reduces to 10 raw sums, and only the backward chimera transform is done.
-// variants: CK_TWO_PHASE=0,1 CK_SURFACE_TENSION=0,1 CK_MIXTURE=0,1 CK_EXT_FORCE=0,1
+// variants: CK_TWO_PHASE=0,1 CK_SURFACE_TENSION=0,1 CK_MIXTURE=0,1 CK_EXT_FORCE=1
+// (CK_EXT_FORCE=0 compiles a strict subset of the =1 code, so the GPU build checks only =1)
 #include "common.cuh"
 #include "lattice.cuh"
 #include "lbm_core.cuh"
@@ -82,11 +83,11 @@ LBM_INLINE void lbm_collide_cell(const long long c, float* RESTRICT f, const uns
 
     // acceleration, Eq. 15: -grad pbar / rho + g (+ F_s / rho) (+ F_ext / (eps rho))
     float gp[3];
-    lbm_gradient(pbar, flags, c, px, pxy, gp);
+    lbm_gradient<1>(pbar, flags, c, px, pxy, gp);
     float ax = gx - gp[0] * inv_rho, ay = gy - gp[1] * inv_rho, az = gz - gp[2] * inv_rho;
 #if CK_TWO_PHASE
     float gphi[3];
-    lbm_gradient(phi, flags, c, px, pxy, gphi);
+    lbm_gradient<0>(phi, flags, c, px, pxy, gphi);
 #if CK_SURFACE_TENSION
     const float chem = mu[c] * inv_rho;
     ax += chem * gphi[0];
@@ -124,7 +125,7 @@ LBM_INLINE void lbm_collide_cell(const long long c, float* RESTRICT f, const uns
 #endif
 #if CK_MIXTURE
         float ge[3];
-        lbm_gradient(eps, flags, c, px, pxy, ge);
+        lbm_gradient<0>(eps, flags, c, px, pxy, ge);
         g0 += rho / e * ge[0];
         g1 += rho / e * ge[1];
         g2 += rho / e * ge[2];

@@ -70,15 +70,24 @@ LBM_INLINE void lbm_store(float* RESTRICT f, const long long c, const long long 
 #undef LBM_STORE
 }
 
-// Eq. 18 isotropic gradient; wall / inflow / solid neighbours take the centre value (their term vanishes)
+// Eq. 18 isotropic gradient.  A wall / inflow / solid neighbour x + c_j takes, with EXTRAP = 0, the centre
+// value (zero normal gradient: phi, eps, v) and, with EXTRAP = 1, the linear extrapolation 2 s(x) - s(x - c_j)
+// when x - c_j is a stencil cell (pressure: exact for the hydrostatic profile, whose wall-normal gradient is
+// rho g, not 0), else the centre value.
+template <int EXTRAP>
 LBM_INLINE void lbm_gradient(const float* RESTRICT s, const unsigned char* RESTRICT flags, const long long c,
-                         const int px, const long long pxy, float* RESTRICT g) {
+                             const int px, const long long pxy, float* RESTRICT g) {
     const float sc = s[c];
     float gx = 0.f, gy = 0.f, gz = 0.f;
 #define LBM_GRAD_TERM(q)                                                                                  \
     {                                                                                                    \
         const long long nb = c + LBM_OFFSET(q, px, pxy);                                                 \
-        const float wd = LBM_STENCIL_CELL(flags[nb]) ? 3.f * W27[q] * (s[nb] - sc) : 0.f;                \
+        float d = LBM_STENCIL_CELL(flags[nb]) ? s[nb] - sc : 0.f;                                        \
+        if (EXTRAP) {                                                                                    \
+            const long long mb = c - LBM_OFFSET(q, px, pxy);                                             \
+            d = (!LBM_STENCIL_CELL(flags[nb]) && LBM_STENCIL_CELL(flags[mb])) ? sc - s[mb] : d;          \
+        }                                                                                                \
+        const float wd = 3.f * W27[q] * d;                                                               \
         if (CX27[q]) gx += CX27[q] * wd;                                                                 \
         if (CY27[q]) gy += CY27[q] * wd;                                                                 \
         if (CZ27[q]) gz += CZ27[q] * wd;                                                                 \

@@ -44,10 +44,10 @@ KERNEL void lbm_macro_pressure(const long long n, const float* RESTRICT f /* siz
         LBM_FOR26(LBM_MOM)
 #undef LBM_MOM
         float ge[3], gvx[3], gvy[3], gvz[3];
-        lbm_gradient(eps, flags, c, px, pxy, ge);
-        lbm_gradient(sand_v, flags, c, px, pxy, gvx);
-        lbm_gradient(sand_v + N, flags, c, px, pxy, gvy);
-        lbm_gradient(sand_v + 2 * N, flags, c, px, pxy, gvz);
+        lbm_gradient<0>(eps, flags, c, px, pxy, ge);
+        lbm_gradient<0>(sand_v, flags, c, px, pxy, gvx);
+        lbm_gradient<0>(sand_v + N, flags, c, px, pxy, gvy);
+        lbm_gradient<0>(sand_v + 2 * N, flags, c, px, pxy, gvz);
         const float e = eps[c];
         const float div_v = gvx[0] + gvy[1] + gvz[2];
         const float slip = (ux - sand_v[c]) * ge[0] + (uy - sand_v[N + c]) * ge[1] + (uz - sand_v[2 * N + c]) * ge[2];
@@ -63,7 +63,8 @@ KERNEL void lbm_macro_pressure(const long long n, const float* RESTRICT f /* siz
     }
 }
 
-// pbar = sum_j w_j p(x + c_j)   (Eq. 40); a wall / inflow / solid neighbour contributes the centre value
+// pbar = sum_j w_j p(x + c_j)   (Eq. 40); a wall / inflow / solid neighbour contributes the linear
+// extrapolation 2 p(x) - p(x - c_j) (the centre value if x - c_j is not a stencil cell either)
 KERNEL void lbm_pressure_filter(const long long n, const float* RESTRICT p /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                                 const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                                 float* RESTRICT pbar /* size: (nx + 2) * (ny + 2) * (nz + 2) */, const int nx,
@@ -75,10 +76,12 @@ KERNEL void lbm_pressure_filter(const long long n, const float* RESTRICT p /* si
         if (flags[c] != FLAG_FLUID) continue;
         const float pc = p[c];
         float acc = 0.f;
-#define LBM_AVG(q)                                                        \
-    {                                                                    \
-        const long long nb = c + LBM_OFFSET(q, px, pxy);                 \
-        acc += W27[q] * (LBM_STENCIL_CELL(flags[nb]) ? p[nb] - pc : 0.f); \
+#define LBM_AVG(q)                                                                               \
+    {                                                                                           \
+        const long long nb = c + LBM_OFFSET(q, px, pxy), mb = c - LBM_OFFSET(q, px, pxy);       \
+        float d = LBM_STENCIL_CELL(flags[nb]) ? p[nb] - pc : 0.f;                               \
+        d = (!LBM_STENCIL_CELL(flags[nb]) && LBM_STENCIL_CELL(flags[mb])) ? pc - p[mb] : d;     \
+        acc += W27[q] * d;                                                                      \
     }
         LBM_FOR26(LBM_AVG)
 #undef LBM_AVG

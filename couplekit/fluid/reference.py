@@ -22,7 +22,8 @@ writes ``F[ĵ][x] = f*_j``. At an odd parity ``f_j(x) = F[ĵ][x − c_j]`` (pull
 Scalar stencils (isotropic gradient Eq. 18, filter Eq. 40) use a neighbour's value when it is a ``FLUID``
 cell (periodic ghosts hold copies of their images) or an ``OUTFLOW`` ghost (which keeps the outlet reference
 value, p = 0: a pressure Dirichlet condition half a link outside); otherwise (walls, inflow, solids) the
-centre value (zero normal gradient, note §1f).
+centre value for φ, ε, v (zero normal gradient, note §1f) and, for the pressure (filter and gradient), the
+linear extrapolation 2 p(x) − p(x − c_j), which keeps a hydrostatic profile in balance at walls.
 """
 
 from __future__ import annotations
@@ -51,12 +52,26 @@ def stencil_cell(flags: np.ndarray) -> np.ndarray:
     return (flags == FLUID) | (flags == OUTFLOW)
 
 
-def isotropic_gradient(s: np.ndarray, flags: np.ndarray) -> np.ndarray:
-    """Eq. 18: ∇s = Σ_j 3 w_j c_j s(x + c_j), wall/inflow/solid neighbours replaced by the centre value."""
+def neighbour_values(s: np.ndarray, flags: np.ndarray, c, extrapolate: bool) -> np.ndarray:
+    """s(x + c) for every interior x, with the wall rule: a wall / inflow / solid neighbour takes the centre
+    value, or with ``extrapolate`` the linear extrapolation 2 s(x) − s(x − c) when x − c is a stencil cell."""
+    centre = interior(s).astype(np.float64)
+    ok = stencil_cell(shifted(flags, c))
+    out = np.where(ok, shifted(s, c), centre)
+    if extrapolate:
+        back = stencil_cell(shifted(flags, -np.asarray(c)))
+        out = np.where(~ok & back, 2.0 * centre - shifted(s, -np.asarray(c)), out)
+    return out
+
+
+def isotropic_gradient(s: np.ndarray, flags: np.ndarray, extrapolate: bool = False) -> np.ndarray:
+    """Eq. 18: ∇s = Σ_j 3 w_j c_j s(x + c_j), with the wall rule of :func:`neighbour_values` (centre value
+    for φ, ε, v — zero normal gradient; linear extrapolation for the pressure, whose hydrostatic wall-normal
+    gradient is ρg, not 0)."""
     centre = interior(s).astype(np.float64)
     grad = np.zeros((3,) + centre.shape)
     for j in range(1, 27):
-        nb = np.where(stencil_cell(shifted(flags, C27[j])), shifted(s, C27[j]), centre)
+        nb = neighbour_values(s, flags, C27[j], extrapolate)
         for d in range(3):
             if C27[j, d]:
                 grad[d] += 3.0 * W27[j] * C27[j, d] * (nb - centre)
@@ -64,11 +79,12 @@ def isotropic_gradient(s: np.ndarray, flags: np.ndarray) -> np.ndarray:
 
 
 def local_average(s: np.ndarray, flags: np.ndarray) -> np.ndarray:
-    """Eq. 40: s̄ = Σ_j w_j s(x + c_j), wall/inflow/solid neighbours replaced by the centre value."""
+    """Eq. 40: s̄ = Σ_j w_j s(x + c_j), wall/inflow/solid neighbours linearly extrapolated (see
+    :func:`neighbour_values`), so a hydrostatic profile passes the filter unchanged."""
     centre = interior(s).astype(np.float64)
     out = W27[0] * centre
     for j in range(1, 27):
-        out = out + W27[j] * np.where(stencil_cell(shifted(flags, C27[j])), shifted(s, C27[j]), centre)
+        out = out + W27[j] * neighbour_values(s, flags, C27[j], extrapolate=True)
     return out
 
 
@@ -199,7 +215,7 @@ class ReferenceOps:
             nu = np.full(s0.shape, float(nu_h))
         r_s = 1.0 / (nu / CS2 + 0.5)
         e = interior(eps).astype(np.float64) if self.mixture else 1.0
-        a = -isotropic_gradient(pbar, flags) / rho
+        a = -isotropic_gradient(pbar, flags, extrapolate=True) / rho
         a = a + np.asarray(gravity, np.float64).reshape(3, 1, 1, 1)
         if self.two_phase:
             grad_phi = isotropic_gradient(phi, flags)
