@@ -1,6 +1,7 @@
 // The constitutive pieces of mpm_g2p.cu as stand-alone kernels, so each can be checked against its NumPy
 // reference on its own (and used by tools that need a stress from an F): the float32 SVD, and the
 // constitutive update F_trial -> (F_new, tau, q, vc).  Same defines as mpm_g2p.cu (see mpm_model.cuh).
+// variants: MPM_PLASTICITY=0,1 MPM_COHESION=0,1
 #include "common.cuh"
 #include "mpm_model.cuh"
 #include "mpm_loops.cuh"

@@ -10,6 +10,7 @@
 // Safety net: positions are clamped to [dx, (n - 1) dx) per axis so the 3x3x3 stencil of the next P2G
 // stays inside the grid (the domain walls keep sand well inside this band; the clamp only matters for a
 // broken setup).  One thread per particle; n = number of particles.
+// variants: MPM_PLASTICITY=0,1 MPM_HARDENING=0,1 MPM_COHESION=0,1 MPM_VOLUME_CORRECTION=0,1
 #include "common.cuh"
 #include "mpm_model.cuh"
 #include "mpm_loops.cuh"

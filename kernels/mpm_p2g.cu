@@ -18,6 +18,7 @@
 // MPM_SERIAL_PARTICLES particles the team is one thread: the same rule every run).
 // Define MPM_HOST_ATOMICS=1 to use `omp atomic` on the host instead (for benchmarking only:
 // not reproducible).
+// variants: MPM_HOST_ATOMICS=0,1
 #include "common.cuh"
 #include "mpm_loops.cuh"
 
