@@ -14,7 +14,8 @@
 //             forcing carries only half of the last step's force F_prev = the `force` array on entry; u* is
 //             the fluid velocity after the whole of last step's drag.  Using u alone makes the exchange
 //             chase a fluid velocity lagging by half an impulse: with strong drag the slip then flips sign
-//             every step, tests/coupling/test_coupling_with_fluid.py)
+//             every step, tests/coupling/test_coupling_with_fluid.py.  A sub-cycling scheduler that keeps
+//             its own scratch fluid velocity passes it as u with a zeroed force array.)
 //   A       = pi (3 eps_s / (4 pi))^(2/3)                    (ball of the node's sand volume, Sec. 4.3)
 //           or 1.5 eps_s / d_grain  when grain_diameter > 0  (total cross-section of grains of diameter d,
 //                                                             notes Sec. 3.2 option)
