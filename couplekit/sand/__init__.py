@@ -11,14 +11,25 @@ from .boundaries import Collider, DomainWalls, SdfCollider, Wall
 from .kernel_ops import KernelOps
 from .params import ConstitutiveModel, SandParams
 from .reference import ReferenceOps
+from .seeding import Seeded, combine, seed_box, seed_sdf, seed_sphere
+from .solver import EPS_MAX, SandSolver, TimeStepError, elastic_dt_limit
 
 __all__ = [
+    "EPS_MAX",
     "Collider",
     "ConstitutiveModel",
     "DomainWalls",
     "KernelOps",
     "ReferenceOps",
     "SandParams",
+    "SandSolver",
     "SdfCollider",
+    "Seeded",
+    "TimeStepError",
     "Wall",
+    "combine",
+    "elastic_dt_limit",
+    "seed_box",
+    "seed_sdf",
+    "seed_sphere",
 ]
