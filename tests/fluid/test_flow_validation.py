@@ -7,7 +7,8 @@
 * Taylor–Green vortex (2-D solution in a 3-D box, k_x = k_y = 2π/N): velocity amplitude decays as
   exp(−2νk²t). Measured over the time the amplitude needs to fall to e^{−1/2}. Pass: rate within 1 % at
   N = 48 and observed order ≥ 1.7 between N = 24 and 48 (second order, allowing for the O(Ma²) and
-  time-step terms that do not shrink with N; lbm-method note §1g). Measured: +0.35 % at N = 48, order 2.2.
+  time-step terms that do not shrink with N; lbm-method note §1g). Measured: +0.35 % at N = 48, order 2.2
+  with the unfiltered stored pressure; see the test for the filtered one.
 * Couette flow between a resting and a moving wall: linear profile, exact for the lattice to round-off
   up to the slip of the moving-wall bounce-back (which is zero for a linear profile): tolerance 0.5 %.
 """
@@ -55,7 +56,7 @@ def test_poiseuille_profile_l2_below_one_percent(cpu, flow, walls):
     assert np.abs(solver.fields()["velocity"][AXES[walls]]).max() < 1e-6
 
 
-def _taylor_green_rate_error(cpu, n: int, nu: float = 0.02, u0: float = 0.02) -> float:
+def _taylor_green_rate_error(cpu, n: int, store_filtered: bool, nu: float = 0.02, u0: float = 0.02) -> float:
     k = 2 * np.pi / n
     c = np.arange(n) + 0.5
     x, y = np.meshgrid(c, c, indexing="xy")  # x varies along the last (contiguous) axis
@@ -63,7 +64,8 @@ def _taylor_green_rate_error(cpu, n: int, nu: float = 0.02, u0: float = 0.02) ->
     vel[0] = u0 * np.sin(k * x) * np.cos(k * y)
     vel[1] = -u0 * np.cos(k * x) * np.sin(k * y)
     p = np.broadcast_to(u0**2 / 4 * (np.cos(2 * k * x) + np.cos(2 * k * y)), (2, n, n))
-    solver = FluidSolver(cpu, (2, n, n), FluidParams(nu_h=nu), velocity=vel, pressure=p)
+    params = FluidParams(nu_h=nu, store_filtered_pressure=store_filtered)
+    solver = FluidSolver(cpu, (2, n, n), params, velocity=vel, pressure=p)
     steps = int(round(0.5 / (2 * nu * k * k)))
     a0 = np.sqrt(solver.diagnostics()["kinetic_energy"])
     solver.step(steps)
@@ -71,12 +73,17 @@ def _taylor_green_rate_error(cpu, n: int, nu: float = 0.02, u0: float = 0.02) ->
     return np.log(a0 / a1) / steps / (2 * nu * k * k) - 1.0
 
 
-def test_taylor_green_decay_rate_and_second_order(cpu):
-    e24 = _taylor_green_rate_error(cpu, 24)
-    e48 = _taylor_green_rate_error(cpu, 48)
+@pytest.mark.parametrize("store_filtered, min_order", [(False, 1.7), (True, 1.6)])
+def test_taylor_green_decay_rate_and_second_order(cpu, store_filtered, min_order):
+    """Unfiltered stored pressure: +0.35 % at N = 48, order 2.2. Stored filtered pressure (the default, what
+    keeps 800:1 stable): the filter adds a numerical diffusion of 1/6 lattice unit per step to p (note §0), an
+    O(Δx²) term with a large constant; measured +0.53 % at N = 48 and order 1.75 (the note's prototype: 0.67 %,
+    1.8), so its order bound is 1.6."""
+    e24 = _taylor_green_rate_error(cpu, 24, store_filtered)
+    e48 = _taylor_green_rate_error(cpu, 48, store_filtered)
     assert abs(e48) < 0.01, f"decay rate error {e48:+.4f} at N=48"
     order = np.log2(abs(e24 / e48))
-    assert order > 1.7, f"observed order {order:.2f} (errors {e24:+.4f}, {e48:+.4f})"
+    assert order > min_order, f"observed order {order:.2f} (errors {e24:+.4f}, {e48:+.4f})"
 
 
 def test_couette_moving_wall_gives_linear_profile(cpu):

@@ -1,0 +1,123 @@
+"""Two-phase validation of the coupled flow + phase field (FluidSolver, cpu backend, one thread).
+
+* Static droplet at density ratio 1000 (issue 3): Laplace jump p_in − p_out = 2σ/R within 5 %, with R the
+  radius of the φ = ½ contour, and spurious currents max|u| < 1e-3 (lattice). ξ = 5 cells (lbmpy's
+  default): at ξ = 4 the discrete stencils under-resolve the interface and the jump came out 6–9 % low,
+  at ξ = 5 it is 3 % low (measured 0.967–0.973 of 2σ/R between 500 and 1000 steps, max|u| ≈ 3e-4).
+  p_in / p_out are averaged over φ > 0.999 / φ < 0.001, far from the interface.
+* Two layers at 800:1 at rest under gravity (paper regime ν_h = 1e-4, ν_l = 1e-2, with surface tension):
+  the time-averaged pressure gradient equals ρg in each phase within 2 % and the interface stays put.
+  Measured: within 0.1 % (the pressure filter and gradient extrapolate linearly into walls, so the
+  hydrostatic profile is a discrete equilibrium); the remaining acoustic oscillation (ν_h = 1e-4 hardly
+  damps it) is averaged out over 1000 steps (≈ 4 periods of the box's lowest mode).
+* Water column collapse at 800:1, ν_h = 1e-4, ν_l = 1e-2: stays finite, max lattice speed < 0.3, phase
+  volume drift < 0.5 % with the controller on. CI runs 32³ for 600 steps; the issue's 64³ × 2000 steps
+  case is marked slow (≈ 3 minutes on 2 shared cores) and run with the benchmarks.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from couplekit.backend import get_backend
+from couplekit.fluid.grid import Boundaries
+from couplekit.fluid.solver import FluidParams, FluidSolver
+
+
+@pytest.fixture(scope="module")
+def cpu():
+    return get_backend("cpu", threads=1)
+
+
+def test_static_droplet_laplace_jump_and_spurious_currents(cpu):
+    n, radius, width, sigma = 40, 12.0, 5.0, 0.005
+    c = np.arange(n) + 0.5
+    z, y, x = np.meshgrid(c, c, c, indexing="ij")
+    r = np.sqrt((x - n / 2) ** 2 + (y - n / 2) ** 2 + (z - n / 2) ** 2)
+    phi = 0.5 * (1 + np.tanh(2 * (radius - r) / width))
+    params = FluidParams(rho_h=1.0, rho_l=1e-3, nu_h=0.05, nu_l=0.05, sigma=sigma, mobility=0.05, width=width)
+    solver = FluidSolver(cpu, (n, n, n), params, phi=phi)
+    solver.step(800)
+    f = solver.fields()
+    p, ph = f["pressure"], f["phi"]
+    jump = p[ph > 0.999].mean() - p[ph < 0.001].mean()
+    line = ph[n // 2 - 1 : n // 2 + 1, n // 2 - 1 : n // 2 + 1, n // 2 :].mean(axis=(0, 1))
+    r_half = np.interp(0.5, line[::-1], (c[n // 2 :] - n / 2)[::-1])
+    laplace = 2 * sigma / r_half
+    assert abs(jump / laplace - 1) < 0.05, f"Laplace jump {jump:.3e} vs 2σ/R = {laplace:.3e} (R = {r_half:.2f})"
+    assert np.abs(f["velocity"]).max() < 1e-3
+    assert abs(solver.diagnostics()["fluid_volume_drift"]) < 1e-5  # conservative phase field, no source
+
+
+def test_two_layers_800_to_1_hydrostatic(cpu):
+    nz, width, g, rho_l = 64, 4.0, -1e-5, 1.0 / 800.0
+    zc = np.arange(nz) + 0.5
+    phi1 = 0.5 * (1 + np.tanh(2 * (nz / 2 - zc) / width))
+    rho = rho_l + (1 - rho_l) * phi1
+    p = np.zeros(nz)  # hydrostatic start (trapezoid rule from the top); the solver must keep it
+    for k in range(nz - 2, -1, -1):
+        p[k] = p[k + 1] - 0.5 * (rho[k] + rho[k + 1]) * g
+    shape = (nz, 4, 4)
+    params = FluidParams(
+        rho_h=1.0, rho_l=rho_l, nu_h=1e-4, nu_l=1e-2, gravity=(0.0, 0.0, g), sigma=0.0, mobility=0.02, width=width
+    )
+    solver = FluidSolver(
+        cpu,
+        shape,
+        params,
+        Boundaries.channel("z"),
+        phi=np.broadcast_to(phi1[:, None, None], shape),
+        pressure=np.broadcast_to(p[:, None, None], shape),
+    )
+    solver.step(3000)
+    mean_p = np.zeros(nz)
+    for _ in range(100):
+        solver.step(10)
+        mean_p += solver.fields()["pressure"].mean(axis=(1, 2)) / 100
+    heavy, light = slice(6, nz // 2 - 8), slice(nz // 2 + 8, nz - 6)
+    slope_h = np.polyfit(zc[heavy], mean_p[heavy], 1)[0] / (1.0 * g)
+    slope_l = np.polyfit(zc[light], mean_p[light], 1)[0] / (rho_l * g)
+    assert abs(slope_h - 1) < 0.02, f"heavy phase dp/dz = {slope_h:.4f} ρ_h g"
+    assert abs(slope_l - 1) < 0.02, f"light phase dp/dz = {slope_l:.4f} ρ_l g"
+    ph = solver.fields()["phi"].mean(axis=(1, 2))
+    z_interface = np.interp(0.5, ph[::-1], zc[::-1])
+    assert abs(z_interface - nz / 2) < 0.05
+
+
+def _column_collapse(cpu, n: int, steps: int) -> dict[str, float]:
+    c = np.arange(n) + 0.5
+    z, y, x = np.meshgrid(c, c, c, indexing="ij")
+    width = 4.0
+    # water block in the corner x < n/2, z < n/2 (all y), smooth edges
+    dist = np.minimum(n / 2 - x, n / 2 - z)
+    phi = 0.5 * (1 + np.tanh(2 * dist / width))
+    g = -0.5 * (0.05**2) / n  # free-fall speed over the column height ≈ 0.05 (low Mach)
+    params = FluidParams(
+        rho_h=1.0, rho_l=1.0 / 800.0, nu_h=1e-4, nu_l=1e-2, gravity=(0.0, 0.0, g), sigma=1e-4, mobility=0.02,
+        width=width, eta=1.0,
+    )  # fmt: skip
+    solver = FluidSolver(cpu, (n, n, n), params, Boundaries.channel("xyz"), phi=phi)
+    peak = 0.0
+    for _ in range(steps // 50):
+        solver.step(50)
+        d = solver.diagnostics()
+        assert np.isfinite(d["max_lattice_speed"]) and np.isfinite(d["fluid_volume"])
+        peak = max(peak, d["max_lattice_speed"])
+    d = solver.diagnostics()
+    d["peak_speed"] = peak
+    return d
+
+
+def test_column_collapse_is_stable_ci_size(cpu):
+    d = _column_collapse(cpu, 32, 600)
+    assert d["peak_speed"] < 0.3
+    assert d["max_lattice_speed"] > 1e-3  # the column really collapses
+    assert abs(d["fluid_volume_drift"]) < 0.005
+
+
+@pytest.mark.slow
+def test_column_collapse_is_stable_64_cubed_2000_steps():
+    d = _column_collapse(get_backend("cpu"), 64, 2000)
+    assert d["peak_speed"] < 0.3
+    assert abs(d["fluid_volume_drift"]) < 0.005
