@@ -7,6 +7,7 @@ read as garbage. Every call is therefore checked against the signature parsed fr
 from __future__ import annotations
 
 import ast
+import functools
 import re
 from dataclasses import dataclass
 
@@ -46,13 +47,18 @@ class Param:
         return f"{'const ' if self.const else ''}{ctype}{'*' if self.pointer else ''} {self.name}"
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Signature:
     """A kernel's name and parameters; the first parameter is always the work-item count ``n``."""
 
     name: str
     params: tuple[Param, ...]
     source: str
+
+    @functools.cached_property
+    def has_sizes(self) -> bool:
+        """Whether any parameter carries a size annotation."""
+        return any(p.size for p in self.params)
 
     def describe(self) -> str:
         return f"{self.name}({', '.join(p.describe() for p in self.params)})"
@@ -172,24 +178,14 @@ def _check_size_expression(expr: str, params: tuple[Param, ...], kernel: str, so
             raise ValueError(f"{source}: kernel {kernel}: size annotation {expr!r} may only use integer parameters")
 
 
-def _eval_size(expr: str, values: dict[str, int]) -> int:
-    def ev(node):
-        if isinstance(node, ast.Expression):
-            return ev(node.body)
-        if isinstance(node, ast.Constant):
-            return int(node.value)
-        if isinstance(node, ast.Name):
-            return int(values[node.id])
-        left, right = ev(node.left), ev(node.right)
-        if isinstance(node.op, ast.Add):
-            return left + right
-        if isinstance(node.op, ast.Sub):
-            return left - right
-        if isinstance(node.op, ast.Mult):
-            return left * right
-        return left // right
+@functools.cache
+def _size_code(expr: str):
+    """``expr`` compiled once; its names were checked by :func:`_check_size_expression` at parse time."""
+    return compile(ast.parse(expr.replace("/", "//"), mode="eval"), "<size>", "eval")
 
-    return ev(ast.parse(expr, mode="eval"))
+
+def _eval_size(expr: str, values: dict[str, int]) -> int:
+    return int(eval(_size_code(expr), {"__builtins__": {}}, values))
 
 
 def check_args(sig: Signature, n: int, args: tuple, array_type: type, array_kind: str) -> list:
@@ -206,22 +202,21 @@ def check_args(sig: Signature, n: int, args: tuple, array_type: type, array_kind
         )
     out = []
     for i, (p, a) in enumerate(zip(expected, args, strict=True), start=2):
-        where = f"{sig.name}: argument {i} ({p.describe()})"
         if p.pointer:
-            if not isinstance(a, array_type):
-                raise KernelArgumentError(f"{where} must be a {array_kind}, got {type(a).__name__}")
-            if a.dtype != p.dtype:
-                raise KernelArgumentError(
-                    f"{where} must have dtype {p.dtype}, got {a.dtype}; use .astype({p.dtype.name})"
-                )
-            if not a.flags.c_contiguous:
-                raise KernelArgumentError(f"{where} must be C-contiguous; pass an ascontiguousarray copy")
-            if not p.const and not a.flags.writeable:
-                raise KernelArgumentError(f"{where} is written by the kernel but the array is read-only")
+            # the common case costs four attribute checks; messages are only built on failure
+            if not (
+                isinstance(a, array_type)
+                and a.dtype == p.dtype
+                and a.flags.c_contiguous
+                and (p.const or a.flags.writeable)
+            ):
+                _array_error(sig, i, p, a, array_type, array_kind)
+            out.append(a)
+        elif type(a) is p.dtype.type:
             out.append(a)
         else:
-            out.append(_scalar(a, p, where))
-    if any(p.size for p in expected):
+            out.append(_scalar(a, p, f"{sig.name}: argument {i} ({p.describe()})"))
+    if sig.has_sizes:
         values = {"n": int(n)}
         values.update(
             {p.name: int(a) for p, a in zip(expected, out, strict=True) if not p.pointer and p.dtype.kind in "iu"}
@@ -236,6 +231,17 @@ def check_args(sig: Signature, n: int, args: tuple, array_type: type, array_kind
                         f"{relation} {p.size} = {want} (shape {tuple(a.shape)})"
                     )
     return out
+
+
+def _array_error(sig: Signature, i: int, p: Param, a, array_type: type, array_kind: str) -> None:
+    where = f"{sig.name}: argument {i} ({p.describe()})"
+    if not isinstance(a, array_type):
+        raise KernelArgumentError(f"{where} must be a {array_kind}, got {type(a).__name__}")
+    if a.dtype != p.dtype:
+        raise KernelArgumentError(f"{where} must have dtype {p.dtype}, got {a.dtype}; use .astype({p.dtype.name})")
+    if not a.flags.c_contiguous:
+        raise KernelArgumentError(f"{where} must be C-contiguous; pass an ascontiguousarray copy")
+    raise KernelArgumentError(f"{where} is written by the kernel but the array is read-only")
 
 
 def _scalar(a, p: Param, where: str):
