@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from states import DT, DX, SHAPE, grids, particles
+from sand_states import DT, DX, SHAPE, grids, particles
 
 from couplekit.sand import Collider, DomainWalls, SandParams, Wall
 from couplekit.sand.boundaries import pack_colliders, pack_walls

@@ -4,7 +4,7 @@ momentum; APIC keeps a rigid rotation (velocity, affine matrix, angular momentum
 from __future__ import annotations
 
 import numpy as np
-from states import DX, SHAPE, grids, particles
+from sand_states import DX, SHAPE, grids, particles
 
 from couplekit.sand import DomainWalls, SandParams
 from couplekit.sand.boundaries import pack_colliders, pack_walls
