@@ -186,8 +186,9 @@ class ReferenceOps:
     ) -> None:
         """Buoyancy into ``f_ext`` (N), implicit drag impulse J added to ``grid_mv`` (kg·m/s) and −J/Δt to
         the fluid ``force`` (lattice force density).  See kernels/coupling_drag.cu for the formulas
-        (notes §3.4).  ``force`` holds last step's drag on entry (zeros at the start): the fluid velocity
-        field carries only half of it (Guo forcing), the exchange adds the other half back.
+        (notes §3.4).  ``u`` must be the fluid's current macroscopic velocity Σ_j f_j c_j (populations after
+        the last streaming, no force shift), not the post-collision velocity field of a Guo-forced step:
+        with that stale value strong drag makes the LBM unstable (kernels/coupling_drag.cu).
 
         ``units``: the lattice unit system (dx, LBM step, reference density); ``gravity`` in m/s²;
         ``rho_h``, ``rho_l`` lattice densities; ``dt``: the MPM step in s (default: the LBM step).
@@ -209,9 +210,7 @@ class ReferenceOps:
         v_star = ((grid_mv.astype(np.float64) + dt * f_b) / m_safe + dt * g) / velocity_scale  # lattice
         m_s = m_safe / mass_scale
         m_f = rho * ef  # fluid mass of the cell, V_cell = 1
-        # the fluid velocity after all of last step's drag: the field u carries half of it (Guo forcing)
-        u_star = _interior(u).astype(np.float64) + 0.5 * _interior(force).astype(np.float64) / m_f
-        r_star = u_star - v_star  # slip u − v before the exchange
+        r_star = _interior(u).astype(np.float64) - v_star  # slip u − v before the exchange
         if grain_diameter > 0:
             area = 1.5 * es / grain_diameter  # all grains' cross-sections (notes §3.2 option)
         else:

@@ -59,7 +59,7 @@ def test_fractions_match_reference(cpu, retention, two_phase, periodic):
 def _run_drag(ops, st, eps_sand, eps_fluid, dt=None):
     grid_mv = st["grid_mv"].copy()
     f_ext = np.full((3, *SHAPE), -7.0, np.float32)
-    # last step's drag, still in the force array (the exchange adds its second half to u)
+    # garbage in the force array: it is output only (interior overwritten)
     force = (np.random.default_rng(7).uniform(-1e-4, 1e-4, (3, *padded()))).astype(np.float32)
     ops.drag_buoyancy(
         st["grid_m"], grid_mv, f_ext, force, st["u"], st["phi"], eps_sand, eps_fluid, st["flags"], UNITS,
