@@ -25,7 +25,9 @@
 //   J       = m_s m_f / (m_s + m_f) (r* - r')               (impulse on the sand; the fluid gets -J)
 // Outputs: (mv)_i += J (SI), force = -J / dt_lattice (lattice force density for the fluid's forcing term),
 // f_ext = F_b.  Nodes without sand mass, or whose cell is not a FLUID cell (flags != 0), get f_ext = 0 and
-// force = 0 and keep their momentum.
+// force = 0 and keep their momentum: there is no fluid there to exchange momentum with (a reaction written
+// into an obstacle cell would be lost).  Sand spilling (B-spline weights) into obstacle cells therefore
+// feels no buoyancy there; keep fluid obstacles and sand colliders on the same cells.
 // variants: CK_TWO_PHASE=0,1
 #include "common.cuh"
 
