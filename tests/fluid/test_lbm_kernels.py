@@ -88,3 +88,16 @@ def test_halo_fold_outflow_copies_are_exact(cpu, boundaries):
         ops.outflow_fix(s["f"], s["out_ghost"], s["out_src"])
     for key in ("f", "velocity", "p"):
         np.testing.assert_array_equal(sk[key], sr[key])
+
+
+def test_bandwidth_probe_kernels(cpu):
+    """The benchmark's bandwidth probes compute what their docstrings say (exact float32 arithmetic here)."""
+    mod = cpu.module("lbm_bandwidth.cu")
+    rng = np.random.default_rng(7)
+    a, b = rng.random(1000, dtype=np.float32), rng.random(1000, dtype=np.float32)
+    c = np.zeros_like(a)
+    mod.function("lbm_bw_triad")(a.size, a, b, c, np.float32(0.5))
+    np.testing.assert_array_equal(c, a + np.float32(0.5) * b)
+    expect = np.float32(2.0) * a + np.float32(1.0)
+    mod.function("lbm_bw_update")(a.size, a, np.float32(2.0), np.float32(1.0))
+    np.testing.assert_allclose(a, expect, rtol=1e-7)
