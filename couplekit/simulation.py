@@ -6,10 +6,13 @@
 >>> sim.fields(), sim.particles(), sim.diagnostics()
 >>> sim.save("x.h5"); sim2 = ck.Simulation.load("x.h5")   # bitwise restart on the cpu backend
 
-What runs today (the solvers that exist): fluid-only scenes (:class:`couplekit.fluid.solver.FluidSolver`,
-one or two phases, obstacles as bounce-back cells, whole-face inflows and outflows) and sand-only scenes
-(:class:`couplekit.sand.solver.SandSolver`, obstacles as an SDF collider). A scene with both is refused with
-:class:`CouplingUnavailableError` until the coupling scheduler exists.
+Scenes: fluid-only (:class:`couplekit.fluid.solver.FluidSolver`, one or two phases, obstacles as
+bounce-back cells, whole-face inflows and outflows), sand-only (:class:`couplekit.sand.solver.SandSolver`,
+obstacles as an SDF collider), and both, coupled in lockstep by
+:class:`couplekit.coupling.coupler.SandFluidCoupler` (paper Algorithm 1: one MPM step per LBM step, same Δt;
+drag, buoyancy, the phase-field source term, water retention). Refused with
+:class:`CouplingUnavailableError`: what the coupler cannot do yet (a jet carrying sand, sand bodies of
+different densities or with and without retention in one scene, drag or buoyancy switched off).
 
 Before anything is allocated the constructor prints the backend and why it was chosen, and a memory
 estimate; a scene that will not fit the device (or the host's available memory) is refused
@@ -43,6 +46,9 @@ __all__ = [
     "RunResult",
 ]
 
+_COUPLER_STATE = ("eps_sand", "fluid_u", "eps_prev", "water", "bound_in", "bound", "d_bound", "moisture_ratio")
+"""SandFluidCoupler arrays saved in checkpoints (it has no state()/load_state() of its own)."""
+
 _FACE = {"x_min": "x-", "x_max": "x+", "y_min": "y-", "y_max": "y+", "z_min": "z-", "z_max": "z+"}
 _SAND_FACE = {"x_min": "-x", "x_max": "+x", "y_min": "-y", "y_max": "+y", "z_min": "-z", "z_max": "+z"}
 
@@ -62,6 +68,35 @@ class SimulationDiverged(FloatingPointError):
     def __init__(self, step: int, solver: str, field: str, index: tuple, value: float, where: str):
         self.step, self.solver, self.field, self.index, self.value = step, solver, field, index, value
         super().__init__(f"non-finite value {value} in {solver} field {field!r} at {where} {index} after step {step}")
+
+
+def _refuse_unsupported(scene: Scene) -> None:
+    """Refuse, before allocation, what the coupler cannot do yet (CouplingUnavailableError naming the key)."""
+    problems = []
+    for i, inflow in enumerate(scene.inflows):
+        if inflow.sand_fraction > 0:
+            problems.append(
+                f"inflows[{i}].sand_fraction > 0: a jet carrying sand needs particle emission at the inflow"
+            )
+    if scene.has_sand:
+        sd = scene.sand
+        bodies = [b for b in scene.bodies if b.kind == "sand"]
+        densities = sorted({b.density or sd.density for b in bodies})
+        if len(densities) > 1:
+            problems.append(
+                f"bodies[*].density: sand bodies of different densities {densities} need per-body materials"
+            )
+        if scene.has_fluid:
+            ret = {b.retention if b.retention is not None else sd.retention for b in bodies}
+            if len(ret) > 1:
+                problems.append("bodies[*].retention: retention on some sand bodies and off on others")
+            for key in ("drag", "buoyancy"):
+                if not getattr(scene.effects, key):
+                    problems.append(f"effects.{key} = false: the coupler has no switch for it")
+    if problems:
+        raise CouplingUnavailableError(
+            f"scene {scene.name!r} needs what the coupling module does not do yet: " + "; ".join(problems)
+        )
 
 
 # ---------------------------------------------------------------------------------------------- memory
@@ -90,7 +125,12 @@ def memory_estimate(scene: Scene) -> dict[str, float]:
                 count += float(np.prod(np.maximum(hi - lo, 0.0))) / scene.domain.dx**3 * scene.sand.particles_per_cell
         out["particle_count"] = count
         out["particles"] = 4.0 * _SAND_FLOATS_PER_PARTICLE * count
-    out["total"] = out["fluid"] + out["sand_grid"] + out["particles"]
+    if scene.fluid is not None and scene.has_sand:
+        # fluid mixture inputs (fluid_fraction, sand_velocity, force) and the coupler's fields
+        retention = any(b.retention if b.retention is not None else scene.sand.retention for b in scene.bodies)
+        out["coupling"] = padded * 4.0 * (7 + 1 + 3 + 1) + nx * ny * nz * 4.0 * (1 + (3 if retention else 0))
+        out["particles"] += 4.0 * count * (1 if retention else 0)
+    out["total"] = out["fluid"] + out["sand_grid"] + out["particles"] + out.get("coupling", 0.0)
     return out
 
 
@@ -145,11 +185,8 @@ class Simulation:
         self.scene = scene if isinstance(scene, Scene) else Scene.load(scene)
         sc = self.scene
         self._log = log or (lambda s: None)
-        if sc.has_fluid and sc.has_sand or any(i.sand_fraction > 0 for i in sc.inflows):
-            raise CouplingUnavailableError(
-                f"scene {sc.name!r} has both sand and a fluid: coupled scenes need the coupling module, not built "
-                "yet (drag, buoyancy and Algorithm 1's lockstep scheduler); run its fluid-only or sand-only parts"
-            )
+        self.coupled = sc.has_fluid and sc.has_sand
+        _refuse_unsupported(sc)
         self.backend = backend if isinstance(backend, Backend) else get_backend(backend, threads=threads)
         self._log(self.backend.describe())
         self._log(sc.summary())
@@ -166,8 +203,8 @@ class Simulation:
         self.units = sc.units()
         self.steps_per_frame = sc.time.steps_per_frame
         self.step_count = 0
-        self.fluid = self._build_fluid() if sc.has_fluid else None
-        self.sand = self._build_sand() if sc.has_sand else None
+        self.fluid = self.sand = self.coupler = None
+        self._rebuild()
 
     # ------------------------------------------------------------------------------------ building
     def _shape_of(self, kind: str) -> Union | None:
@@ -248,7 +285,17 @@ class Simulation:
                     for c in range(3):
                         velocity[c][inside] = u.to_lattice(b.velocity[c], "velocity")
         self._fluid_params = prm
-        return FluidSolver(self.backend, dom.shape, prm, Boundaries(faces), solid=solid, phi=phi, velocity=velocity)
+        return FluidSolver(
+            self.backend,
+            dom.shape,
+            prm,
+            Boundaries(faces),
+            solid=solid,
+            phi=phi,
+            velocity=velocity,
+            mixture=self.coupled,
+            external_force=self.coupled,
+        )
 
     def _build_sand(self):
         from .sand.boundaries import DomainWalls, SdfCollider, Wall
@@ -260,13 +307,8 @@ class Simulation:
         sd, dom, eff = sc.sand, sc.domain, sc.effects
         bodies = [b for b in sc.bodies if b.kind == "sand"]
         densities = {b.density or sd.density for b in bodies}
-        if len(densities) > 1:
-            raise CouplingUnavailableError(
-                f"sand bodies of different densities {sorted(densities)} need per-body materials, which the sand "
-                "solver does not take yet; give them one density"
-            )
-        if any(b.retention if b.retention is not None else sd.retention for b in bodies):
-            self._log("note: water retention needs the coupling module; a sand-only scene has no water to retain")
+        if not self.coupled and any(b.retention if b.retention is not None else sd.retention for b in bodies):
+            self._log("note: water retention has no effect in a sand-only scene (no water to retain)")
         h0, h1, h2, h3 = sd.hardening
         s1, s2, s3 = sd.cohesion_saturation
         params = SandParams(
@@ -345,20 +387,43 @@ class Simulation:
             "sand": sand,
             "cohesion": bool(sand and self.sand.params.cohesion_on),
             "hardening": bool(sand and self.sand.params.hardening),
-            "drag": False,
-            "buoyancy": False,
-            "source_term": False,
-            "retention": False,
+            "coupling": self.coupler is not None,
+            "drag": self.coupler is not None,
+            "buoyancy": self.coupler is not None,
+            "source_term": bool(self.coupler is not None and two and sc.effects.source_term),
+            "retention": bool(self.coupler is not None and self.coupler.retention),
         }
 
     def step(self, n: int = 1) -> None:
         """Advance ``n`` time steps (every solver in the scene)."""
         n = int(n)
-        if self.fluid is not None:
-            self.fluid.step(n)
-        if self.sand is not None:
-            self.sand.step(n)
+        if self.coupler is not None:
+            for _ in range(n):
+                self._coupled_step()
+        else:
+            if self.fluid is not None:
+                self.fluid.step(n)
+            if self.sand is not None:
+                self.sand.step(n)
         self.step_count += n
+
+    def _coupled_step(self) -> None:
+        """One lockstep step in paper Algorithm 1's order (SandFluidCoupler.step, with the source-term switch)."""
+        c, sand = self.coupler, self.sand
+        sand.p2g()
+        c.fluid_velocity()
+        c.fractions()
+        if self.scene.effects.source_term:
+            c.phase_source()
+        c.exchange()
+        sand.grid_update()
+        c.moisture()
+        sand.g2p()
+        c.sand_velocity()
+        self.fluid.step(1)
+        c.finish()
+        if sand.cfl_check_every and sand.steps % sand.cfl_check_every == 0:
+            sand.set_dt(sand.dt)  # re-checks the particle CFL limit, as SandSolver.step does
 
     def fields(self) -> dict[str, np.ndarray]:
         """Host NumPy grid fields: velocity (m/s), pressure (lattice), density, phi, solid (fluid);
@@ -372,6 +437,8 @@ class Simulation:
             s = self.sand.fields()
             out["sand_fraction"] = s["sand_fraction"]
             out["sand_velocity"] = s["velocity"]
+        if self.coupler is not None:
+            out.update(self.coupler.fields())
         return out
 
     def particles(self) -> dict[str, np.ndarray]:
@@ -380,7 +447,10 @@ class Simulation:
         if self.sand is None:
             return {}
         p = self.sand.particles()
-        return {k: p[k] for k in ("x", "v", "saturation", "friction_angle", "mass", "volume") if k in p}
+        out = {k: p[k] for k in ("x", "v", "saturation", "friction_angle", "mass", "volume") if k in p}
+        if self.coupler is not None and self.coupler.retention:
+            out["moisture"] = self.backend.to_host(self.coupler.moisture_ratio)
+        return out
 
     def diagnostics(self) -> dict[str, float]:
         """Floats: time, step, frame; fluid_volume, fluid_volume_drift, max_lattice_speed, mach, max_speed,
@@ -432,6 +502,12 @@ class Simulation:
             out["fluid"] = self.fluid.state()
         if self.sand is not None:
             out["sand"] = self.sand.state()
+        if self.coupler is not None:
+            c = self.coupler
+            out["coupler"] = {
+                k: self.backend.to_host(getattr(c, k)) for k in _COUPLER_STATE if getattr(c, k) is not None
+            }
+            out["coupler"]["started"] = np.array(c._started)
         return out
 
     def _load_states(self, states: dict[str, dict[str, np.ndarray]], step: int) -> None:
@@ -440,12 +516,32 @@ class Simulation:
                 if name not in states:
                     raise ValueError(f"the checkpoint has no {name} state, the scene needs one")
                 solver.load_state(states[name])
+        if self.coupler is not None:
+            st = states.get("coupler")
+            if st is None:
+                raise ValueError("the checkpoint has no coupler state, the scene is coupled")
+            for k in _COUPLER_STATE:
+                if getattr(self.coupler, k) is not None:
+                    setattr(self.coupler, k, self.backend.asarray(np.asarray(st[k]), np.float32))
+            self.coupler._started = bool(st["started"])
         self.step_count = int(step)
 
     def _rebuild(self) -> None:
         """Fresh solvers (scratch arrays outside the solver state, e.g. ghost layers, may hold NaN)."""
         self.fluid = self._build_fluid() if self.scene.has_fluid else None
         self.sand = self._build_sand() if self.scene.has_sand else None
+        self.coupler = self._build_coupler() if self.coupled else None
+
+    def _build_coupler(self):
+        from .coupling.coupler import SandFluidCoupler
+        from .coupling.params import CouplingParams
+
+        sd = self.scene.sand
+        retention = any(
+            b.retention if b.retention is not None else sd.retention for b in self.scene.bodies if b.kind == "sand"
+        )
+        params = CouplingParams(retention=retention, r_max=sd.max_moisture, absorption_rate=sd.absorption_rate)
+        return SandFluidCoupler(self.sand, self.fluid, self.units, params)
 
     def _locate_divergence(self, good: dict, good_step: int, exc: SimulationDiverged) -> SimulationDiverged:
         """Replay from the last good state one step at a time to find the first non-finite step."""

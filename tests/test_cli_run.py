@@ -79,12 +79,12 @@ def test_run_writes_frames(tmp_path, capsys):
     assert len(read_diagnostics(out / "diagnostics.jsonl")) == 2
 
 
-def test_run_refuses_coupled_scene(tmp_path, capsys):
-    text = _scene(tmp_path).read_text() + "\n[fluid]\nphases = 2\n"
+def test_run_refuses_what_the_coupler_cannot_do(tmp_path, capsys):
+    text = _scene(tmp_path).read_text() + "\n[effects]\ndrag = false\n\n[fluid]\nphases = 2\n"
     p = tmp_path / "coupled.toml"
     p.write_text(text.replace("dt = 2e-4", "dt = 2e-5").replace("frame_duration = 1e-3", "frame_duration = 1e-4"))
     assert main(["run", str(p), "--out", str(tmp_path / "o"), "--backend", "cpu"]) == 3
-    assert "coupling module, not built yet" in capsys.readouterr().err
+    assert "effects.drag = false" in capsys.readouterr().err
 
 
 def test_info_still_works(capsys):

@@ -24,10 +24,12 @@ Conventions: z is up (gravity defaults to (0, 0, -9.81) m/s²); the domain is th
 the MPM (paper 000 Table 1 lists one resolution). Paper 000's figures have y up: its resolution
 `X × Y × Z` is written here as `resolution = [X, Z, Y]`.
 
-What runs today: fluid-only scenes (one or two phases, water bodies, obstacles, inflows, outflows) and
-sand-only scenes (sand bodies, obstacles). A scene with both sand and a fluid validates, but `run` refuses
-it until the coupling module (drag, buoyancy, Algorithm 1's scheduler) lands. A water jet carrying sand
-(`sand_fraction > 0`) is a coupled scene too.
+What runs: fluid-only scenes (one or two phases, water bodies, obstacles, inflows, outflows), sand-only
+scenes (sand bodies, obstacles), and both together, coupled in lockstep as in the paper's Algorithm 1 (drag,
+buoyancy, the phase-field source term, water retention). These validate but `run` refuses them for now,
+naming the key: a water jet carrying sand (`inflows[i].sand_fraction > 0`), sand bodies of different
+densities or with different `retention` in one scene, and `effects.drag` or `effects.buoyancy` = false with
+sand and a fluid.
 
 Example (the demo, `examples/sand_drop_small.toml`):
 

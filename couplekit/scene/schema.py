@@ -309,7 +309,15 @@ SECTIONS: dict[str, list[Key]] = {
             "lattice",
             lo=0.0,
         ),
-        Key("max_moisture", "float", 0.3, "largest moisture ratio r_max of a particle (Eq. 55)", "", lo=0.0, hi=1.0),
+        Key(
+            "max_moisture",
+            "float",
+            0.28,
+            "largest moisture ratio r_max of a particle (Eq. 55; not in the paper: at 0.28 sand packed at ε_max holds (1 − ε_max)/2 of its volume as bound water, the paper's wet threshold)",
+            "",
+            lo=0.0,
+            hi=0.56,
+        ),
     ],
     "outputs": [
         Key("directory", "str", None, "output folder (default runs/<scene.name>; `couplekit run --out` overrides it)"),

@@ -43,3 +43,14 @@ def tiny_fluid(frames: int = 2) -> dict:
         ],  # a water inflow into air diverges (reported)
         "outputs": {"preview": False},
     }
+
+
+def tiny_coupled(retention: bool = True) -> dict:
+    """tiny_fluid plus a sand block in the air above the water layer (with retention by default)."""
+    d = tiny_fluid()
+    d["scene"]["name"] = "tiny_coupled"
+    d["bodies"].append(
+        {"kind": "sand", "geometry": {"type": "box", "min": [0.005, 0.006, 0.012], "max": [0.011, 0.014, 0.016]}}
+    )
+    d["sand"] = {"density": 1500.0, "retention": retention}
+    return d

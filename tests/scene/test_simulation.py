@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from sim_scenes import tiny_fluid, tiny_sand
+from sim_scenes import tiny_coupled, tiny_fluid, tiny_sand
 
 import couplekit.simulation as simulation
 from couplekit.io import read_diagnostics, read_pvd
@@ -27,7 +27,7 @@ def _same_state(a: Simulation, b: Simulation) -> None:
             assert x.tobytes() == y.tobytes(), f"{solver}.{k} differs after restart"
 
 
-@pytest.mark.parametrize("scene", [tiny_sand, tiny_fluid], ids=["sand", "fluid"])
+@pytest.mark.parametrize("scene", [tiny_sand, tiny_fluid, tiny_coupled], ids=["sand", "fluid", "coupled"])
 def test_restart_is_bitwise_on_cpu(tmp_path, scene):
     """A run resumed from a checkpoint is bitwise identical to an uninterrupted one (cpu backend)."""
     straight = _sim(scene())
@@ -92,12 +92,42 @@ def test_single_phase_and_effects_off():
     assert not eff["surface_tension"] and not eff["volume_controller"]
 
 
-def test_coupled_scene_is_refused():
-    d = tiny_fluid()
-    d["bodies"].append({"kind": "sand", "geometry": {"type": "box", "min": [0.01] * 3, "max": [0.015] * 3}})
-    d["time"]["dt"] = 2e-5
-    with pytest.raises(CouplingUnavailableError, match="coupling module, not built yet"):
+def test_coupled_scene_wiring():
+    """Sand and fluid together run through SandFluidCoupler (Algorithm 1 order); its fields and the particle
+    moisture (retention) are outputs; the fluid gets the mixture inputs."""
+    sim = _sim(tiny_coupled())
+    eff = sim.effects
+    assert eff["coupling"] and eff["drag"] and eff["buoyancy"] and eff["source_term"] and eff["retention"]
+    assert sim.fluid.mixture and sim.fluid.external_force
+    sim.step(3)
+    f, p = sim.fields(), sim.particles()
+    assert {"fluid_fraction", "bound_water", "sand_fraction", "phi"} <= f.keys()
+    assert "moisture" in p and p["moisture"].shape == p["volume"].shape
+    # the sand block (cells x 2..4, y 2..5, z 4..6) shows in the porosity the fluid sees
+    assert f["fluid_fraction"][5, 4, 3] < 0.6 and f["fluid_fraction"][10, 4, 10] == 1.0
+    assert sim.sand.steps == 3 and sim.fluid.step_count == 3
+    d = tiny_coupled(retention=False)
+    d["effects"] = {"source_term": False}
+    sim = _sim(d)
+    assert not sim.effects["source_term"] and not sim.effects["retention"]
+
+
+@pytest.mark.parametrize(
+    ("change", "words"),
+    [
+        (lambda d: d["bodies"].append({**d["bodies"][3], "density": 900.0}), "different densities"),
+        (lambda d: d["bodies"].append({**d["bodies"][3], "retention": False}), "retention on some"),
+        (lambda d: d.update(effects={"drag": False}), "effects.drag"),
+        (lambda d: d["inflows"][0].update(kind="water", sand_fraction=0.3), "inflows[0].sand_fraction"),
+    ],
+    ids=["densities", "retention", "drag-off", "sand-jet"],
+)
+def test_what_the_coupler_cannot_do_is_refused(change, words):
+    d = tiny_coupled()
+    change(d)
+    with pytest.raises(CouplingUnavailableError, match="does not do yet") as err:
         _sim(d)
+    assert words in str(err.value)
 
 
 def test_memory_refusal(monkeypatch):
