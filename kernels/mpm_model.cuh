@@ -81,8 +81,12 @@ DEVICE float mpm_return_map(float& e0, float& e1, float& e2, float& vc, const fl
     float dq;
     float n0, n1, n2;
     if (tr >= 0.f) {
-        // Case II: expansion beyond the apex -> stress-free (apex) state
-        dq = sqrtf(a0 * a0 + a1 * a1 + a2 * a2);
+        // Case II: expansion beyond the apex -> stress-free (apex) state.  The plastic increment is the
+        // trial elastic strain about the apex, e - delta_c (Klar: ||eps||_F), NOT ||a||: a also holds the
+        // stored volume-correction gain vc/3, which is no plastic flow of this step; with it a loose
+        // particle at rest (vc > 0, e = delta_c) gained |vc|/sqrt(3) of hardening every step.
+        const float b0 = e0 - dc, b1 = e1 - dc, b2 = e2 - dc;
+        dq = sqrtf(b0 * b0 + b1 * b1 + b2 * b2);
         n0 = n1 = n2 = 0.f;
     } else {
         const float dgamma = dnorm + (kappa3 / (2.f * mu)) * alpha * tr;

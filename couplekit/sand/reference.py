@@ -110,7 +110,10 @@ def hencky_return_map(
     e_new[case2] = 0.0
     k = np.where(case3, dgamma / np.where(dnorm > 0, dnorm, 1.0), 0.0)
     e_new -= k[:, None] * dev * case3[:, None]
-    dq = np.where(case2, np.linalg.norm(a, axis=1), np.where(case3, dgamma, 0.0))
+    # plastic increment (hardening): Case II removes the trial elastic strain about the apex, e − δ_c
+    # (Klár's ‖ε‖_F; not ‖a‖, which also holds the stored volume-correction gain v_c/3 — no flow of this
+    # step), Case III the deviatoric amount δγ
+    dq = np.where(case2, np.linalg.norm(e - dc[:, None], axis=1), np.where(case3, dgamma, 0.0))
     e_new += dc[:, None]
     vc_new = vc + e.sum(axis=1) - e_new.sum(axis=1) if volume_correction else vc
     return e_new, dq, vc_new

@@ -124,3 +124,29 @@ def test_volume_correction_cycle(kops):
     F = step(F / 1.1, vc)
     assert np.allclose(F, np.eye(3) / 1.05, atol=1e-6)
     assert vc[0] == pytest.approx(0.0, abs=1e-6)
+
+
+@pytest.mark.parametrize("cohesion_max", [0.0, 3000.0])
+def test_hardening_counts_plastic_flow_not_stored_volume_gain(kops, rops, cohesion_max):
+    """q accumulates plastic strain (Klár 2016): a loose particle (stored expansion v_c = 0.05) at rest in
+    its apex state gains no hardening, however many steps it sits there; before the fix q grew by
+    v_c/sqrt(3) = 0.029 per step (a resting column's mean q climbed from 3 to 9 in 0.15 s and its friction
+    angle past the 48 deg peak).  A fresh expansion F = 1.01 I from the apex still counts its strain:
+    dq = ||ln 1.01 (1, 1, 1)|| = sqrt(3) ln 1.01.  Kernel and reference.  Tolerances: one step 1e-6
+    (float32 logs); 50 steps 5e-5 (each float32 SVD + log round trip moves ln sigma by a few 1e-7, and
+    q, v_c add them up), against the 50 x 0.029 = 1.4 of the bug."""
+    model = SandParams(cohesion_max=cohesion_max).model()
+    sat = np.full(1, 0.1, np.float32)
+    dc = float(model.cohesion_of(sat)[0]) / (3 * dp_alpha(model.h0 - model.h3) * (3 * model.lam + 2 * model.mu))
+    for ops in (kops, rops):
+        vc = np.full(1, 0.05, np.float32)
+        q = np.zeros(1, np.float32)
+        for _ in range(50):
+            F = np.ascontiguousarray((math.exp(dc) * np.eye(3)).reshape(9, 1).astype(np.float32))
+            ops.constitutive(F, np.zeros((6, 1), np.float32), q, vc, sat, model)
+        assert q[0] == pytest.approx(0.0, abs=5e-5)
+        assert vc[0] == pytest.approx(0.05, abs=5e-5)
+        q[0] = 0.0
+        F = np.ascontiguousarray((1.01 * math.exp(dc) * np.eye(3)).reshape(9, 1).astype(np.float32))
+        ops.constitutive(F, np.zeros((6, 1), np.float32), q, vc, sat, model)
+        assert q[0] == pytest.approx(math.sqrt(3) * math.log(1.01), abs=2e-6)
