@@ -215,3 +215,31 @@ def test_reference_documents_every_key():
     assert doc == render(), (
         "docs/scene-reference.md is stale: run python -m couplekit.scene.reference > docs/scene-reference.md"
     )
+
+
+def test_heightfield_obstacle_from_scene(tmp_path):
+    """A terrain from a .npy height grid (relative path) becomes an obstacle SDF: solid under the surface."""
+    import numpy as np
+
+    from couplekit.scene import sdf_on_grid
+
+    np.save(tmp_path / "terrain.npy", np.array([[0.01, 0.02], [0.01, 0.02]]))
+    d = sand_scene()
+    d["bodies"].append(
+        {
+            "kind": "obstacle",
+            "geometry": {"type": "heightfield", "file": "terrain.npy", "x_range": [0.0, 0.1], "y_range": [0.0, 0.1]},
+        }
+    )
+    scene = Scene.from_dict(d, base_dir=tmp_path)
+    shape = scene.bodies[1].geometry.shape(scene.domain)
+    phi = sdf_on_grid(shape, scene.domain.resolution, scene.domain.dx)  # (nz, ny, nx), cells of 5 mm
+    x = (np.arange(20) + 0.5) * 0.005
+    surface = 0.01 + 0.1 * x  # z = 0.01 + 0.01 x / 0.1
+    z = (np.arange(20) + 0.5) * 0.005
+    expect_solid = z[:, None] < surface[None, :]
+    np.testing.assert_array_equal(phi[:, 10, :] < 0, expect_solid)
+    d["bodies"][1]["geometry"]["heights"] = [[0.0, 1.0], [2.0, 3.0]]
+    with pytest.raises(SceneError) as err:
+        Scene.from_dict(d, base_dir=tmp_path)
+    assert "bodies[1].geometry.heights" in err.value.keys  # heights and file both given
