@@ -66,7 +66,7 @@ LBM_INLINE void lbm_collide_cell(const long long c, float* RESTRICT f, const uns
 
     // material properties, Eq. 4
 #if CK_TWO_PHASE
-    const float ph = fminf(fmaxf(phi[c], 0.f), 1.f);
+    const float ph = lbm_clamp01(phi[c]);
     const float rho = rho_l + (rho_h - rho_l) * ph;
     const float nu = (rho_l * nu_l + (rho_h * nu_h - rho_l * nu_l) * ph) / rho;
 #else

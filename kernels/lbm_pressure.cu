@@ -54,7 +54,7 @@ KERNEL void lbm_macro_pressure(const long long n, const float* RESTRICT f /* siz
         divergence += ((1.f - e) * div_v + slip) / e;
 #endif
 #if CK_TWO_PHASE
-        const float ph = fminf(fmaxf(phi[c], 0.f), 1.f);
+        const float ph = lbm_clamp01(phi[c]);
         const float rho = rho_l + (rho_h - rho_l) * ph;
 #else
         const float rho = rho_h;
