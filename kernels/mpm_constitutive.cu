@@ -9,16 +9,13 @@
 // A (9, n) row-major matrices -> U (9, n), sigma (3, n), V (9, n) with A = U diag(sigma) V^T.
 KERNEL void mpm_svd3_batch(const long long n, const float* RESTRICT A, float* RESTRICT U, float* RESTRICT sigma,
                            float* RESTRICT V) {
-    FOR_EACH(p, n) {
-        float a[9], u[9], s[3], w[9];
-        for (int j = 0; j < 9; ++j) a[j] = A[j * n + p];
-        mpm_svd3(a, u, s, w);
-        for (int j = 0; j < 9; ++j) {
-            U[j * n + p] = u[j];
-            V[j * n + p] = w[j];
-        }
-        for (int j = 0; j < 3; ++j) sigma[j * n + p] = s[j];
-    }
+#if CK_ON_GPU
+    FOR_EACH(p, n) { mpm_svd3_strided(A + p, n, U + p, sigma + p, V + p, n); }
+#else
+    // one particle per SIMD lane: the SoA arrays give contiguous vector loads and stores
+    CK_PRAGMA(omp parallel for simd schedule(simd : static) if (n > MPM_SERIAL_PARTICLES))
+    for (long long p = 0; p < n; ++p) mpm_svd3_strided(A + p, n, U + p, sigma + p, V + p, n);
+#endif
 }
 
 // F (9, n) in: trial deformation gradient; out: elastic F after plasticity.  tau (6, n) out: Kirchhoff

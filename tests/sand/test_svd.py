@@ -13,6 +13,7 @@ be as accurate as sigma_max * eps.
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 
 def _as_mats(a):
@@ -73,3 +74,117 @@ def test_svd_kernel_reconstructs_and_matches_lapack(kops, rops):
     det = np.linalg.det(M)
     clear = np.abs(det) > 1e-6 * scale**3
     assert np.all(np.sign(s[2][clear]) == np.sign(det[clear]))
+
+
+def _degenerate_cases(rng) -> np.ndarray:
+    """Matrices that break naive SVDs: zero / rank-deficient, repeated and exactly equal singular values
+    (the Jacobi half-angle is 0/0 there), inverted and flattened F, huge and tiny scales."""
+    q, _ = np.linalg.qr(rng.normal(size=(40, 3, 3)))
+    q *= np.sign(np.linalg.det(q))[:, None, None]
+    mats = [
+        np.zeros((3, 3)),
+        -0.0 * np.eye(3),
+        np.eye(3),
+        -np.eye(3),
+        np.diag([1.0, -1.0, 1.0]),
+        np.diag([0.0, 0.0, 1.0]),
+        np.diag([0.0, 1.0, 0.0]),
+        np.diag([1.0, 0.0, 0.0]),
+        np.diag([3.0, 3.0, 0.0]),
+        np.diag([1.0, 1.0, -1e-7]),  # just inverted
+        np.diag([1.0, 1e-7, 1e-7]),  # flattened to a line
+        np.ones((3, 3)),  # rank 1, equal entries
+        np.outer([1.0, -1.0, 0.0], [0.0, 1.0, 1.0]),
+        np.array([[1.0, 1.0, 0.0], [1.0, 1.0, 0.0], [0.0, 0.0, 2.0]]),  # symmetric, equal diagonal
+        np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]),  # zero diagonal of A^T A pairs
+        np.array([[1.0, 2.0, 3.0], [2.0, 4.0, 6.0], [1.0, 1.0, 1.0]]),  # rank 2
+        np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, -1.0]]),  # rank 2, inverted
+        1e35 * np.eye(3),
+        1e-35 * np.diag([1.0, 2.0, -3.0]),
+        1e-40 * np.ones((3, 3)),  # subnormal entries: treated as the zero matrix
+        np.diag([1e30, 1e-30, -1.0]),
+    ]
+    for k in range(40):  # rotations of repeated / vanishing / negative spectra
+        s = [(2.0, 2.0, 2.0), (1.0, 1.0, 0.0), (1.0, 0.0, 0.0), (1.5, 1.5, -1.5), (1.0, 1.0, -1e-6)][k % 5]
+        mats.append(q[k] @ np.diag(s) @ q[(k + 7) % 40].T)
+    return np.array(mats)
+
+
+def test_svd_never_nan_for_degenerate_or_inverted(kops):
+    """Degenerate and inverted F, mixed with ordinary matrices so that they share SIMD batches with them
+    (and the count is no multiple of any SIMD width), give finite rotations U, V (det +1) and ordered
+    singular values with sigma_3 carrying the sign of det A.
+
+    Tolerances: reconstruction <= 1e-4 ||A|| (the ill-conditioned limit of the module docstring),
+    orthogonality / det <= 1e-5, ordering to 1e-5 sigma_1 (round-off of the sorted QR diagonal).
+    Matrices whose largest entry is subnormal (< 1e-36) are the zero matrix by design: sigma = 0.
+    """
+    rng = np.random.default_rng(7)
+    bad = _degenerate_cases(rng)
+    A = np.concatenate([bad, rng.normal(size=(333, 3, 3))])
+    A = A[rng.permutation(len(A))].astype(np.float32)
+    flat = np.ascontiguousarray(A.reshape(-1, 9).T)
+    U, s, V = kops.svd3(flat)
+    assert np.all(np.isfinite(U)) and np.all(np.isfinite(s)) and np.all(np.isfinite(V))
+    Um, Vm, sv = _as_mats(U), _as_mats(V), s.T.astype(np.float64)
+    M = A.astype(np.float64)
+    amax = np.abs(M).max(axis=(1, 2))
+    zero = amax < 1e-36
+    assert zero.sum() == 3  # the zero, -0 and subnormal matrices
+    assert np.all(sv[zero] == 0)
+    eye = np.eye(3)
+    assert np.max(np.abs(np.einsum("pba,pbc->pac", Um, Um) - eye)) < 1e-5
+    assert np.max(np.abs(np.einsum("pba,pbc->pac", Vm, Vm) - eye)) < 1e-5
+    assert np.max(np.abs(np.linalg.det(Um) - 1)) < 1e-5
+    assert np.max(np.abs(np.linalg.det(Vm) - 1)) < 1e-5
+    live = ~zero
+    rec = np.einsum("pab,pb,pcb->pac", Um, sv, Vm)
+    err = np.linalg.norm(rec - M, axis=(1, 2)) / np.maximum(np.linalg.norm(M, axis=(1, 2)), 1e-300)
+    assert np.max(err[live]) < 1e-4
+    top = sv[:, 0]
+    assert np.all(sv[:, 0] >= -1e-5 * top) and np.all(sv[:, 1] >= -1e-5 * top)
+    assert np.all(sv[:, 0] - sv[:, 1] >= -1e-5 * top)
+    assert np.all(sv[:, 1] - np.abs(sv[:, 2]) >= -1e-5 * top)
+    det = np.linalg.det(M / np.maximum(amax, 1e-300)[:, None, None])  # scale-free, no overflow
+    clear = det < -1e-6
+    assert clear.sum() > 10
+    assert np.all(sv[clear, 2] < 0)
+
+
+def test_svd_result_does_not_depend_on_batch_position(kops):
+    """The host kernel runs one matrix per SIMD lane in batches, with a shorter tail: a matrix's result
+    must be the same wherever it sits (bitwise: every lane runs the same instructions; this is what makes
+    the sand step independent of the particle order within the batches and of the thread count)."""
+    rng = np.random.default_rng(8)
+    A = np.concatenate([_cases(rng, 60), _degenerate_cases(rng).astype(np.float32)])
+    perm = rng.permutation(len(A))
+    outs = []
+    for order in (np.arange(len(A)), perm):
+        flat = np.ascontiguousarray(A[order].reshape(-1, 9).T)
+        U, s, V = kops.svd3(flat)
+        inv = np.argsort(order)
+        outs.append((U[:, inv], s[:, inv], V[:, inv]))
+    for a, b in zip(*outs, strict=True):
+        assert np.array_equal(a, b)
+
+
+@pytest.mark.parametrize("plasticity", [True, False])
+def test_constitutive_update_finite_for_degenerate_f(kops, plasticity):
+    """The whole constitutive update (SVD, clamped logs, return mapping, Kirchhoff stress) on degenerate and
+    inverted trial F returns finite F, tau, q, vc (the |sigma| >= 1e-4 clamp before the log bounds the
+    strains)."""
+    from couplekit.sand import SandParams
+
+    rng = np.random.default_rng(9)
+    bad = _degenerate_cases(rng)
+    bad = bad[np.abs(bad).max(axis=(1, 2)) < 1e3]  # F of a sand step: no 1e30 stretches (tau would overflow)
+    n = len(bad)
+    F = np.ascontiguousarray(bad.reshape(n, 9).T.astype(np.float32))
+    tau = np.zeros((6, n), np.float32)
+    q = (5 * rng.random(n)).astype(np.float32)
+    vc = (0.01 * rng.random(n)).astype(np.float32)
+    sat = (0.3 * rng.random(n)).astype(np.float32)
+    model = SandParams(plasticity=plasticity, cohesion_max=1000.0).model()
+    kops.constitutive(F, tau, q, vc, sat, model)
+    for a in (F, tau, q, vc):
+        assert np.all(np.isfinite(a))
