@@ -41,6 +41,23 @@ BYTES_TWO_PHASE_STEP = {
 }
 
 
+NOTE = (
+    "Why the targets are missed (analysis of 2026-11-22, couplekit fluid developer; re-check when the kernels "
+    "change): (1) the collide-stream kernel does more than lbmpy's: it tests the cell flag, computes the "
+    "pressure force from 26 neighbours of p-bar with the wall-extrapolation rule and writes the velocity; "
+    "dropping the gradient alone made it ~20 % faster. (2) The central-moment back-transform is written in "
+    "general form and g++ without -ffast-math may not fold products with the many constant-zero moments "
+    "(IEEE semantics), so it does about twice the arithmetic of lbmpy's symbolically simplified kernel; built "
+    "with -fno-signed-zeros -ffinite-math-only the same source ran 1.3-1.8x faster in isolation. (3) The full "
+    "two-phase step is 6 flow + 3 phase-field kernels plus ghost copies, each its own pass over memory and its "
+    "own OpenMP region: per-kernel rates of 20-40 MLUPS add up to a few MLUPS per step, and on a shared 2-core "
+    "machine (load average 5-8 from other sessions during these runs) OpenMP barriers are costly, so 2 threads "
+    "were at times slower than 1. Next steps: fuse pressure update + filter + phase-field macroscopic into the "
+    "collide kernels (lagged pressure, lbm-peers note: ~400 B/cell-step), a hand-simplified back-transform, "
+    "and fewer launches per step."
+)
+
+
 def best_time(fn, repeats: int, inner: int) -> float:
     """Best wall time per call of ``fn`` over ``repeats`` batches of ``inner`` calls."""
     fn()
@@ -145,6 +162,7 @@ def main() -> None:
         "machine": {"platform": platform.platform(), "processor": platform.processor(), "threads": args.threads},
         "backend": backend.describe(),
         "bandwidth": bw,
+        "note": NOTE,
         "bytes_per_cell_step": {
             "collide_stream_single_phase": BYTES_COLLIDE_SINGLE,
             "two_phase_step": bytes_step,

@@ -11,7 +11,7 @@
   Measured: within 0.1 % (heavy) and 0.3 % (light) (the pressure filter and gradient extrapolate linearly
   into walls, so the hydrostatic profile is a discrete equilibrium); σ = 0 here: with σ = 1e-3 the heavy
   slope came out 3 % off (an open question, see the fluid report); the remaining acoustic oscillation (ν_h = 1e-4 hardly
-  damps it) is averaged out over 1000 steps (≈ 4 periods of the box's lowest mode).
+  damps it) is averaged out over 500 steps (≈ 2 periods of the box's lowest mode, 2·64/c_s ≈ 222 steps).
 * Water column collapse at 800:1, ν_h = 1e-4, ν_l = 1e-2: stays finite, max lattice speed < 0.3, phase
   volume drift < 0.5 % with the controller on. CI runs 32³ for 600 steps; the issue's 64³ × 2000 steps
   case is marked slow (≈ 3 minutes on 2 shared cores) and run with the benchmarks.
@@ -72,11 +72,11 @@ def test_two_layers_800_to_1_hydrostatic(cpu):
         phi=np.broadcast_to(phi1[:, None, None], shape),
         pressure=np.broadcast_to(p[:, None, None], shape),
     )
-    solver.step(3000)
+    solver.step(1500)
     mean_p = np.zeros(nz)
-    for _ in range(100):
+    for _ in range(50):
         solver.step(10)
-        mean_p += solver.fields()["pressure"].mean(axis=(1, 2)) / 100
+        mean_p += solver.fields()["pressure"].mean(axis=(1, 2)) / 50
     heavy, light = slice(6, nz // 2 - 8), slice(nz // 2 + 8, nz - 6)
     slope_h = np.polyfit(zc[heavy], mean_p[heavy], 1)[0] / (1.0 * g)
     slope_l = np.polyfit(zc[light], mean_p[light], 1)[0] / (rho_l * g)
