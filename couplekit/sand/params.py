@@ -18,6 +18,11 @@ Defaults and their sources:
   order 1 kPa (tensile strength ≈ 2.3 kPa at S = 0.3, Andreotti et al. 2013 via notes §2.5), and a
   10 cm vertical wet cut needs c_C ≈ 400 Pa at φ = 25° (Rankine), so 1000 Pa lets decimetre blocks
   stand (Fig. 17).  These are choices, not published values; replace them when Su 2023 is read.
+
+Consequence of the hardening, measured (tests/sand/test_validation.py): the sand hardens while it flows
+(a collapsing column's particles end at a mean φ_F of 31–41°), and a Drucker–Prager deposit stands at its
+friction angle, so column-collapse runouts fall 44–53 % short of Lube et al. 2004.  A constant 20°
+(``hardening=False, h0=20``) reproduces Lube's scaling within 20 % at aspect ratios 0.5 and 2.
 """
 
 from __future__ import annotations
