@@ -88,3 +88,32 @@ KERNEL void lbm_pressure_filter(const long long n, const float* RESTRICT p /* si
         pbar[c] = pc + acc;
     }
 }
+
+// out = sum_j f_j c_j of the current populations (read rule of the parity, no force shift) in interior fluid
+// cells: the fluid velocity "now", as the sand-fluid exchange needs it (odd parity: ghosts and wall links
+// must have been prepared as before an odd step)
+KERNEL void lbm_momentum(const long long n, const float* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
+                         const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                         float* RESTRICT out /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */, const int parity,
+                         const int nx, const int ny, const int nz) {
+    const int px = nx + 2;
+    const long long pxy = (long long)px * (ny + 2);
+    const long long N = pxy * (nz + 2);
+    const int odd = parity & 1;
+    FOR_EACH_CELL(x, y, z, nx, ny, nz) {
+        const long long c = (x + 1) + px * (long long)(y + 1) + pxy * (z + 1);
+        if (flags[c] != FLAG_FLUID) continue;
+        float fj[27];
+        if (odd)
+            lbm_load<1>(f, c, N, px, pxy, fj);
+        else
+            lbm_load<0>(f, c, N, px, pxy, fj);
+        float ux = 0.f, uy = 0.f, uz = 0.f;
+#define LBM_MOM(q) ux += CX27[q] * fj[q], uy += CY27[q] * fj[q], uz += CZ27[q] * fj[q];
+        LBM_FOR26(LBM_MOM)
+#undef LBM_MOM
+        out[c] = ux;
+        out[N + c] = uy;
+        out[2 * N + c] = uz;
+    }
+}

@@ -38,6 +38,7 @@ class KernelOps:
         self._collide = collide.function("lbm_collide_stream")
         self._macro = pressure.function("lbm_macro_pressure")
         self._filter = pressure.function("lbm_pressure_filter")
+        self._momentum = pressure.function("lbm_momentum")
         self._halo = halo.function("lbm_halo_copy")
         self._fold = halo.function("lbm_fold")
         self._outflow_fix = halo.function("lbm_outflow_fix")
@@ -107,6 +108,13 @@ class KernelOps:
             np.float32(rho_h),
             np.float32(rho_l),
         )
+
+    def momentum(self, f, flags, velocity, out, parity: int) -> None:
+        """Σ_j f_j c_j of the current populations into ``out`` (see ReferenceOps.momentum)."""
+        n, nx, ny, nz = self._interior(flags)
+        if parity & 1:
+            self._wall_call(self._prefill, f, flags, velocity)
+        self._momentum(n, f, flags, out, np.int32(parity), np.int32(nx), np.int32(ny), np.int32(nz))
 
     def pressure_filter(self, p, flags, pbar) -> None:
         """Eq. 40 filter (see ReferenceOps.pressure_filter)."""

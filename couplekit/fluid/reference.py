@@ -191,6 +191,15 @@ class ReferenceOps:
         new = interior(p).astype(np.float64) - CS2 * rho * divergence
         interior(p)[fluid] = new[fluid]
 
+    def momentum(self, f, flags, velocity, out, parity: int) -> None:
+        """out = Σ_j f_j c_j of the current populations (Eq. 13 without the force shift) on interior fluid
+        cells: the velocity "now", between two steps, as the sand–fluid exchange needs it."""
+        fi = self.load(f, flags, velocity, parity)
+        u = np.einsum("jd,j...->d...", C27.astype(np.float64), fi)
+        fluid = interior(flags) == FLUID
+        for d in range(3):
+            interior(out[d])[fluid] = u[d][fluid]
+
     def pressure_filter(self, p, flags, pbar) -> None:
         """Eq. 40: p̄ = Σ_j w_j p(x + c_j) on interior fluid cells (non-fluid neighbours: centre value)."""
         fluid = interior(flags) == FLUID

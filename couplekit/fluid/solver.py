@@ -222,6 +222,20 @@ class FluidSolver:
             if self.two_phase:
                 self._phase_macroscopic()
 
+    def current_velocity(self, out=None):
+        """Σ_j f_j c_j of the current populations (before the next collision, no force shift) as a padded
+        backend array (3, Pz, Py, Px), interior fluid cells set: the velocity the sand–fluid exchange must
+        see. ``out`` may be a preallocated array of that shape. Prepares the ghosts the way the next step
+        does (idempotent), so it can be called between steps at no cost to the state."""
+        if out is None:
+            out = self.xp.zeros_like(self.velocity)
+        parity = self.step_count & 1
+        if parity:
+            self.ops.halo_copy(self.f, self._ghost, self._image)
+            self.ops.halo_copy(self.f, self._out_ghost, self._out_src)
+        self.ops.momentum(self.f, self.flags, self.velocity, out, parity)
+        return out
+
     # ------------------------------------------------------------------------------------------ outputs
     def _host_interior(self, a) -> np.ndarray:
         return np.asarray(self.backend.to_host(a)[(Ellipsis, *INTERIOR)])
