@@ -1,10 +1,12 @@
 // The constitutive pieces of mpm_g2p.cu as stand-alone kernels, so each can be checked against its NumPy
 // reference on its own (and used by tools that need a stress from an F): the float32 SVD, and the
-// constitutive update F_trial -> (F_new, tau, q, vc).  Same defines as mpm_g2p.cu (see mpm_model.cuh).
+// constitutive update F_trial -> (F_new, tau, q, vc), and the vectorisable log / exp of the host G2P.
+// Same defines as mpm_g2p.cu (see mpm_model.cuh).
 // variants: MPM_PLASTICITY=0,1 MPM_COHESION=0,1
 #include "common.cuh"
 #include "mpm_model.cuh"
 #include "mpm_loops.cuh"
+#include "mpm_simd_math.cuh"
 
 // A (9, n) row-major matrices -> U (9, n), sigma (3, n), V (9, n) with A = U diag(sigma) V^T.
 KERNEL void mpm_svd3_batch(const long long n, const float* RESTRICT A, float* RESTRICT U, float* RESTRICT sigma,
@@ -36,4 +38,22 @@ KERNEL void mpm_constitutive_batch(const long long n, float* RESTRICT F, float* 
         q[p] = qp;
         vc[p] = vcp;
     }
+}
+
+// The host G2P's vectorisable logf / expf (mpm_simd_math.cuh; the built-ins on CUDA) on their own, to check
+// them against libm: logx = mpm_logf(max(|x|, 1e-37)), expx = mpm_expf(x) (|x| <= 88).
+MPM_MATH_INLINE void mpm_log_exp_one(const float* x, float* logx, float* expx, const long long i) {
+    const float xi = x[i];
+    logx[i] = mpm_logf(mpm_max_nonneg(fabsf(xi), 1.0e-37f));
+    expx[i] = mpm_expf(xi);
+}
+
+KERNEL void mpm_simd_log_exp(const long long n, const float* RESTRICT x, float* RESTRICT logx,
+                             float* RESTRICT expx) {
+#if CK_ON_GPU
+    FOR_EACH(i, n) { mpm_log_exp_one(x, logx, expx, i); }
+#else
+    CK_PRAGMA(omp parallel for simd schedule(simd : static) if (n > MPM_SERIAL_PARTICLES))
+    for (long long i = 0; i < n; ++i) mpm_log_exp_one(x, logx, expx, i);
+#endif
 }

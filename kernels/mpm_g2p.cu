@@ -14,11 +14,14 @@
 #include "common.cuh"
 #include "mpm_model.cuh"
 #include "mpm_loops.cuh"
+#include "mpm_simd_math.cuh"
 
 #if defined(__CUDACC__)
 #define MPM_UNROLL _Pragma("unroll")
+#define MPM_UNROLL_9 _Pragma("unroll")
 #else
 #define MPM_UNROLL _Pragma("GCC unroll 3")
+#define MPM_UNROLL_9 _Pragma("GCC unroll 9")
 #endif
 
 #ifndef MPM_G2P_BATCH
@@ -49,12 +52,14 @@ MPM_INLINE float mpm_clamp_axis(const float p, const int ncell, const float dx) 
     return a < hi ? a : hi;
 }
 
-// Stage a: gather v_p, C_p from the grid (Eq. 30, APIC), write them and the advected position, and the
-// trial F = (I + dt C) F_p into ft[k * ld] (row-major).  Node indices are int: grids below 2^31 nodes.
-MPM_INLINE void mpm_g2p_transfer(const long long p, const long long np, float* RESTRICT x, float* RESTRICT v,
-                                 float* RESTRICT C, const float* RESTRICT F, const float* RESTRICT grid_v,
-                                 const int nx, const int ny, const int nz, const long long ncell,
-                                 const float dx, const float inv_dx, const float dt, float* ft,
+// Stage a: gather v_p, C_p of particle p from the grid (Eq. 30, APIC) and form the trial
+// F = (I + dt C) F_p.  Reads x, F of particle p (SoA, stride np); writes the advected position, v, C at
+// [k * ldo] of xo, vo, Co and the trial F (row-major) at [k * ld] of ft.  Node indices are int: grids
+// below 2^31 nodes.
+MPM_INLINE void mpm_g2p_transfer(const long long p, const long long np, const float* x, const float* F,
+                                 const float* RESTRICT grid_v, const int nx, const int ny, const int nz,
+                                 const long long ncell, const float dx, const float inv_dx, const float dt,
+                                 float* xo, float* vo, float* Co, const long long ldo, float* ft,
                                  const long long ld) {
     const float* RESTRICT gvx = grid_v;
     const float* RESTRICT gvy = grid_v + ncell;
@@ -99,8 +104,6 @@ MPM_INLINE void mpm_g2p_transfer(const long long p, const long long np, float* R
     const float k = 4.f * inv_dx;
     const float c00 = k * B00, c01 = k * B01, c02 = k * B02, c10 = k * B10, c11 = k * B11, c12 = k * B12;
     const float c20 = k * B20, c21 = k * B21, c22 = k * B22;
-    C[p] = c00, C[np + p] = c01, C[2 * np + p] = c02, C[3 * np + p] = c10, C[4 * np + p] = c11;
-    C[5 * np + p] = c12, C[6 * np + p] = c20, C[7 * np + p] = c21, C[8 * np + p] = c22;
     const float f00 = F[p], f01 = F[np + p], f02 = F[2 * np + p], f10 = F[3 * np + p], f11 = F[4 * np + p];
     const float f12 = F[5 * np + p], f20 = F[6 * np + p], f21 = F[7 * np + p], f22 = F[8 * np + p];
     ft[0] = f00 + dt * (c00 * f00 + c01 * f10 + c02 * f20);
@@ -112,52 +115,68 @@ MPM_INLINE void mpm_g2p_transfer(const long long p, const long long np, float* R
     ft[6 * ld] = f20 + dt * (c20 * f00 + c21 * f10 + c22 * f20);
     ft[7 * ld] = f21 + dt * (c20 * f01 + c21 * f11 + c22 * f21);
     ft[8 * ld] = f22 + dt * (c20 * f02 + c21 * f12 + c22 * f22);
-    v[p] = ux;
-    v[np + p] = uy;
-    v[2 * np + p] = uz;
-    x[p] = mpm_clamp_axis(xp + dt * ux, nx, dx);
-    x[np + p] = mpm_clamp_axis(yp + dt * uy, ny, dx);
-    x[2 * np + p] = mpm_clamp_axis(zp + dt * uz, nz, dx);
+    Co[0] = c00, Co[ldo] = c01, Co[2 * ldo] = c02, Co[3 * ldo] = c10, Co[4 * ldo] = c11;
+    Co[5 * ldo] = c12, Co[6 * ldo] = c20, Co[7 * ldo] = c21, Co[8 * ldo] = c22;
+    vo[0] = ux;
+    vo[ldo] = uy;
+    vo[2 * ldo] = uz;
+    xo[0] = mpm_clamp_axis(xp + dt * ux, nx, dx);
+    xo[ldo] = mpm_clamp_axis(yp + dt * uy, ny, dx);
+    xo[2 * ldo] = mpm_clamp_axis(zp + dt * uz, nz, dx);
 }
 
-// Stage c: the constitutive update of mpm_constitutive (mpm_model.cuh) given the SVD of the trial F
-// (ft, U, sig, V at [k * ld]): principal Hencky strains, return mapping, elastic F, Kirchhoff stress;
-// writes F, tau, q, vc of particle p.
-MPM_INLINE void mpm_g2p_finish(const long long p, const long long np, float* RESTRICT F, float* RESTRICT tau,
-                               float* RESTRICT q, float* RESTRICT vc, const float* RESTRICT saturation,
-                               const float* ft, const float* Us, const float* sig, const float* Vs,
-                               const long long ld, const float mu, const float lambda, const float h0,
-                               const float h1, const float h2, const float h3, const float c_max, const float S1,
-                               const float S2, const float S3) {
-    float U[9], Fn[9];
-    for (int j = 0; j < 9; ++j) U[j] = Us[j * ld];
-    for (int j = 0; j < 9; ++j) Fn[j] = ft[j * ld];
-    float e0 = logf(fmaxf(fabsf(sig[0]), MPM_SIGMA_MIN));
-    float e1 = logf(fmaxf(fabsf(sig[ld]), MPM_SIGMA_MIN));
-    float e2 = logf(fmaxf(fabsf(sig[2 * ld]), MPM_SIGMA_MIN));
-    float qp = q[p], vcp = vc[p];
-#if MPM_PLASTICITY
-    const float alpha = mpm_dp_alpha(mpm_friction_angle(qp, h0, h1, h2, h3));
+// Stage b: the yield-surface parameters of particle p before this step's projection: the Drucker-Prager
+// coefficient from the hardening state (libm sinf / expf, scalar on the host) and the cohesion.
+MPM_INLINE void mpm_g2p_yield(const float qp, const float S, const float h0, const float h1, const float h2,
+                              const float h3, const float c_max, const float S1, const float S2, const float S3,
+                              float& alpha, float& cC) {
+    alpha = mpm_dp_alpha(mpm_friction_angle(qp, h0, h1, h2, h3));
 #if MPM_COHESION
-    const float cC = mpm_cohesion(saturation[p], c_max, S1, S2, S3);
+    cC = mpm_cohesion(S, c_max, S1, S2, S3);
 #else
-    const float cC = 0.f;
+    cC = 0.f;
+    (void)S, (void)c_max, (void)S1, (void)S2, (void)S3;
 #endif
+}
+
+// Stage c: mpm_constitutive (mpm_model.cuh) after its SVD, given the SVD of the trial F (ft, U, sig, V at
+// [k * ld]) and the yield parameters: principal Hencky strains, return mapping, elastic F, Kirchhoff
+// stress.  q, vc in/out at qo[0], vco[0]; F, tau out at [k * ldo] of Fo, to.  Branch-free apart from the
+// return mapping's cases (which GCC if-converts), with mpm_logf / mpm_expf, so that on the host it
+// vectorises over a batch.
+MPM_INLINE void mpm_g2p_finish(const float* ft, const float* Us, const float* sig, const float* Vs,
+                               const long long ld, const float alpha, const float cC, const float mu,
+                               const float lambda, float* Fo, float* to, float* qo, float* vco,
+                               const long long ldo) {
+    float U[9], Fn[9];
+    MPM_UNROLL_9
+    for (int j = 0; j < 9; ++j) U[j] = Us[j * ld];
+    MPM_UNROLL_9
+    for (int j = 0; j < 9; ++j) Fn[j] = ft[j * ld];
+    float e0 = mpm_logf(mpm_max_nonneg(fabsf(sig[0]), MPM_SIGMA_MIN));
+    float e1 = mpm_logf(mpm_max_nonneg(fabsf(sig[ld]), MPM_SIGMA_MIN));
+    float e2 = mpm_logf(mpm_max_nonneg(fabsf(sig[2 * ld]), MPM_SIGMA_MIN));
+    float qp = qo[0], vcp = vco[0];
+#if MPM_PLASTICITY
     qp += mpm_return_map(e0, e1, e2, vcp, alpha, cC, mu, lambda);
-    const float s0 = expf(e0), s1 = expf(e1), s2 = expf(e2);
+    const float s0 = mpm_expf(e0), s1 = mpm_expf(e1), s2 = mpm_expf(e2);
+    MPM_UNROLL
     for (int r = 0; r < 3; ++r)
+        MPM_UNROLL
         for (int c = 0; c < 3; ++c)
             Fn[3 * r + c] = U[3 * r] * s0 * Vs[(3 * c) * ld] + U[3 * r + 1] * s1 * Vs[(3 * c + 1) * ld] +
                             U[3 * r + 2] * s2 * Vs[(3 * c + 2) * ld];
 #else
-    (void)saturation, (void)Vs, (void)h0, (void)h1, (void)h2, (void)h3, (void)c_max, (void)S1, (void)S2, (void)S3;
+    (void)Vs, (void)alpha, (void)cC;
 #endif
     float t[6];
     mpm_kirchhoff(U, e0, e1, e2, mu, lambda, t);
-    for (int j = 0; j < 9; ++j) F[j * np + p] = Fn[j];
-    for (int j = 0; j < 6; ++j) tau[j * np + p] = t[j];
-    q[p] = qp;
-    vc[p] = vcp;
+    MPM_UNROLL_9
+    for (int j = 0; j < 9; ++j) Fo[j * ldo] = Fn[j];
+    MPM_UNROLL_9
+    for (int j = 0; j < 6; ++j) to[j * ldo] = t[j];
+    qo[0] = qp;
+    vco[0] = vcp;
 }
 
 KERNEL void mpm_g2p(const long long n, float* RESTRICT x, float* RESTRICT v, float* RESTRICT C,
@@ -171,30 +190,76 @@ KERNEL void mpm_g2p(const long long n, float* RESTRICT x, float* RESTRICT v, flo
     const float inv_dx = 1.f / dx;
 #if CK_ON_GPU
     FOR_EACH(p, n) {
-        float ft[9], U[9], sig[3], V[9];
-        mpm_g2p_transfer(p, np, x, v, C, F, grid_v, nx, ny, nz, ncell, dx, inv_dx, dt, ft, 1);
+        float ft[9], U[9], sig[3], V[9], alpha = 0.f, cC = 0.f;
+        mpm_g2p_transfer(p, np, x, F, grid_v, nx, ny, nz, ncell, dx, inv_dx, dt, x + p, v + p, C + p, np, ft, 1);
         mpm_svd3(ft, U, sig, V);
-        mpm_g2p_finish(p, np, F, tau, q, vc, saturation, ft, U, sig, V, 1, mu, lambda, h0, h1, h2, h3, c_max, S1,
-                       S2, S3);
+#if MPM_PLASTICITY
+        mpm_g2p_yield(q[p], saturation[p], h0, h1, h2, h3, c_max, S1, S2, S3, alpha, cC);
+#endif
+        mpm_g2p_finish(ft, U, sig, V, 1, alpha, cC, mu, lambda, F + p, tau + p, q + p, vc + p, np);
     }
 #else
-    // Batches of particles: the transfer and the SVD run one particle per SIMD lane (`omp simd`: the grid
-    // reads become gathers, the SVD's serial rotation chain is spread over the lanes), the constitutive
-    // finish (libm logs / exps, branches of the return mapping) is a scalar loop over the batch.
+    // Batches of B particles, one particle per SIMD lane in the `omp simd` loops: (a) transfer (the grid
+    // reads become gathers) and SVD (its serial rotation chain spread over the lanes), (b) the yield
+    // parameters (libm sinf / expf: scalar), (c) return mapping and stress.  Full batches read and write
+    // the particle arrays in place; a short last batch is padded to B lanes (its last particle repeated in
+    // local copies) and only its real lanes are stored.  So the compute loops always run all B lanes and no
+    // particle goes through a vectoriser epilogue, whose FMA contractions may differ from the vector
+    // body's: every particle's result is bitwise independent of its position in a batch (of the particle
+    // order and of the thread count).
     CK_PRAGMA(omp parallel for schedule(static) if (n > MPM_SERIAL_PARTICLES))
     for (long long p0 = 0; p0 < n; p0 += MPM_G2P_BATCH) {
-        const int cnt = (int)(n - p0 < MPM_G2P_BATCH ? n - p0 : MPM_G2P_BATCH);
-        alignas(64) float ft[9 * MPM_G2P_BATCH], U[9 * MPM_G2P_BATCH], sig[3 * MPM_G2P_BATCH],
-            V[9 * MPM_G2P_BATCH];
-        CK_PRAGMA(omp simd)
-        for (int j = 0; j < cnt; ++j) {
-            mpm_g2p_transfer(p0 + j, np, x, v, C, F, grid_v, nx, ny, nz, ncell, dx, inv_dx, dt, ft + j,
-                             MPM_G2P_BATCH);
-            mpm_svd3_strided(ft + j, MPM_G2P_BATCH, U + j, sig + j, V + j, MPM_G2P_BATCH);
+        constexpr int B = MPM_G2P_BATCH;
+        const int cnt = (int)(n - p0 < B ? n - p0 : B);
+        const bool full = cnt == B;
+        alignas(64) float ft[9 * B], U[9 * B], sig[3 * B], V[9 * B], alpha[B], cC[B];
+        // the short batch's particle data (in: x, F, q, vc; out: all)
+        alignas(64) float xb[3 * B], vb[3 * B], Cb[9 * B], Fb[9 * B], tb[6 * B], qb[B], vcb[B];
+        if (!full) {
+            for (int j = 0; j < B; ++j) {
+                const long long p = p0 + (j < cnt ? j : cnt - 1);
+                for (int k = 0; k < 3; ++k) xb[k * B + j] = x[k * np + p];
+                for (int k = 0; k < 9; ++k) Fb[k * B + j] = F[k * np + p];
+                qb[j] = q[p];
+                vcb[j] = vc[p];
+            }
         }
-        for (int j = 0; j < cnt; ++j)
-            mpm_g2p_finish(p0 + j, np, F, tau, q, vc, saturation, ft + j, U + j, sig + j, V + j, MPM_G2P_BATCH,
-                           mu, lambda, h0, h1, h2, h3, c_max, S1, S2, S3);
+        float* xs = full ? x + p0 : xb;
+        float* vs = full ? v + p0 : vb;
+        float* Cs = full ? C + p0 : Cb;
+        float* Fs = full ? F + p0 : Fb;
+        float* ts = full ? tau + p0 : tb;
+        float* qs = full ? q + p0 : qb;
+        float* vcs = full ? vc + p0 : vcb;
+        const long long ld = full ? np : B;
+        CK_PRAGMA(omp simd)
+        for (int j = 0; j < B; ++j) {
+            mpm_g2p_transfer(j, ld, xs, Fs, grid_v, nx, ny, nz, ncell, dx, inv_dx, dt, xs + j, vs + j, Cs + j, ld,
+                             ft + j, B);
+            mpm_svd3_strided(ft + j, B, U + j, sig + j, V + j, B);
+        }
+#if MPM_PLASTICITY
+        for (int j = 0; j < B; ++j) {
+            const long long p = p0 + (j < cnt ? j : cnt - 1);
+            mpm_g2p_yield(qs[j], saturation[p], h0, h1, h2, h3, c_max, S1, S2, S3, alpha[j], cC[j]);
+        }
+#else
+        for (int j = 0; j < B; ++j) alpha[j] = cC[j] = 0.f;
+#endif
+        CK_PRAGMA(omp simd)
+        for (int j = 0; j < B; ++j)
+            mpm_g2p_finish(ft + j, U + j, sig + j, V + j, B, alpha[j], cC[j], mu, lambda, Fs + j, ts + j, qs + j,
+                           vcs + j, ld);
+        if (!full) {
+            for (int j = 0; j < cnt; ++j) {
+                const long long p = p0 + j;
+                for (int k = 0; k < 3; ++k) x[k * np + p] = xb[k * B + j], v[k * np + p] = vb[k * B + j];
+                for (int k = 0; k < 9; ++k) C[k * np + p] = Cb[k * B + j], F[k * np + p] = Fb[k * B + j];
+                for (int k = 0; k < 6; ++k) tau[k * np + p] = tb[k * B + j];
+                q[p] = qb[j];
+                vc[p] = vcb[j];
+            }
+        }
     }
 #endif
 }

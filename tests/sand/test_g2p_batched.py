@@ -1,6 +1,7 @@
-"""The host G2P runs the constitutive update in batches (SIMD transfer + SVD, scalar finish; see
-kernels/mpm_g2p.cu), restating mpm_constitutive of mpm_model.cuh after the SVD.  These tests pin that
-restatement to the stand-alone constitutive kernel and check that batching changes nothing a caller sees.
+"""The host G2P runs in batches of SIMD lanes (transfer + SVD, scalar yield parameters, vectorised return
+mapping and stress; see kernels/mpm_g2p.cu), restating mpm_constitutive of mpm_model.cuh after the SVD.
+These tests pin that restatement to the stand-alone constitutive kernel and check that batching changes
+nothing a caller sees.
 """
 
 from __future__ import annotations
@@ -28,11 +29,11 @@ def _g2p_state(rng, n):
 @pytest.mark.parametrize("name", list(MODELS))
 def test_g2p_constitutive_equals_constitutive_kernel(kops, name):
     """With the grid at rest C_new = 0 and the trial F is F_old exactly, so G2P's F, tau, q, vc must equal
-    mpm_constitutive_batch applied to F_old.  Both run the same float32 operations (G2P's SVD in SIMD
-    lanes, the stand-alone kernel's one matrix at a time), so the only admissible difference is a
-    contraction of a*b+c into an FMA in one build and not the other: <= 1e-6 of each field's scale
-    (a few float32 ulp through the SVD; measured 0, bitwise equal).  A change of the constitutive model in
-    mpm_model.cuh that G2P's restatement misses shows up here as an O(1) difference.
+    mpm_constitutive_batch applied to F_old.  Both run the same float32 SVD and return mapping; they differ
+    in the logs / exps (G2P's vectorisable mpm_logf / mpm_expf, within 1 ulp of libm's, see
+    test_svd.py) and in FMA contractions: a few ulp of the strains, so <= 1e-6 of each field's scale and
+    q to 1e-6 relative (measured F 1.1e-7, tau 1.6e-7, q 9.5e-7 absolute at q ~ 10, i.e. 1 ulp).  A change
+    of the constitutive model in mpm_model.cuh that G2P's restatement misses shows up as an O(1) difference.
     """
     rng = np.random.default_rng(11)
     n = 3001  # not a multiple of the batch or of any SIMD width
@@ -74,3 +75,22 @@ def test_g2p_independent_of_particle_order(kops):
         outs.append({k: st[k][..., inv] for k in keys})
     for k in keys:
         assert np.array_equal(outs[0][k], outs[1][k]), k
+
+
+def test_initial_f_identity_gives_zero_stress(kops):
+    """F = I (every particle at seeding) stays exactly I with exactly zero stress when the grid is at rest:
+    the SVD's Jacobi threshold leaves the already diagonal A^T A = I alone (U = V = I, sigma = 1), so the
+    strains are exactly 0 and nothing is re-synthesised with round-off."""
+    rng = np.random.default_rng(13)
+    n = 1000
+    p = particles(rng, n)
+    gv = np.zeros((3, *SHAPE), np.float32)
+    keys = ("x", "v", "C", "F", "tau", "q", "vc")
+    st = {k: p[k].copy() for k in keys}
+    eye = np.broadcast_to(np.eye(3, dtype=np.float32).reshape(9, 1), (9, n))
+    st["F"][...] = eye
+    st["vc"][...] = 0.0
+    for name in ("sand", "sand_cohesive", "elastic"):
+        kops.g2p(*(st[k] for k in keys), p["saturation"], gv, DX, DT, MODELS[name].model())
+        assert np.array_equal(st["F"], eye)
+        assert np.array_equal(st["tau"], np.zeros((6, n), np.float32))
