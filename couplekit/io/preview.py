@@ -46,6 +46,8 @@ def render_preview(
     p.set_background("white")
     p.add_mesh(pv.Box(bounds=(0, size[0], 0, size[1], 0, size[2])).outline(), color="black")
     phi = fields.get("phi")
+    if phi is not None and fields.get("solid") is not None:
+        phi = np.where(np.asarray(fields["solid"], bool), 0.0, phi)  # no water surface drawn inside obstacles
     if phi is not None and np.nanmax(phi) > 0.5 > np.nanmin(phi):
         surf = _image(np.nan_to_num(phi), dx).contour([0.5], scalars="v")
         if surf.n_points:
@@ -54,7 +56,7 @@ def render_preview(
     if solid is not None and np.any(solid) and not np.all(solid):
         surf = _image(np.asarray(solid, np.float32), dx).contour([0.5], scalars="v")
         if surf.n_points:
-            p.add_mesh(surf, color="#888888")
+            p.add_mesh(surf, color="#888888", opacity=0.2)  # see-through, so containers do not hide the scene
     x = particles.get("x")
     if x is not None and np.asarray(x).shape[1] > 0:
         x = np.asarray(x, dtype=np.float32)

@@ -11,6 +11,8 @@ from couplekit.scene import Box, Cylinder, HeightField, Sphere, Transformed, Tri
 from couplekit.scene.mesh import point_triangle_distance
 
 RNG = np.random.default_rng(7)
+# meshio's STL reader multiplies a 32-bit triangle count while sniffing binary vs ASCII: a harmless overflow warning
+pytestmark = pytest.mark.filterwarnings("ignore:overflow encountered in scalar multiply:RuntimeWarning")
 
 
 def test_box_sdf_closed_form():

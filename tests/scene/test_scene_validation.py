@@ -188,6 +188,7 @@ def test_toml_syntax_and_missing_file(tmp_path):
         Scene.load(tmp_path / "missing.toml")
 
 
+@pytest.mark.filterwarnings("ignore:overflow encountered in scalar multiply:RuntimeWarning")  # meshio STL sniffing
 def test_mesh_file_resolves_relative_to_scene(tmp_path):
     import meshio
     import numpy as np
