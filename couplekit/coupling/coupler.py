@@ -23,10 +23,9 @@ fluid's inputs (``fluid_fraction``, ``force``, ``source_term``, ``sand_velocity`
 Why :meth:`fluid_velocity`: the exchange must see the fluid's velocity as it is now (after the last
 streaming).  FluidSolver's ``velocity`` field is the Guo-forced velocity of the last collision, before its
 streaming; with it a strong drag over a sand block makes the LBM blow up within ~50 steps (c = 1e3), with
-Σ f c it stays stable (tests/coupling/test_coupling_coupler.py).  FluidSolver has no kernel for Σ f c yet,
-so this uses its NumPy read rule (:meth:`couplekit.fluid.reference.ReferenceOps.load`) on a host copy —
-correct on every backend, but a NumPy pass over the 27 populations per step: to be replaced by a fluid
-kernel (requested from the fluid module).
+Σ f c it stays stable (tests/coupling/test_coupling_coupler.py).  Σ f c is
+:meth:`couplekit.fluid.solver.FluidSolver.current_velocity`, a fluid kernel on every backend (checked
+against an independent NumPy read of the populations in tests/coupling/test_coupling_fluid_velocity.py).
 """
 
 from __future__ import annotations
@@ -36,36 +35,8 @@ import numpy as np
 from ..units import Units
 from . import make_coupling_ops
 from .params import CouplingParams
-from .reference import source_index
 
-__all__ = ["SandFluidCoupler", "current_fluid_velocity"]
-
-
-def current_fluid_velocity(fluid) -> np.ndarray:
-    """Σ_j f_j c_j (3, nz, ny, nx) of a FluidSolver's current populations (before its next collision, no
-    force shift), host float32.
-
-    Reads the populations with the fluid's NumPy AA read rule of the next step's parity
-    (:meth:`couplekit.fluid.reference.ReferenceOps.load`) on a host copy whose ghost layer is filled the
-    way FluidSolver fills it before an odd step: periodic ghosts from their image, the others from the
-    nearest interior cell (outflow; wall ghosts are not read, walls bounce back).  Without that fill, an odd
-    step would read stale periodic ghosts (measured: 30 % momentum errors in a small periodic box).
-    """
-    from ..fluid.reference import ReferenceOps as FluidReference
-    from ..lattice import C27
-
-    be = fluid.backend
-    f = np.asarray(be.to_host(fluid.f))
-    parity = fluid.step_count & 1
-    if parity:
-        nz, ny, nx = fluid.shape
-        per = [fluid.boundaries.face(a + "-").kind == "periodic" for a in "xyz"]
-        iz = source_index(nz, per[2])[:, None, None] + 1
-        iy = source_index(ny, per[1])[None, :, None] + 1
-        ix = source_index(nx, per[0])[None, None, :] + 1
-        f = f[:, iz, iy, ix]
-    fi = FluidReference.load(f, be.to_host(fluid.flags), be.to_host(fluid.velocity), parity)
-    return np.einsum("jd,j...->d...", C27.astype(np.float64), fi).astype(np.float32)
+__all__ = ["SandFluidCoupler"]
 
 
 class SandFluidCoupler:
@@ -116,11 +87,10 @@ class SandFluidCoupler:
 
     # ------------------------------------------------------------------ stages
     def fluid_velocity(self) -> None:
-        """``fluid_u`` := Σ_j f_j c_j of the fluid's current populations (interior; module docstring)."""
-        f = self.fluid
-        u = current_fluid_velocity(f)
-        u *= (f.backend.to_host(f.flags)[1:-1, 1:-1, 1:-1] == 0)[None]
-        self.fluid_u[:, 1:-1, 1:-1, 1:-1] = f.backend.xp.asarray(u)
+        """``fluid_u`` := Σ_j f_j c_j of the fluid's current populations on interior fluid cells (zero on
+        solid cells and ghosts, which no coupling stage reads): FluidSolver.current_velocity (module
+        docstring)."""
+        self.fluid.current_velocity(out=self.fluid_u)
 
     def fractions(self) -> None:
         """ε (Eq. 25), bound water (Eqs. 53–56, retention) and the porosity into ``fluid.fluid_fraction``."""
@@ -136,7 +106,19 @@ class SandFluidCoupler:
             self.eps_prev[...] = f.fluid_fraction
             if self.retention:
                 self.eps_prev[...] = self.eps_prev + _pad(self.fluid.backend.xp, self.d_bound, self.eps_prev)
+            if self.two_phase:
+                # V0 of the volume controller (Eq. 52): the water this step starts from, free Σ ε̃_prev φ
+                # (the porosity the phase field holds it in) + bound Σ R before this step's absorption
+                free = f.pf_ops.volume_sums(f.phi, f.source_term, f.flags, self.eps_prev)[0]
+                f.reset_volume_reference(free + (self._sum(self.bound_in) if self.retention else 0.0))
             self._started = True
+        if self.retention and self.two_phase:
+            f.held_volume = self._sum(self.bound)  # bound water after this step's absorption (Eq. 56)
+
+    @staticmethod
+    def _sum(a) -> float:
+        """Σ a in float64 (a backend array)."""
+        return float(a.sum(dtype=np.float64))
 
     def phase_source(self) -> None:
         """S_φ (Eq. 45, Eq. 57 with retention) into ``fluid.source_term`` (two-phase fluids only)."""
