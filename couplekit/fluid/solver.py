@@ -40,7 +40,8 @@ class FluidParams:
     ``nu_h``, ``nu_l``: their kinematic viscosities (μ interpolates linearly in φ, Eq. 4);
     ``gravity``: acceleration (x, y, z); ``sigma``: surface tension (0 compiles the chemical potential out);
     ``mobility``, ``width``: phase-field mobility M and interface width ξ (cells);
-    ``eta``: volume-controller bound η of Eq. 52 (0 = off). A single-phase solver uses ``rho_h``, ``nu_h``.
+    ``eta``: volume-controller bound η of Eq. 52 (0 = off); with ``mixture`` the controller's sums are
+    ε-weighted (``FluidSolver._controller_sums``). A single-phase solver uses ``rho_h``, ``nu_h``.
     ``store_filtered_pressure``: True (default, the paper's reading of Eq. 40: "a filter is applied to the
     pressure field") replaces p by p̄ every step; False keeps p unfiltered and uses p̄ only for the force.
     The stored filter is what keeps the 800:1, ν_h = 1e-4 regime stable: without it the pressure of the
@@ -152,6 +153,9 @@ class FluidSolver:
 
         self.step_count = 0
         self.gamma = 1.0
+        # water held outside the phase field that V of Eq. 52 counts (the sand's bound water, Eq. 53; set by
+        # the coupler every step, 0 otherwise)
+        self.held_volume = 0.0
         self.phi = self.h = self.grad = self.mu = self.source_term = None
         if self.two_phase:
             from . import phasefield as pf  # only two-phase scenes need (and load) the phase field
@@ -212,7 +216,7 @@ class FluidSolver:
                 ops.outflow_fix(self.f, self._out_ghost, self._out_src)
             if self.two_phase:
                 if prm.eta > 0:
-                    volume, source_sum = self.pf_ops.volume_sums(self.phi, self.source_term, self.flags)
+                    volume, source_sum = self._controller_sums()
                     self.gamma = self._pf.volume_controller_gamma(self.volume0, volume, source_sum, prm.eta)
                 self.pf_ops.collide_stream(
                     self.h, self.phi, self.grad, self.velocity, self.source_term, self.flags, self.step_count,
@@ -241,9 +245,35 @@ class FluidSolver:
         return np.asarray(self.backend.to_host(a)[(Ellipsis, *INTERIOR)])
 
     def _volume(self) -> float:
+        """The fluid volume V of Eq. 52: Σφ, or with a mixture Σ ε φ (water in the pores) + ``held_volume``."""
         if self.two_phase:
-            return self.pf_ops.volume_sums(self.phi, self.source_term, self.flags)[0]
+            eps = self.fluid_fraction if self.mixture else None
+            return self.pf_ops.volume_sums(self.phi, self.source_term, self.flags, eps)[0] + self.held_volume
         return float(self._fluid_host.sum())
+
+    def _controller_sums(self) -> tuple[float, float]:
+        """(V, Σ ε S_φ) for the volume controller (Eq. 52).
+
+        A mixture's water volume is Σ ε φ (φ is the water fraction of the pores), and one phase-field step
+        with source γ S changes it by γ Σ ε S (φ' = φ + γ S cell by cell).  So both sums are ε-weighted:
+        then γ = (V0 − V)/Σ ε S is 1 when the source term already does its job (the S_φ of Eq. 45 carries
+        Σ ε φ from one step to the next) and corrects only the transport and rounding error.  With the
+        plain sums (Σφ, ΣS) the controller fights the source: the mixture's Σφ must change as sand enters
+        the water, so γ drives S towards 0 (measured: the drift returned to the no-source −2.5 % at η = 2).
+        Σ ε S is the first sum of ``volume_sums`` with S in place of φ.
+        """
+        if not self.mixture:
+            return self.pf_ops.volume_sums(self.phi, self.source_term, self.flags)
+        eps = self.fluid_fraction
+        volume = self.pf_ops.volume_sums(self.phi, self.source_term, self.flags, eps)[0] + self.held_volume
+        weighted_source = self.pf_ops.volume_sums(self.source_term, self.source_term, self.flags, eps)[0]
+        return volume, weighted_source
+
+    def reset_volume_reference(self, volume: float | None = None) -> None:
+        """Set V0 of Eq. 52 (and of ``fluid_volume_drift``) to ``volume``, or to the current :meth:`_volume`.
+
+        The coupler calls it on its first step, once the fluid fraction ε is known (at construction ε ≡ 1)."""
+        self.volume0 = float(self._volume() if volume is None else volume)
 
     def density(self) -> np.ndarray:
         """ρ(φ) of Eq. 4 on the interior (host float32); ρ_h everywhere for a single-phase solver."""
@@ -267,7 +297,8 @@ class FluidSolver:
         return out
 
     def diagnostics(self) -> dict[str, float]:
-        """Float64 global quantities: fluid_volume (Σφ, or the fluid cell count single-phase),
+        """Float64 global quantities: fluid_volume (Σφ; Σ ε φ + held_volume with a mixture; the fluid cell
+        count single-phase),
         fluid_volume_drift (relative to the start), max_lattice_speed, momentum_x/y/z (Σ ρu) and
         kinetic_energy (½ Σ ρ|u|²) over fluid cells, step."""
         u = self._host_interior(self.velocity).astype(np.float64) * self._fluid_host[None]
@@ -294,6 +325,7 @@ class FluidSolver:
         out["step_count"] = np.array(self.step_count, np.int64)
         out["gamma"] = np.array(self.gamma, np.float64)
         out["volume0"] = np.array(self.volume0, np.float64)
+        out["held_volume"] = np.array(self.held_volume, np.float64)
         return out
 
     def load_state(self, state: dict[str, np.ndarray]) -> None:
@@ -311,5 +343,6 @@ class FluidSolver:
         self.step_count = int(state["step_count"])
         self.gamma = float(state["gamma"])
         self.volume0 = float(state["volume0"])
+        self.held_volume = float(state.get("held_volume", 0.0))  # absent from checkpoints before it existed
         if self.two_phase:
             self._phase_macroscopic()

@@ -7,8 +7,9 @@ tested.  Fluid volume V = Σ ε̃ φ.
   (paper Fig. 14a: "drastic loss");
 * with S_φ, V holds to well under 1 % (paper: "up to 5 %" without the controller at their scale);
 * with S_φ and the volume controller (Eq. 52) computed on the ε̃-weighted sums,
-  γ = clamp((V0 − Σ ε̃ φ) / Σ ε̃ S, ±η), V holds to 0.1 %.  (The controller is applied here by scaling the
-  source handed to the solver, whose own controller is off: see the report on FluidSolver's Σφ controller.)
+  γ = clamp((V0 − Σ ε̃ φ) / Σ ε̃ S, ±η), V holds to 0.1 %: FluidSolver's own controller (η = 2), whose
+  sums are ε-weighted in mixtures.  With its former plain sums (Σφ, ΣS) it cancelled the source term and
+  the drift returned to the no-source −2.5 %; the "plain" case keeps that measured failure visible.
 
 Viscosity 0.1 (lattice): at ν = 0.02 the mixture pressure update of the fluid solver goes unstable with a
 moving sand field even without any source (reported to the fluid module), which is not what this tests.
@@ -35,7 +36,8 @@ def _run(cpu1, mode: str) -> np.ndarray:
     padded = tuple(s + 2 for s in SHAPE)
     zz, yy, xx = np.meshgrid(np.arange(nz) + 0.5, np.arange(ny) + 0.5, np.arange(nx) + 0.5, indexing="ij")
     phi0 = (0.5 * (1 - np.tanh(2 * (zz - 11.0) / 4.0))).astype(np.float32)  # water below z = 11
-    params = FluidParams(rho_h=1.0, rho_l=0.01, nu_h=0.1, nu_l=0.1, mobility=0.02, width=4.0)
+    eta = 2.0 if mode == "controller" else 0.0
+    params = FluidParams(rho_h=1.0, rho_l=0.01, nu_h=0.1, nu_l=0.1, mobility=0.02, width=4.0, eta=eta)
     fluid = FluidSolver(cpu1, SHAPE, params, boundaries=Boundaries.channel("xyz"), phi=phi0, mixture=True)
     ops = KernelOps(cpu1, CouplingParams(), two_phase=True)
     es, ef = np.zeros(padded, np.float32), np.ones(padded, np.float32)
@@ -56,12 +58,16 @@ def _run(cpu1, mode: str) -> np.ndarray:
         fluid.fluid_fraction[...] = ef
         e = ef[inside].astype(np.float64)
         volume = float((e * fluid.phi[inside]).sum())
-        v0 = volume if v0 is None else v0
+        if v0 is None:
+            v0 = volume
+            fluid.reset_volume_reference()  # V0 = Σ ε φ once ε is known (the solver starts with ε ≡ 1)
+            assert fluid.volume0 == pytest.approx(v0, rel=1e-9)
         if mode != "none":
             ops.phase_source(ef, ef_prev, fluid.phi, fluid.velocity, fluid.flags, None, source)
             gamma = 1.0
-            if mode == "controller":
-                gamma = volume_controller_gamma(v0, volume, float((e * source[inside]).sum()), 2.0)
+            if mode == "plain":  # the controller on the unweighted sums Σφ, ΣS (the former solver's)
+                plain = float(fluid.phi[inside][fluid.flags[inside] == 0].sum())
+                gamma = volume_controller_gamma(float(phi0.sum()), plain, float(source[inside].sum()), 2.0)
             fluid.source_term[...] = gamma * source
         fluid.step(1)
         ef_prev[...] = ef
@@ -70,10 +76,19 @@ def _run(cpu1, mode: str) -> np.ndarray:
     return np.array(volumes) / v0 - 1.0
 
 
-@pytest.mark.parametrize("mode, low, high", [("none", 0.01, 1.0), ("source", 0.0, 0.01), ("controller", 0.0, 0.001)])
+@pytest.mark.parametrize(
+    "mode, low, high",
+    [
+        ("none", 0.01, 1.0),
+        pytest.param("plain", 0.01, 1.0, marks=pytest.mark.slow),  # measured 2.65 % (CI budget: slow only)
+        ("source", 0.0, 0.01),
+        ("controller", 0.0, 0.001),
+    ],
+)
 def test_fluid_volume_with_and_without_the_source_term(cpu1, mode, low, high):
     drift = np.abs(_run(cpu1, mode))
-    if mode == "none":
-        assert drift[-1] > low, f"without S_phi the sand should cost water volume, drift {drift[-1]:.3%}"
+    print(f"{mode}: final drift {drift[-1]:.4%}, max {drift.max():.4%}")
+    if mode in ("none", "plain"):
+        assert drift[-1] > low, f"{mode}: the sand should cost water volume, drift {drift[-1]:.3%}"
     else:
         assert drift.max() < high, f"{mode}: max drift {drift.max():.3%}"
