@@ -18,7 +18,8 @@ fluid's inputs (``fluid_fraction``, ``force``, ``source_term``, ``sand_velocity`
     fluid.step()
     coupler.finish()           # this step's porosity becomes last step's
 
-:meth:`step` runs exactly that.  The scheduler (timing, sub-cycling) may call the stages itself.
+:meth:`step` runs exactly that through :class:`couplekit.schedulers.lockstep.LockstepScheduler` (which
+also times the stages); other schedulers (sub-cycling) call the stages themselves.
 
 Why :meth:`fluid_velocity`: the exchange must see the fluid's velocity as it is now (after the last
 streaming).  FluidSolver's ``velocity`` field is the Guo-forced velocity of the last collision, before its
@@ -84,6 +85,7 @@ class SandFluidCoupler:
         else:
             self.bound_in = self.bound = self.d_bound = self.moisture_ratio = None
         self._started = False
+        self._scheduler = None  # built by step()
 
     # ------------------------------------------------------------------ stages
     def fluid_velocity(self) -> None:
@@ -151,19 +153,13 @@ class SandFluidCoupler:
         self.eps_prev[...] = self.fluid.fluid_fraction
 
     def step(self, n: int = 1) -> None:
-        """``n`` lockstep steps of sand + fluid in Algorithm 1's order (module docstring)."""
-        for _ in range(int(n)):
-            self.sand.p2g()
-            self.fluid_velocity()
-            self.fractions()
-            self.phase_source()
-            self.exchange()
-            self.sand.grid_update()
-            self.moisture()
-            self.sand.g2p()
-            self.sand_velocity()
-            self.fluid.step(1)
-            self.finish()
+        """``n`` lockstep steps of sand + fluid in Algorithm 1's order: the untimed
+        :class:`couplekit.schedulers.lockstep.LockstepScheduler` (one code path for the stage order)."""
+        if self._scheduler is None:
+            from ..schedulers.lockstep import LockstepScheduler
+
+            self._scheduler = LockstepScheduler(self.fluid, self.sand, self, timing=False)
+        self._scheduler.step(n)
 
     # ------------------------------------------------------------------ outputs
     def fields(self) -> dict[str, np.ndarray]:
