@@ -185,6 +185,7 @@ class Simulation:
         self.scene = scene if isinstance(scene, Scene) else Scene.load(scene)
         sc = self.scene
         self._log = log or (lambda s: None)
+        self._preview_failed = False
         self.coupled = sc.has_fluid and sc.has_sand
         _refuse_unsupported(sc)
         self.backend = backend if isinstance(backend, Backend) else get_backend(backend, threads=threads)
@@ -598,15 +599,22 @@ class Simulation:
                 indexes["particles"].add(t, write_particles_vtp(out / f"particles_{frame:04d}.vtp", parts["x"], extra))
         if o.ply and parts:
             write_particles_ply(out / f"particles_{frame:04d}.ply", parts["x"], extra)
-        if o.preview and frame % o.preview_every == 0:
-            render_preview(
-                out / f"preview_{frame:04d}.png",
-                self.scene.domain.size,
-                self.scene.domain.dx,
-                self.fields(),
-                parts,
-                title=f"{self.scene.name}  frame {frame}  t = {t:.4g} s",
-            )
+        if o.preview and frame % o.preview_every == 0 and not self._preview_failed:
+            try:
+                render_preview(
+                    out / f"preview_{frame:04d}.png",
+                    self.scene.domain.size,
+                    self.scene.domain.dx,
+                    self.fields(),
+                    parts,
+                    title=f"{self.scene.name}  frame {frame}  t = {t:.4g} s",
+                )
+            except Exception as exc:  # a missing OpenGL/EGL library must not stop the simulation
+                self._preview_failed = True
+                self._log(
+                    f"warning: PNG previews disabled ({type(exc).__name__}: {exc}); the VTK/PLY outputs are "
+                    "unaffected. Headless rendering needs EGL: apt-get install libegl1 libegl-mesa0 libgl1"
+                )
         if log_file is not None:
             log_file.write(self.diagnostics())
 

@@ -11,6 +11,15 @@ fi
 if ! command -v "${CXX:-g++}" >/dev/null 2>&1 && ! command -v c++ >/dev/null 2>&1; then
     echo "warning: no C++ compiler found: the cpu backend is unavailable and only the NumPy reference will run" >&2
 fi
+# PNG previews render off-screen through EGL (Mesa's software rasteriser is enough; no GPU, no X server)
+if ! ldconfig -p 2>/dev/null | grep -q "libEGL.so.1"; then
+    if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+        echo "== installing the EGL/GL libraries for off-screen PNG previews (apt-get)"
+        apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libegl1 libegl-mesa0 libgl1 >/dev/null
+    else
+        echo "warning: libEGL not found: PNG previews will be skipped (install libegl1 libegl-mesa0 libgl1)" >&2
+    fi
+fi
 if [ ! -x "$VENV/bin/python" ]; then
     echo "== creating virtual environment $VENV"
     "$PY" -m venv "$VENV"

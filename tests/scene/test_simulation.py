@@ -196,3 +196,21 @@ def test_run_writes_outputs_and_interrupt_resume_is_exact(tmp_path):
 
     g = pv.read(tmp_path / "fields_0003.vti")
     np.testing.assert_array_equal(g.point_data["sand_fraction"].reshape(12, 12, 12), straight.fields()["sand_fraction"])
+
+
+def test_failed_preview_disables_previews_but_not_the_run(tmp_path, monkeypatch):
+    import couplekit.io as io
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("no EGL display")
+
+    monkeypatch.setattr(io, "render_preview", broken)
+    d = tiny_sand(frames=2)
+    d["outputs"] = {"preview": True, "preview_every": 1}
+    messages = []
+    sim = Simulation(Scene.from_dict(d), backend="cpu", log=messages.append)
+    r = sim.run(out=tmp_path, progress=False)
+    assert r.status == "done"
+    warnings = [m for m in messages if "PNG previews disabled" in m]
+    assert len(warnings) == 1 and "no EGL display" in warnings[0] and "libegl1" in warnings[0]
+    assert (tmp_path / "particles_0002.vtp").exists() and not list(tmp_path.glob("preview_*.png"))
