@@ -11,6 +11,10 @@
 // volume (Eq. 27 with V^0 and tau = J sigma).
 //
 // The grid arrays are overwritten (no need to clear them first).
+// Guard: a particle whose 3x3x3 stencil would leave the grid (x / dx outside [1, n - 1) on an axis), or whose
+// position is not finite (NaN compares false), scatters nothing and is counted in *skipped: G2P keeps
+// positions inside that band, so only a diverged state gets here, and without the guard a NaN position
+// turned into a wild grid index (the host build wrote out of bounds and crashed with "double free").
 // CUDA: float atomics straight into the grid (order-dependent round-off, as any GPU MPM).
 // Host: deterministic.  Each OpenMP thread scatters its static block of particles into a private grid
 // (scratch: nthreads * 5 * ncell floats, node-interleaved), then the private grids are summed node by
@@ -42,6 +46,11 @@ DEVICE int mpm_bspline(const float X, float w[3], float& f) {
 #define MPM_P2G_PARTICLE_SETUP                                                                         \
     const float xp = x[p], yp = x[np + p], zp = x[2 * np + p];                                         \
     const float Xg = xp * inv_dx - 0.5f, Yg = yp * inv_dx - 0.5f, Zg = zp * inv_dx - 0.5f;             \
+    if (!(Xg >= 0.5f && Xg < (float)nx - 1.5f && Yg >= 0.5f && Yg < (float)ny - 1.5f && Zg >= 0.5f &&  \
+          Zg < (float)nz - 1.5f)) {                                                                    \
+        atomic_add(skipped, 1);                                                                        \
+        continue;                                                                                      \
+    }                                                                                                  \
     float wx[3], wy[3], wz[3], fx, fy, fz;                                                             \
     const int bx = mpm_bspline(Xg, wx, fx), by = mpm_bspline(Yg, wy, fy), bz = mpm_bspline(Zg, wz, fz); \
     const float mp = mass[p], vp = vol[p];                                                             \
@@ -59,7 +68,8 @@ DEVICE int mpm_bspline(const float X, float w[3], float& f) {
 KERNEL void mpm_p2g(const long long n, const float* RESTRICT x, const float* RESTRICT v,
                     const float* RESTRICT C, const float* RESTRICT tau, const float* RESTRICT mass,
                     const float* RESTRICT vol, float* RESTRICT grid_m, float* RESTRICT grid_mv,
-                    float* RESTRICT grid_vol, float* RESTRICT scratch, const int nthreads, const int nx,
+                    float* RESTRICT grid_vol, float* RESTRICT scratch, int* RESTRICT skipped /* size: 1 */,
+                    const int nthreads, const int nx,
                     const int ny, const int nz, const float dx, const float dt) {
     const long long np = n;
     const long long ncell = (long long)nx * ny * nz;

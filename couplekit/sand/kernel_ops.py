@@ -30,6 +30,7 @@ class KernelOps:
         self.deterministic = backend.name == "cpu" and not self.host_atomics
         self._scratch = None
         self._threads = 1
+        self._skipped = backend.xp.zeros(1, dtype=np.int32)
 
     def _module(self, source: str, defines: dict | None = None):
         return self.backend.module(source, defines)
@@ -55,6 +56,7 @@ class KernelOps:
         scratch, threads = self._scratch_for(ncell)
         if self._clear_first:
             mod.function("mpm_clear_grid")(ncell, grid_m, grid_mv, grid_vol)
+        self._skipped.fill(0)
         mod.function("mpm_p2g")(
             x.shape[1],
             x,
@@ -67,6 +69,7 @@ class KernelOps:
             grid_mv,
             grid_vol,
             scratch,
+            self._skipped,
             np.int32(threads),
             np.int32(nx),
             np.int32(ny),
@@ -74,6 +77,11 @@ class KernelOps:
             np.float32(dx),
             np.float32(dt),
         )
+
+    def skipped_particles(self) -> int:
+        """Particles the last :meth:`p2g` left out: non-finite positions, or stencils outside the grid
+        (kernels/mpm_p2g.cu guard; 0 unless the state diverged).  Reads back one int (a GPU sync)."""
+        return int(self.backend.to_host(self._skipped)[0])
 
     def grid_update(
         self,
