@@ -9,7 +9,10 @@
 //
 // Safety net: positions are clamped to [dx, (n - 1) dx) per axis so the 3x3x3 stencil of the next P2G
 // stays inside the grid (the domain walls keep sand well inside this band; the clamp only matters for a
-// broken setup).  One thread per particle; n = number of particles.
+// broken setup).  n = number of particles.  CUDA: one thread per particle.  Host: batches of
+// MPM_G2P_BATCH particles through `omp simd` loops, one particle per SIMD lane (see the kernel body);
+// the constitutive update after the SVD restates mpm_constitutive (mpm_model.cuh) in vectorisable form,
+// pinned to it by tests/sand/test_g2p_batched.py.
 // variants: MPM_PLASTICITY=0,1 MPM_HARDENING=0,1 MPM_COHESION=0,1 MPM_VOLUME_CORRECTION=0,1
 #include "common.cuh"
 #include "mpm_model.cuh"
