@@ -26,43 +26,95 @@
 #define CK_EXT_FORCE 0
 #endif
 
-// central moments (k0, k1, k2) along one axis -> populations (f-, f0, f+), in place
-LBM_INLINE void chimera_backward(float& a0, float& a1, float& a2, const float u) {
-    const float k0 = a0, k1 = a1, k2 = a2, uu = u * u;
-    a1 = k0 * (1.f - uu) - 2.f * u * k1 - k2;
-    a0 = 0.5f * (k0 * (uu - u) + k1 * (2.f * u - 1.f) + k2);
-    a2 = 0.5f * (k0 * (uu + u) + k1 * (2.f * u + 1.f) + k2);
+// Backward chimera step along one axis (Geier et al. 2015): central moments (k0, k1, k2) about u -> populations
+// (f-, f0, f+), in place.  With S = k0 u^2 + 2u k1 + k2 and T = k0 u + k1:
+//   f0 = k0 - S,  f- = (S - T) / 2,  f+ = (S + T) / 2
+// (= k0 (1 - u^2) - 2u k1 - k2 and (k0 (u^2 -+ u) + k1 (2u -+ 1) + k2) / 2 expanded).  The variants drop the
+// terms of moments that are zero / one by construction: IEEE arithmetic forbids the compiler to fold x * 0.
+LBM_INLINE void chimera_backward(float& a0, float& a1, float& a2, const float u, const float u2, const float uu) {
+    const float k0 = a0, S = k0 * uu + (u2 * a1 + a2), T = k0 * u + a1;
+    a1 = k0 - S;
+    a0 = 0.5f * (S - T);
+    a2 = 0.5f * (S + T);
+}
+// k1 = 0
+LBM_INLINE void chimera_backward_k1zero(float& a0, float& a1, float& a2, const float k0, const float k2,
+                                        const float u, const float uu) {
+    const float S = k0 * uu + k2, T = k0 * u;
+    a1 = k0 - S;
+    a0 = 0.5f * (S - T);
+    a2 = 0.5f * (S + T);
+}
+// k1 = k2 = 0
+LBM_INLINE void chimera_backward_k0only(float& a0, float& a1, float& a2, const float k0, const float u,
+                                        const float uu) {
+    const float S = k0 * uu, T = k0 * u;
+    a1 = k0 - S;
+    a0 = 0.5f * (S - T);
+    a2 = 0.5f * (S + T);
+}
+// k0 = 1
+LBM_INLINE void chimera_backward_unit(float& a0, float& a1, float& a2, const float k1, const float k2, const float u,
+                                      const float u2, const float uu) {
+    const float S = uu + (u2 * k1 + k2), T = u + k1;
+    a1 = 1.f - S;
+    a0 = 0.5f * (S - T);
+    a2 = 0.5f * (S + T);
 }
 
 #define CUBE(q) ((CX27[q] + 1) * 9 + (CY27[q] + 1) * 3 + (CZ27[q] + 1))
+// direction q of cube index (c_x + 1) * 9 + (c_y + 1) * 3 + (c_z + 1) (inverse of CUBE; lattice.cuh order)
+CONSTANT int QOF27[27] = {20, 8, 22, 10, 2, 16, 24, 14, 25, 12, 4, 18, 6, 0,
+                          5, 17, 3, 11, 26, 13, 23, 15, 1, 9, 21, 7, 19};
+#define LBM_QOF(i) QOF27[i]
 
-// one fluid cell: load, forces, collision, store (ODD = parity & 1)
-template <int ODD>
+// host rows are processed in chunks of this many cells (the link masks of a chunk live on the stack)
+#define LBM_ROW_CHUNK 512
+
+// one fluid cell: load, forces, collision, store (ODD = parity & 1; MODE: how the stencils learn the kind of a
+// neighbour, see lbm_gradient; `mask` = lbm_link_mask of c for LBM_NB_MASK)
+template <int ODD, int MODE>
 LBM_INLINE void lbm_collide_cell(const long long c, float* RESTRICT f, const unsigned char* RESTRICT flags,
                                  float* RESTRICT vel, const float* RESTRICT phi, const float* RESTRICT mu,
                                  const float* RESTRICT eps, const float* RESTRICT force,
                                  const float* RESTRICT pbar, const int px, const long long pxy, const long long N,
                                  const float rho_h, const float rho_l, const float nu_h, const float nu_l,
-                                 const float gx, const float gy, const float gz) {
+                                 const float gx, const float gy, const float gz, const unsigned int mask) {
     float fj[27];
     lbm_load<ODD>(f, c, N, px, pxy, fj);
 
-    // raw moments m0, m_a, m_ab
-    float m0 = 0.f, mx = 0.f, my = 0.f, mz = 0.f;
-    float mxx = 0.f, myy = 0.f, mzz = 0.f, mxy = 0.f, mxz = 0.f, myz = 0.f;
-#define LBM_MOMENTS(q)                                       \
-    {                                                       \
-    const float v = fj[q];                              \
-    m0 += v;                                            \
-    if (CX27[q]) mx += CX27[q] * v, mxx += v;           \
-    if (CY27[q]) my += CY27[q] * v, myy += v;           \
-    if (CZ27[q]) mz += CZ27[q] * v, mzz += v;           \
-    if (CX27[q] * CY27[q]) mxy += CX27[q] * CY27[q] * v; \
-    if (CX27[q] * CZ27[q]) mxz += CX27[q] * CZ27[q] * v; \
-    if (CY27[q] * CZ27[q]) myz += CY27[q] * CZ27[q] * v; \
+    // raw moments m0, m_a, m_ab by a forward chimera-style pass (66 additions): along x the line sums
+    // X0 = f- + f0 + f+, X1 = f+ - f-, X2 = f+ + f- of the 9 (y, z) lines, then along y, then along z
+    float X0[9], X1[9], X2[9];
+#define LBM_XLINE(l)                                                                   \
+    {                                                                                 \
+        const float fm = fj[LBM_QOF(0 * 9 + (l))], fp = fj[LBM_QOF(2 * 9 + (l))];      \
+        X2[l] = fm + fp;                                                              \
+        X0[l] = X2[l] + fj[LBM_QOF(9 + (l))];                                          \
+        X1[l] = fp - fm;                                                              \
     }
-    LBM_FOR27(LBM_MOMENTS)
-#undef LBM_MOMENTS
+    LBM_REP9(LBM_XLINE, 0)
+#undef LBM_XLINE
+    // line index l = (c_y + 1) * 3 + (c_z + 1); along y for each z index k
+    float Y00[3], Y01[3], Y02[3], Y10[3], Y11[3], Y20[3];
+#define LBM_YLINE(k)                                      \
+    {                                                    \
+        Y02[k] = X0[k] + X0[6 + (k)];                    \
+        Y00[k] = Y02[k] + X0[3 + (k)];                   \
+        Y01[k] = X0[6 + (k)] - X0[k];                    \
+        Y10[k] = (X1[k] + X1[6 + (k)]) + X1[3 + (k)];    \
+        Y11[k] = X1[6 + (k)] - X1[k];                    \
+        Y20[k] = (X2[k] + X2[6 + (k)]) + X2[3 + (k)];    \
+    }
+    LBM_YLINE(0) LBM_YLINE(1) LBM_YLINE(2)
+#undef LBM_YLINE
+    const float mzz = Y00[0] + Y00[2];
+    const float m0 = mzz + Y00[1], mz = Y00[2] - Y00[0];
+    const float my = (Y01[0] + Y01[2]) + Y01[1], myz = Y01[2] - Y01[0];
+    const float myy = (Y02[0] + Y02[2]) + Y02[1];
+    const float mx = (Y10[0] + Y10[2]) + Y10[1], mxz = Y10[2] - Y10[0];
+    const float mxy = (Y11[0] + Y11[2]) + Y11[1];
+    const float mxx = (Y20[0] + Y20[2]) + Y20[1];
 
     // material properties, Eq. 4
 #if CK_TWO_PHASE
@@ -83,11 +135,11 @@ LBM_INLINE void lbm_collide_cell(const long long c, float* RESTRICT f, const uns
 
     // acceleration, Eq. 15: -grad pbar / rho + g (+ F_s / rho) (+ F_ext / (eps rho))
     float gp[3];
-    lbm_gradient<1>(pbar, flags, c, px, pxy, gp);
+    lbm_gradient<1, MODE>(pbar, flags, c, px, pxy, gp, mask);
     float ax = gx - gp[0] * inv_rho, ay = gy - gp[1] * inv_rho, az = gz - gp[2] * inv_rho;
 #if CK_TWO_PHASE
     float gphi[3];
-    lbm_gradient<0>(phi, flags, c, px, pxy, gphi);
+    lbm_gradient<0, MODE>(phi, flags, c, px, pxy, gphi, mask);
 #if CK_SURFACE_TENSION
     const float chem = mu[c] * inv_rho;
     ax += chem * gphi[0];
@@ -125,7 +177,7 @@ LBM_INLINE void lbm_collide_cell(const long long c, float* RESTRICT f, const uns
 #endif
 #if CK_MIXTURE
         float ge[3];
-        lbm_gradient<0>(eps, flags, c, px, pxy, ge);
+        lbm_gradient<0, MODE>(eps, flags, c, px, pxy, ge, mask);
         g0 += rho / e * ge[0];
         g1 += rho / e * ge[1];
         g2 += rho / e * ge[2];
@@ -148,43 +200,38 @@ LBM_INLINE void lbm_collide_cell(const long long c, float* RESTRICT f, const uns
     const float kyz = myz - uy * mz - uz * my + uy * uz * m0;
     const float om = 1.f - rs;
     const float dxy = om * (kxx - kyy), dxz = om * (kxx - kzz);
+    // post-collision central moments K_abc (a, b, c = orders in x, y, z; cube index a*9 + b*3 + c): rate 1
+    // except r_s on the deviatoric second order, Guo forcing; the zeroth moment reset to 1:
+    //   K000 = 1, K100 = ax/2, K120 = K102 = ax/6, K122 = ax/18 (alike for y, z), K110 = om kxy, K101 = om kxz,
+    //   K011 = om kyz, K200 = (1 + dxy + dxz)/3, K020 = K200 - dxy, K002 = K200 - dxz, K220 = K202 = K022 = 1/9,
+    //   K222 = 1/27, K111 = K112 = K121 = K211 = 0.
+    const float k200 = (1.f + dxy + dxz) * (1.f / 3.f);
+    const float hax = 0.5f * ax, hay = 0.5f * ay, haz = 0.5f * az;
+    const float sax = ax * (1.f / 6.f), say = ay * (1.f / 6.f), saz = az * (1.f / 6.f);
+    const float ux2 = ux + ux, uy2 = uy + uy, uz2 = uz + uz;
+    const float uxx = ux * ux, uyy = uy * uy, uzz = uz * uz;
     float K[27];
-    K[0] = 1.f;                                  // 000
-    K[1] = 0.5f * az;                            // 001
-    K[2] = 1.f / 3.f + (dxy + dxz) * (1.f / 3.f) - dxz;  // 002
-    K[3] = 0.5f * ay;                            // 010
-    K[4] = om * kyz;                             // 011
-    K[5] = ay * (1.f / 6.f);                     // 012
-    K[6] = (1.f + dxy + dxz) * (1.f / 3.f) - dxy;  // 020
-    K[7] = az * (1.f / 6.f);                     // 021
-    K[8] = 1.f / 9.f;                            // 022
-    K[9] = 0.5f * ax;                            // 100
-    K[10] = om * kxz;                            // 101
-    K[11] = ax * (1.f / 6.f);                    // 102
-    K[12] = om * kxy;                            // 110
-    K[13] = 0.f;                                 // 111
-    K[14] = 0.f;                                 // 112
-    K[15] = ax * (1.f / 6.f);                    // 120
-    K[16] = 0.f;                                 // 121
-    K[17] = ax * (1.f / 18.f);                   // 122
-    K[18] = (1.f + dxy + dxz) * (1.f / 3.f);     // 200
-    K[19] = az * (1.f / 6.f);                    // 201
-    K[20] = 1.f / 9.f;                           // 202
-    K[21] = ay * (1.f / 6.f);                    // 210
-    K[22] = 0.f;                                 // 211
-    K[23] = ay * (1.f / 18.f);                   // 212
-    K[24] = 1.f / 9.f;                           // 220
-    K[25] = az * (1.f / 18.f);                   // 221
-    K[26] = 1.f / 27.f;                          // 222
-
-    // backward chimera transform: x, then y, then z (cube index a*9 + b*3 + c -> ix*9 + iy*3 + iz)
-#define LBM_BACK_X(bc) chimera_backward(K[bc], K[9 + (bc)], K[18 + (bc)], ux);
-#define LBM_BACK_Y(i) chimera_backward(K[(i) / 3 * 9 + (i) % 3], K[(i) / 3 * 9 + 3 + (i) % 3], K[(i) / 3 * 9 + 6 + (i) % 3], uy);
-#define LBM_BACK_Z(ij) chimera_backward(K[(ij) * 3], K[(ij) * 3 + 1], K[(ij) * 3 + 2], uz);
-    LBM_REP9(LBM_BACK_X, 0)
+    // backward chimera transform: x (folding the known zeros and ones), then y, then z; afterwards K holds
+    // the populations by cube index (c_x + 1) * 9 + (c_y + 1) * 3 + (c_z + 1)
+    K[0] = 1.f, K[9] = hax, K[18] = k200;  // bc = 00
+    chimera_backward_unit(K[0], K[9], K[18], hax, k200, ux, ux2, uxx);
+    K[1] = haz, K[10] = om * kxz, K[19] = saz;  // 01
+    chimera_backward(K[1], K[10], K[19], ux, ux2, uxx);
+    K[2] = k200 - dxz, K[11] = sax, K[20] = 1.f / 9.f;  // 02
+    chimera_backward(K[2], K[11], K[20], ux, ux2, uxx);
+    K[3] = hay, K[12] = om * kxy, K[21] = say;  // 10
+    chimera_backward(K[3], K[12], K[21], ux, ux2, uxx);
+    chimera_backward_k0only(K[4], K[13], K[22], om * kyz, ux, uxx);                        // 11
+    chimera_backward_k1zero(K[5], K[14], K[23], say, ay * (1.f / 18.f), ux, uxx);          // 12
+    K[6] = k200 - dxy, K[15] = sax, K[24] = 1.f / 9.f;  // 20
+    chimera_backward(K[6], K[15], K[24], ux, ux2, uxx);
+    chimera_backward_k1zero(K[7], K[16], K[25], saz, az * (1.f / 18.f), ux, uxx);          // 21
+    K[8] = 1.f / 9.f, K[17] = ax * (1.f / 18.f), K[26] = 1.f / 27.f;  // 22
+    chimera_backward(K[8], K[17], K[26], ux, ux2, uxx);
+#define LBM_BACK_Y(i) chimera_backward(K[(i) / 3 * 9 + (i) % 3], K[(i) / 3 * 9 + 3 + (i) % 3], K[(i) / 3 * 9 + 6 + (i) % 3], uy, uy2, uyy);
+#define LBM_BACK_Z(ij) chimera_backward(K[(ij) * 3], K[(ij) * 3 + 1], K[(ij) * 3 + 2], uz, uz2, uzz);
     LBM_REP9(LBM_BACK_Y, 0)
     LBM_REP9(LBM_BACK_Z, 0)
-#undef LBM_BACK_X
 #undef LBM_BACK_Y
 #undef LBM_BACK_Z
 
@@ -210,18 +257,57 @@ KERNEL void lbm_collide_stream(const long long n, float* RESTRICT f /* size: 27 
     const int px = nx + 2;
     const long long pxy = (long long)px * (ny + 2);
     const long long N = pxy * (nz + 2);
-    // one loop per parity, so the parity is a compile-time constant inside the (vectorised) x loop
-#define LBM_COLLIDE_LOOP(ODD)                                                                                  \
-    FOR_EACH_CELL(x, y, z, nx, ny, nz) {                                                                       \
-        const long long c = (x + 1) + px * (long long)(y + 1) + pxy * (z + 1);                                 \
-        if (flags[c] != FLAG_FLUID) continue;                                                                  \
-        lbm_collide_cell<ODD>(c, f, flags, vel, phi, mu, eps, force, pbar, px, pxy, N, rho_h, rho_l, nu_h, nu_l, \
-                              gx, gy, gz);                                                                     \
+#define LBM_CELL_ARGS f, flags, vel, phi, mu, eps, force, pbar, px, pxy, N, rho_h, rho_l, nu_h, nu_l, gx, gy, gz
+#if CK_ON_GPU
+    // one thread per cell; the flag tests of the stencils cost little next to the memory traffic
+#define LBM_COLLIDE_LOOP(ODD)                                                    \
+    FOR_EACH_CELL(x, y, z, nx, ny, nz) {                                         \
+        const long long c = (x + 1) + px * (long long)(y + 1) + pxy * (z + 1);   \
+        if (flags[c] != FLAG_FLUID) continue;                                    \
+        lbm_collide_cell<ODD, LBM_NB_FLAGS>(c, LBM_CELL_ARGS, 0u);               \
     }
+#else
+    // host: the FOR_EACH_CELL shape ((z, y) rows in parallel, x loop `omp simd`) written out, because each
+    // chunk of a row first gathers its cells' link masks (the only byte reads) and then takes one of two float-
+    // only x loops: LBM_NB_BULK when every cell and neighbour is fluid (no flag logic, no masked lanes), else
+    // LBM_NB_MASK.  A byte read inside the collide loop makes g++ pick 64 lanes (four zmm registers per float)
+    // and spill the populations to the stack.
+#define LBM_COLLIDE_LOOP(ODD)                                                                          \
+    CK_PRAGMA(omp parallel for collapse(2) schedule(static))                                           \
+    for (int z = 0; z < nz; ++z)                                                                       \
+        for (int y = 0; y < ny; ++y) {                                                                 \
+            const long long row = px * (long long)(y + 1) + pxy * (z + 1);                             \
+            unsigned int masks[LBM_ROW_CHUNK];                                                         \
+            for (int x0 = 1; x0 <= nx; x0 += LBM_ROW_CHUNK) {                                          \
+                const int len = nx - x0 + 1 < LBM_ROW_CHUNK ? nx - x0 + 1 : LBM_ROW_CHUNK;             \
+                const long long c0 = row + x0;                                                         \
+                unsigned int all = LBM_FULL_MASK;                                                      \
+                CK_PRAGMA(omp simd reduction(& : all))                                                 \
+                for (int i = 0; i < len; ++i) {                                                        \
+                    masks[i] = lbm_link_mask(flags, c0 + i, px, pxy);                                  \
+                    all &= masks[i];                                                                   \
+                }                                                                                      \
+                if (all == LBM_FULL_MASK) {                                                            \
+                    CK_PRAGMA(omp simd)                                                                \
+                    for (int i = 0; i < len; ++i)                                                      \
+                        lbm_collide_cell<ODD, LBM_NB_BULK>(c0 + i, LBM_CELL_ARGS, LBM_FULL_MASK);      \
+                } else {                                                                               \
+                    CK_PRAGMA(omp simd)                                                                \
+                    for (int i = 0; i < len; ++i) {                                                    \
+                        const unsigned int m = masks[i];                                               \
+                        if (!(m & 1u)) continue;                                                       \
+                        lbm_collide_cell<ODD, LBM_NB_MASK>(c0 + i, LBM_CELL_ARGS, m);                  \
+                    }                                                                                  \
+                }                                                                                      \
+            }                                                                                          \
+        }
+#endif
+    // one loop per parity, so the parity is a compile-time constant inside the (vectorised) x loop
     if (parity & 1) {
         LBM_COLLIDE_LOOP(1)
     } else {
         LBM_COLLIDE_LOOP(0)
     }
 #undef LBM_COLLIDE_LOOP
+#undef LBM_CELL_ARGS
 }
