@@ -32,6 +32,36 @@ What the investigation of the runout deficit found (issue 4; numbers from these 
   repose angle of sand (mu_s = 0.32, 17.7 deg, in Lagree, Staron & Popinet, J. Fluid Mech. 686, 2011 —
   as recalled, not re-checked).  So the runout validation runs a 20 deg sand, and the paper's sand is
   checked for the deficit it legitimately has.
+
+The creep of settled deposits (issue 4, open; measured on the slumped 45 deg cone of
+test_slumped_cone_stands_at_the_friction_angle, 30 deg sand, R = 12 cells: toe radius 12.08, 12.28,
+12.51, 12.64 cells and flank 27.2, 26.1, 25.2, 24.5 deg at t = 0.3, 0.5, 1.0, 1.5 s; the rate decays
+slowly, roughly like 1/t).  What it is not, each by a run that changes only that:
+
+* not elastic ringing: zeroing every particle velocity and C at t = 0.5 s leaves the drift as it was
+  (toe 12.635 vs 12.64 at 1.5 s); damping the grid velocity at 20 /s from t = 0.3 s (ringing would be
+  gone in 0.1 s) only slows it (toe 12.23 -> 12.56, flank 27.1 -> 25.9 deg over 0.5-1.5 s); the kinetic
+  energy left (rms ~1.5 mm/s) is the creep itself.
+* not the state the collapse left: resetting F = I, tau = 0, vc = 0 (and v, C = 0) at t = 0.5 s, so that
+  only the particle positions remain, creeps the same (toe 12.63 at 1.5 s).
+* not the volume correction (off: toe 12.61), nor the time step (dt = 0.12 dx/c_p instead of 0.35: the
+  same drift per unit time, 0.34 vs 0.37 cells over 0.5-1.5 s, so no per-step ratchet), nor particles per
+  cell (3^3: 0.35 cells), nor the floor (friction 1e6: identical), nor the round-off of rebuilding
+  F = U exp(e) V^T every step (an experimental G2P that keeps F_trial when the return mapping leaves the
+  strains unchanged: identical toe).  A stiffer sand (4 E) stands steeper after the slump and then creeps
+  more (30.3 -> 25.7 deg over 0.5-1.5 s).
+* a fresh cone built BELOW the friction angle creeps too: a 25 deg cone of 30 deg sand at rest from
+  t = 0 moves its toe 11.46 -> 11.66 cells over 0.3-1.5 s (its flank does not flatten: 24.6 -> 24.9 deg),
+  and even with 45 deg sand by 0.04 cells; the same cone of a purely elastic (no plasticity) Hencky solid
+  is still to round-off (toe 11.354 at every time, kinetic energy 7e-13 J/kg).  So the creep needs the
+  plasticity and a free surface, and not a steep slope.
+* where: in the slumped cone at t = 1 s, 50-70 % of the particles down to 3 cells below the free surface
+  sit exactly at the cone's apex (stress-free, |e| < 1e-6) step after step, next to particles carrying
+  4-5x the hydrostatic compression (force chains between grid-invisible stress-free particles); the
+  hydrostatic strain 2 cells deep would be -1.8e-3, the median there is -5e-7.  The creeping layer is
+  the same 3-4 cells (mean speed 4.2, 2.7, 1.4, 0.44, 0.1 mm/s at 0-0.5, 0.5-1, 1-2, 2-3, 3-4 cells).
+  The leading suspect is therefore the free-surface layer of B-spline support (about 1.5 cells) whose
+  particles the Drucker-Prager apex case keeps at zero stress and zero strength; not fixed yet.
 """
 
 from __future__ import annotations
@@ -39,7 +69,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from couplekit.sand import DomainWalls, SandParams, Wall
+from couplekit.sand import DomainWalls, SandParams, SdfCollider, Wall
 from couplekit.sand.seeding import seed_box, seed_sdf
 from couplekit.sand.solver import SandSolver
 
@@ -157,17 +187,21 @@ def _flank_angle(x: np.ndarray, o: float, dx: float) -> tuple[float, float]:
     """Slope (degrees) of a pile's free surface and its height: the top particle of each dx/2 x dx/2 column
     of the (quarter) pile, least-squares line of height against radius over the columns whose top lies
     between 20 % and 80 % of the pile height (the height: 99th percentile of the tops), so that neither
-    the rounded summit nor the toe enters (notes/mpm-method.md Sec. 6.3)."""
+    the rounded summit nor the toe enters (notes/mpm-method.md Sec. 6.3).  Only the outer flank counts:
+    columns at or beyond the median radius of the highest 1 % (a poured heap may keep a crater where the
+    jet landed).  Particles that sit a little inside the symmetry planes (x or y < o, within the wall
+    layer) belong to the first column."""
     b = dx / 2
-    ix = np.floor((x[0] - o) / b).astype(np.int64)
-    iy = np.floor((x[1] - o) / b).astype(np.int64)
+    ix = np.maximum(np.floor((x[0] - o) / b), 0).astype(np.int64)
+    iy = np.maximum(np.floor((x[1] - o) / b), 0).astype(np.int64)
     key = ix * 1_000_000 + iy
     order = np.argsort(key)
     keys, start = np.unique(key[order], return_index=True)
     top = np.maximum.reduceat(x[2][order] - o, start)
     r = np.hypot((keys // 1_000_000 + 0.5) * b, (keys % 1_000_000 + 0.5) * b)
     height = np.percentile(top, 99)
-    sel = (top > 0.2 * height) & (top < 0.8 * height)
+    r_summit = np.median(r[top >= height])
+    sel = (top > 0.2 * height) & (top < 0.8 * height) & (r >= r_summit)
     slope = np.polyfit(r[sel], top[sel], 1)[0]
     return float(np.degrees(np.arctan(-slope))), float(height)
 
@@ -215,6 +249,111 @@ def test_slumped_cone_stands_at_the_friction_angle(cpu):
         else:
             displacement = np.linalg.norm(x - body.x, axis=0)
             assert np.percentile(displacement, 99) < 0.25 * dx  # stable below phi: no flow
+
+
+def _funnel_pour(cpu, phi: float) -> dict:
+    """Fixed-funnel pour (the fixed-funnel angle-of-repose method: sand runs out of a funnel held at a fixed
+    height until the heap's tip reaches the orifice).  Quarter domain (slip symmetry planes at -x, -y, the
+    heap's axis on their corner), dx = 1 cm, rough floor (separating, Coulomb 1.0 >= tan 35 deg: the base
+    does not slide, notes Sec. 6.3).  The funnel is an SDF collider: a conical shell two cells thick,
+    inner radius 2 cells at the orifice, 8 cells above the floor, opening at 35 deg from the vertical to
+    17 cells above the orifice, walls separating with friction 0.3; it starts full (6848 particles,
+    2^3 per cell, more than a 25 deg heap of height 8 cells holds).  E = 1e5 Pa (the paper's time steps
+    bound E to ~1e5, params.py) halves the step count of the default sand.
+
+    Flank angle: the mean of the 20-80 % fit of :func:`_flank_angle` over five snapshots at t = 2.0-3.0 s
+    (each snapshot alone scatters by about +-1 deg on a heap 7.4 cells tall).  The heap reaches the
+    orifice by t = 1.5 s; afterwards the funnel only trickles as fast as the heap's flank creeps away
+    (module docstring: the creep)."""
+    dx, z_o, r_o, half, depth, thick = 0.01, 8, 2.0, 35.0, 17, 2.0
+    o = BOUND * dx
+    zo, ro, top = o + z_o * dx, r_o * dx, o + (z_o + depth) * dx
+    tn, cs = np.tan(np.radians(half)), np.cos(np.radians(half))
+    r_top = ro + depth * dx * tn
+    n = BOUND + int(np.ceil(max(r_top / dx + thick / cs + 2, 1.25 * z_o / np.tan(np.radians(phi)) + 3))) + 3
+    nz = BOUND + z_o + depth + 4
+
+    def inner(p):  # > 0 outside the funnel's inner cone surface, distance along its normal
+        return (np.hypot(p[:, 0] - o, p[:, 1] - o) - ro - (p[:, 2] - zo) * tn) * cs
+
+    def funnel(p, t=0.0):
+        shell = np.abs(inner(p) - 0.5 * thick * dx) - 0.5 * thick * dx
+        return np.maximum(shell, np.maximum(zo - p[:, 2], p[:, 2] - top))
+
+    def content(p):
+        return np.maximum(inner(p), np.maximum(zo - p[:, 2], p[:, 2] - (top - dx)))
+
+    params = SandParams(hardening=False, h0=phi, youngs_modulus=1e5)
+    body = seed_sdf(content, (o, o, zo), (o + r_top, o + r_top, top), dx, 2, 0.5, 5)
+    walls = DomainWalls.from_dict(
+        {"-x": Wall("slip"), "-y": Wall("slip"), "-z": Wall("separate", 1.0)}, default=Wall("separate")
+    )
+    dt = 0.35 * dx / params.p_wave_speed
+    collider = SdfCollider(funnel, mode="separate", friction=0.3)
+    sol = SandSolver(cpu, (nz, n, n), dx, dt, params, body.x, body.volume, walls=walls, sdf_collider=collider)
+    angles, heights = [], []
+    for t in (2.0, 2.25, 2.5, 2.75, 3.0):
+        sol.step(int(round(t / dt)) - sol.steps)
+        x = sol.particles()["x"].astype(np.float64)
+        heap = x[:, x[2] < zo - 0.5 * dx]  # below the orifice (the sand still in the funnel excluded)
+        angle, height = _flank_angle(heap, o, dx)
+        angles.append(angle)
+        heights.append(height / dx)
+    d = sol.diagnostics()
+    return {
+        "angle": float(np.mean(angles)),
+        "angles": angles,
+        "height_cells": float(np.mean(heights)),
+        "left_in_funnel": float(np.mean(x[2] >= zo)),
+        "mass0": body.volume.sum() * params.density,
+        "mass": d["mass"],
+        "in_domain": bool(np.all(np.isfinite(x)) and x[2].min() > o - dx),
+    }
+
+
+@pytest.mark.parametrize(
+    "phi",
+    [
+        pytest.param(25.0, id="phi25"),
+        pytest.param(30.0, id="phi30", marks=pytest.mark.slow),
+        pytest.param(35.0, id="phi35"),
+    ],
+)
+def test_poured_heap_stands_at_the_friction_angle(cpu, phi):
+    """Angle of repose of a POURED heap (fixed-funnel method, :func:`_funnel_pour`) within +-5 deg of the
+    friction angle, for constant friction angles of 25 and 35 deg (30 deg: slow).
+
+    The prediction.  A cohesionless Mohr-Coulomb slope stands at phi: on a plane at incipient failure
+    tau = sigma_n tan(phi), and an infinite slope of angle beta carries tau / sigma_n = tan(beta) on every
+    plane parallel to it.  The Drucker-Prager cone here, ||dev tau|| = 3 alpha p with
+    alpha = sqrt(2/3) 2 sin(phi) / (3 - sin(phi)) (mpm_model.cuh; notes Sec. 2.2), circumscribes the
+    Mohr-Coulomb pyramid and touches it on the triaxial-compression meridians (sigma_2 = sigma_3), so it
+    is as strong as Mohr-Coulomb there and stronger elsewhere: in plane strain with the isochoric
+    (deviatoric) flow of the return mapping, sigma_2 = (sigma_1 + sigma_3)/2 and the cone gives
+    sin(phi_ps) = 2 sqrt(3) sin(phi) / (3 - sin(phi)): 34.6, 43.9, 55.0 deg for phi = 25, 30, 35.
+    (notes Sec. 6.3 guesses the plane-strain cone weaker; it is the stronger one.)  The flank of a
+    heap that grows by avalanches spreading outward over a cone extends in the hoop direction, so the hoop
+    stress falls to the minor principal stress, the Haar-von Karman closure of axisymmetric granular
+    statics with sigma_theta = sigma_3 (Nedderman, Statics and Kinematics of Granular Materials, CUP 1992
+    — as recalled, not re-checked): sigma_2 = sigma_3 is triaxial compression, where the cone is
+    Mohr-Coulomb.  So the prediction is phi, with phi_ps the ceiling should the hoop stress stay
+    intermediate.
+
+    Measured (this test; the heap's height is set by the orifice, 7.4 cells): phi = 25 -> 27.8, 30 -> 31.5,
+    35 -> 32.1 deg (mean of the five snapshots; the funnel still holds 3 %, 20 %, 32 % of the sand at
+    t = 3 s), far below phi_ps.  How long the heap keeps being fed after it chokes matters at 35 deg:
+    with a funnel 14 cells deep (4062 particles, nearly empty by t = 3 s) the same heap stands at
+    37-38 deg, with this one (17 cells, still trickling) at 32 deg.  A fed flank is a slowly flowing
+    surface layer and stands lower: the creep of the module docstring.  Resolution matters too: with the
+    orifice 6 cells above the floor (heap 5.5 cells tall) phi = 35 reads 27-30 deg (the 20-80 % band is
+    3 cells and the smeared free-surface cell eats into it).  A free pour from 12 cells (no choke, the
+    jet hits the floor at ~1.5 m/s) stands lower, 20.7 / 28.1 deg for 25 / 35: the impacts flatten it."""
+    c = _funnel_pour(cpu, phi)
+    assert c["in_domain"]
+    assert c["mass"] == pytest.approx(c["mass0"], rel=1e-6)
+    assert c["height_cells"] > 7.0  # the heap reached the orifice (8 cells up): a fixed-funnel heap
+    assert c["angle"] == pytest.approx(phi, abs=5.0), c["angles"]
+    assert max(c["angles"]) - min(c["angles"]) < 4.0  # settled shape, not a passing avalanche
 
 
 def _block(cpu, saturation: float, t_end: float):
