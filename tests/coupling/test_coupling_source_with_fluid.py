@@ -11,8 +11,8 @@ tested.  Fluid volume V = Σ ε̃ φ.
   sums are ε-weighted in mixtures.  With its former plain sums (Σφ, ΣS) it cancelled the source term and
   the drift returned to the no-source −2.5 %; the "plain" case keeps that measured failure visible.
 
-Viscosity 0.1 (lattice): at ν = 0.02 the mixture pressure update of the fluid solver goes unstable with a
-moving sand field even without any source (reported to the fluid module), which is not what this tests.
+Viscosity 0.1 (lattice), as first written: the ν = 0.02 instability that once made it necessary was the
+unfiltered stored pressure, not the sand (tests/coupling/test_coupling_pressure_stability.py).
 """
 
 from __future__ import annotations
