@@ -42,19 +42,28 @@ BYTES_TWO_PHASE_STEP = {
 
 
 NOTE = (
-    "Why the targets are missed (analysis of 2026-11-22, couplekit fluid developer; re-check when the kernels "
-    "change): (1) the collide-stream kernel does more than lbmpy's: it tests the cell flag, computes the "
-    "pressure force from 26 neighbours of p-bar with the wall-extrapolation rule and writes the velocity; "
-    "dropping the gradient alone made it ~20 % faster. (2) The central-moment back-transform is written in "
-    "general form and g++ without -ffast-math may not fold products with the many constant-zero moments "
-    "(IEEE semantics), so it does about twice the arithmetic of lbmpy's symbolically simplified kernel; built "
-    "with -fno-signed-zeros -ffinite-math-only the same source ran 1.3-1.8x faster in isolation. (3) The full "
-    "two-phase step is 6 flow + 3 phase-field kernels plus ghost copies, each its own pass over memory and its "
-    "own OpenMP region: per-kernel rates of 20-40 MLUPS add up to a few MLUPS per step, and on a shared 2-core "
-    "machine (load average 5-8 from other sessions during these runs) OpenMP barriers are costly, so 2 threads "
-    "were at times slower than 1. Next steps: fuse pressure update + filter + phase-field macroscopic into the "
-    "collide kernels (lagged pressure, lbm-peers note: ~400 B/cell-step), a hand-simplified back-transform, "
-    "and fewer launches per step."
+    "Why the targets are missed (analysis of 2026-11-22 after the host collide-stream rework; re-check when the "
+    "kernels change). Collide-stream: 2.7x faster than before in the same run (128^3: 17 -> 46 MLUPS), now "
+    "0.6-1.0x lbmpy depending on size and run (see collide_stream_vs_lbmpy). What was done, each measured: byte data (cell flags) inside the x loop made g++ pick 64 "
+    "lanes, i.e. four zmm registers per float, and spill the populations; rows whose 9-row neighbourhood is all "
+    "fluid now take a flag-free loop, other rows a loop over 32-bit link masks built from widened flags (the "
+    "per-cell byte mask loop stayed scalar: 1.5x); forward moments as chimera line sums (66 adds), back "
+    "transform with known-zero moments folded and its 1/2 factors deferred, factorised Eq. 18 gradient (flops "
+    "per 16-cell vector iteration 585 -> 355). What remains: (1) ours moves 233 B/cell (it also writes u, "
+    "reads p-bar and flags) against lbmpy's 216, so at equal bandwidth efficiency the ceiling is 0.93x; (2) the "
+    "26-neighbour p-bar gradient and the u write cost ~25 % (ablation in one run: no gradient 37 -> 48 MLUPS at "
+    "96^3); (3) the vector loop is still 598 instructions per 16 cells against lbmpy's 469, 175 of them stack "
+    "spills and reloads of the 80 stream pointers (27 load + 27 store + 26 stencil bases), which g++ cannot "
+    "keep in 16 registers. Full two-phase step: its kernels move 2-20 % of the measured bandwidth each (per-"
+    "stage times in two_phase_step_ms_by_stage, bytes in bytes_per_cell_step; the 27-point pressure filter, 9 "
+    "B/cell, takes a third of the collide time: compute-bound on flag logic): it is ~15 kernel launches per step (flow: halo copies, pressure update, "
+    "filter, collide-stream, fold; phase field: collide-stream, macroscopic, gradients), each a separate pass "
+    "over memory and an OpenMP fork/join; on this shared 2-core machine (load 2-5 from other sessions) a fork/"
+    "join costs up to milliseconds (a 66k-ghost copy of one float field: 0.1-9 ms in one run), and only the "
+    "collide-stream kernel was reworked (lbm_pressure.cu and phasefield.cu are owned elsewhere and not yet "
+    "tuned). Next steps: fuse pressure update + filter + phase-field macroscopic into the collide kernels "
+    "(lagged pressure, lbm-peers note: ~400 B/cell-step), apply the row-mask scheme to lbm_pressure.cu and "
+    "phasefield.cu, and one OpenMP region per step."
 )
 
 
@@ -96,16 +105,53 @@ def ours_collide(backend, n: int):
     return run
 
 
-def ours_two_phase_step(backend, n: int):
-    """A callable running two full two-phase steps (flow + phase field, σ > 0, walls) on n³."""
+def two_phase_solver(backend, n: int) -> FluidSolver:
+    """The benchmark's two-phase scene on n³: a flat 800:1 interface, σ > 0, walls in z, periodic in x and y."""
     c = np.arange(n) + 0.5
     z, y, x = np.meshgrid(c, c, c, indexing="ij")
     phi = 0.5 * (1 + np.tanh(2 * (n / 2 - z) / 4.0))
     params = FluidParams(
         rho_h=1.0, rho_l=1 / 800, nu_h=1e-4, nu_l=1e-2, gravity=(0, 0, -1e-6), sigma=1e-4, mobility=0.02, width=4.0
     )
-    s = FluidSolver(backend, (n, n, n), params, Boundaries.channel("z"), phi=phi)
+    return FluidSolver(backend, (n, n, n), params, Boundaries.channel("z"), phi=phi)
+
+
+def ours_two_phase_step(backend, n: int):
+    """A callable running two full two-phase steps (flow + phase field, σ > 0, walls) on n³."""
+    s = two_phase_solver(backend, n)
     return lambda: s.step(2)
+
+
+def two_phase_stage_times(backend, n: int, steps: int = 6) -> dict[str, float]:
+    """Milliseconds per step spent in each ops call of the two-phase step (timers wrapped around the ops
+    methods; 'other' is the Python step loop and everything unwrapped), after two warm-up steps."""
+    s = two_phase_solver(backend, n)
+    s.step(2)
+    spent: dict[str, float] = {}
+
+    def wrap(obj, name: str, label: str) -> None:
+        fn = getattr(obj, name)
+
+        def timed(*a, **k):
+            t = time.perf_counter()
+            out = fn(*a, **k)
+            spent[label] = spent.get(label, 0.0) + time.perf_counter() - t
+            return out
+
+        setattr(obj, name, timed)
+
+    for name in ("halo_copy", "macro_pressure", "pressure_filter", "collide_stream", "fold", "outflow_fix"):
+        wrap(s.ops, name, "flow." + name)
+    for name in ("collide_stream", "macroscopic", "gradients", "volume_sums"):
+        if hasattr(s.pf_ops, name):
+            wrap(s.pf_ops, name, "phase." + name)
+    t = time.perf_counter()
+    s.step(steps)
+    total = time.perf_counter() - t
+    out = {k: v / steps * 1e3 for k, v in sorted(spent.items(), key=lambda kv: -kv[1])}
+    out["other"] = (total - sum(spent.values())) / steps * 1e3
+    out["total"] = total / steps * 1e3
+    return out
 
 
 def lbmpy_collide(n: int, threads: int):
@@ -185,6 +231,7 @@ def main() -> None:
         roofline = bw["in_place_update_GBs"] * 1e9 / bytes_step / 1e6
         entry = {
             "mlups": mlups,
+            "two_phase_step_ms_by_stage": two_phase_stage_times(backend, n),
             "peer": peer_info,
             "two_phase_roofline_mlups": roofline,
             "two_phase_fraction_of_roofline": mlups["two_phase_step"] / roofline,
@@ -199,6 +246,8 @@ def main() -> None:
         if peer is not None:
             ratio = mlups["collide_stream"] / mlups["lbmpy_collide_stream"]
             entry["collide_stream_vs_lbmpy"] = ratio
+            # both kernels near the bandwidth limit: ours also writes u and reads p̄ and the flags
+            entry["collide_stream_vs_lbmpy_bandwidth_bound_ceiling"] = 27 * 4 * 2 / BYTES_COLLIDE_SINGLE
             targets["collide_stream >= 1.0 lbmpy"] = {"ratio": ratio, "met": ratio >= 1.0}
         entry["targets"] = targets
         result["sizes"][str(n)] = entry
