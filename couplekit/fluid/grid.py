@@ -196,3 +196,18 @@ def wall_links(flags: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     d = np.concatenate(dirs).astype(np.int32)
     order = np.argsort(cell, kind="stable")
     return cell[order], d[order]
+
+
+def inflow_front_ramp(distance: np.ndarray, width: float) -> np.ndarray:
+    """Fraction (0 → 1) of the way from the initial to the carried phase value of an inflow cell, after the
+    inflow has pushed fluid ``distance`` cells in (normal speed × time).
+
+    The equilibrium interface profile ½(1 + tanh(2 s/ξ)) of the conservative Allen–Cahn equation (Eq. 46)
+    over s ∈ [−ξ, ξ], rescaled to go exactly from 0 at distance 0 to 1 at distance 2ξ: the inflow value is
+    what an interface of width ξ entering at the inflow speed would show at the face. A non-positive
+    distance (an inflow that does not push fluid in) gives 1 at once: nothing enters, so no front forms.
+    """
+    d = np.asarray(distance, np.float64)
+    t2 = np.tanh(2.0)
+    s = (np.tanh(2.0 * (d - width) / width) + t2) / (2.0 * t2)
+    return np.where((d <= 0.0) | (d >= 2.0 * width), 1.0, np.clip(s, 0.0, 1.0))
