@@ -123,11 +123,8 @@ def test_reload_into_the_same_solver_restarts_bitwise(backend_name):
     saved = solver.state()
     solver.step(6)
     straight = solver.state()
-    for name in saved:
-        arr = getattr(solver, name, None)
-        if arr is not None and hasattr(arr, "dtype") and arr.dtype.kind == "f":
-            arr[...] = np.nan
-    for name in ("grad", "mu"):
+    every_array = ("f", "velocity", "p", "pbar", "phi", "h", "grad", "mu", "source_term")
+    for name in every_array:
         if getattr(solver, name) is not None:
             getattr(solver, name)[...] = np.nan
     solver.load_state(saved)
