@@ -12,7 +12,6 @@ import numpy as np
 import pytest
 
 from couplekit.coupling import CouplingParams, KernelOps
-from couplekit.coupling.coupler import current_fluid_velocity
 from couplekit.fluid.solver import FluidParams, FluidSolver
 from couplekit.units import Units
 
@@ -21,9 +20,9 @@ UNITS = Units(dx=0.005, dt=1.6e-5)
 
 
 def current_velocity(fluid, out):
-    """out (padded) := Σ_j f_j c_j of the fluid's current populations (interior)."""
-    out[:, 1:-1, 1:-1, 1:-1] = current_fluid_velocity(fluid)
-    return out
+    """out (padded) := Σ_j f_j c_j of the fluid's current populations (interior fluid cells), as the
+    coupler reads it (FluidSolver.current_velocity; tests/coupling/test_coupling_fluid_velocity.py)."""
+    return fluid.current_velocity(out=out)
 
 
 @pytest.mark.parametrize("c_drag", [1e-2, 1e1, 1e4])
