@@ -128,3 +128,21 @@ def test_volume_preservation_ablation(cpu1, mode):
         assert drifts.max() < 0.05  # paper: "up to 5 %" without the controller; measured 1.01 % max here
     else:
         assert drifts.max() < 0.01  # measured 0.001 %
+
+
+# ------------------------------------------------------------------ Fig. 10 (retention): known failure
+@pytest.mark.xfail(strict=True, reason="known defect: retention with air in the pores diverges (see docstring)")
+def test_dry_plug_under_water_with_retention_stays_finite(cpu1):
+    """Paper Fig. 10's setting: a dry plug (air in its pores) under a water layer, retention on.  Measured:
+    at R_a = 0.01 the air inside the plug accelerates to 0.1–0.18 lattice speed by step ~75 and everything
+    is NaN by step ~97 (at the paper's R_a = 0.001: step ~1900); without retention, or with R_a = 0, the
+    same scene runs 4000 steps.  Not yet understood (Eq. 55 absorbs at the capacity rate even from the thin
+    water of the diffuse interface inside the plug, so bound water appears 3 cells deep in air-filled pores;
+    the air must then leave the shrinking pores).  Until fixed, the wetting-front comparison with and
+    without retention cannot be measured; strict xfail: this test fails once the defect is gone."""
+    from couplekit.coupling.scenes import dry_plug_under_water
+
+    sc = dry_plug_under_water(cpu1, retention=True, absorption_rate=0.01, nu_h=NU, youngs_modulus=1e5,
+                              sand_params={"cohesion_max": 0.0})  # fmt: skip
+    sc.step(150)
+    assert sc.finite() and sc.max_lattice_speed() < 0.3
