@@ -40,7 +40,7 @@ def tiny_fluid(frames: int = 2) -> dict:
         ],
         "inflows": [
             {"face": "x_min", "kind": "wind", "velocity": [0.1, 0, 0]}
-        ],  # a water inflow into air diverges (reported)
+        ],  # a water inflow works too (tests/fluid/test_inflow_front.py)
         "outputs": {"preview": False},
     }
 
