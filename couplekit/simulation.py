@@ -8,9 +8,11 @@
 
 Scenes: fluid-only (:class:`couplekit.fluid.solver.FluidSolver`, one or two phases, obstacles as
 bounce-back cells, whole-face inflows and outflows), sand-only (:class:`couplekit.sand.solver.SandSolver`,
-obstacles as an SDF collider), and both, coupled in lockstep by
-:class:`couplekit.coupling.coupler.SandFluidCoupler` (paper Algorithm 1: one MPM step per LBM step, same Δt;
-drag, buoyancy, the phase-field source term, water retention). Refused with
+obstacles as an SDF collider), and both, coupled by :class:`couplekit.coupling.coupler.SandFluidCoupler`
+(drag, buoyancy, the phase-field source term, water retention). Every scene is stepped by
+:class:`couplekit.schedulers.lockstep.LockstepScheduler` (paper Algorithm 1: one MPM step per LBM step, same
+Δt), which times every stage: :meth:`Simulation.stage_times`, :meth:`Simulation.cost_report`, a cost line at
+the end of :meth:`Simulation.run` and ``step_seconds`` in the diagnostics. Refused with
 :class:`CouplingUnavailableError`: what the coupler cannot do yet (a jet carrying sand, sand bodies of
 different densities or with and without retention in one scene, drag or buoyancy switched off).
 
@@ -171,7 +173,11 @@ class Simulation:
 
     backend: ``"auto"``, ``"cuda"``, ``"cpu"``, ``"numpy"`` or a :class:`Backend`; threads: OpenMP threads
     of the cpu backend; log: where the start-up report goes (``None`` for silence); check_memory: refuse
-    a scene whose estimate exceeds the available memory.
+    a scene whose estimate exceeds the available memory; timing: time every stage of every step
+    (:meth:`stage_times`, :meth:`cost_report`; on a GPU this costs one synchronisation per stage).
+
+    Every scene is stepped by a :class:`couplekit.schedulers.lockstep.LockstepScheduler` (:attr:`scheduler`):
+    fluid-only and sand-only scenes run their solver's stages, coupled scenes paper Algorithm 1.
     """
 
     def __init__(
@@ -181,6 +187,7 @@ class Simulation:
         threads: int | None = None,
         log: Callable[[str], Any] | None = print,
         check_memory: bool = True,
+        timing: bool = True,
     ):
         self.scene = scene if isinstance(scene, Scene) else Scene.load(scene)
         sc = self.scene
@@ -204,7 +211,8 @@ class Simulation:
         self.units = sc.units()
         self.steps_per_frame = sc.time.steps_per_frame
         self.step_count = 0
-        self.fluid = self.sand = self.coupler = None
+        self.fluid = self.sand = self.coupler = self.scheduler = None
+        self._timing = bool(timing)
         self._rebuild()
 
     # ------------------------------------------------------------------------------------ building
@@ -396,35 +404,34 @@ class Simulation:
         }
 
     def step(self, n: int = 1) -> None:
-        """Advance ``n`` time steps (every solver in the scene)."""
+        """Advance ``n`` time steps (every solver in the scene) through :attr:`scheduler`."""
         n = int(n)
-        if self.coupler is not None:
-            for _ in range(n):
-                self._coupled_step()
-        else:
-            if self.fluid is not None:
-                self.fluid.step(n)
-            if self.sand is not None:
-                self.sand.step(n)
+        self.scheduler.step(n)
         self.step_count += n
 
-    def _coupled_step(self) -> None:
-        """One lockstep step in paper Algorithm 1's order (SandFluidCoupler.step, with the source-term switch)."""
-        c, sand = self.coupler, self.sand
-        sand.p2g()
-        c.fluid_velocity()
-        c.fractions()
-        if self.scene.effects.source_term:
-            c.phase_source()
-        c.exchange()
-        sand.grid_update()
-        c.moisture()
-        sand.g2p()
-        c.sand_velocity()
-        self.fluid.step(1)
-        c.finish()
-        if sand.cfl_check_every and sand.steps % sand.cfl_check_every == 0:
-            sand.set_dt(sand.dt)  # re-checks the particle CFL limit, as SandSolver.step does
+    def stage_times(self) -> dict[str, float]:
+        """Seconds spent in each stage of the last step, in execution order
+        (:meth:`couplekit.schedulers.lockstep.LockstepScheduler.stage_times`; empty with ``timing=False``)."""
+        return self.scheduler.stage_times()
+
+    def cost_report(self) -> dict[str, dict[str, float]]:
+        """Per stage over every timed step since the solvers were built (or :meth:`reset_timing`):
+        ``total`` s, ``mean`` s per step, ``fraction`` of the step."""
+        return self.scheduler.cost_report()
+
+    def reset_timing(self) -> None:
+        """Forget the accumulated stage times (e.g. after warm-up steps that compiled the kernels)."""
+        self.scheduler.reset_timing()
+
+    def cost_summary(self, top: int | None = None) -> str:
+        """One line: mean ms per step and share of each stage (most expensive first), over the timed steps."""
+        rep = self.cost_report()
+        if not rep:
+            return "stage costs: not timed"
+        total = sum(r["mean"] for r in rep.values())
+        items = sorted(rep.items(), key=lambda kv: -kv[1]["mean"])[: top or len(rep)]
+        parts = ", ".join(f"{k} {1e3 * r['mean']:.3g} ({100 * r['fraction']:.0f}%)" for k, r in items)
+        return f"stage costs, ms/step over {self.scheduler._timed_steps} steps (total {1e3 * total:.3g}): {parts}"
 
     def fields(self) -> dict[str, np.ndarray]:
         """Host NumPy grid fields: velocity (m/s), pressure (lattice), density, phi, solid (fluid);
@@ -456,8 +463,12 @@ class Simulation:
     def diagnostics(self) -> dict[str, float]:
         """Floats: time, step, frame; fluid_volume, fluid_volume_drift, max_lattice_speed, mach, max_speed,
         momentum_x/y/z, kinetic_energy (fluid, lattice units); sand_mass, sand_momentum_x/y/z,
-        sand_kinetic_energy, sand_max_speed (SI)."""
+        sand_kinetic_energy, sand_max_speed (SI); step_seconds (wall time of the last step's stages, when
+        timed)."""
         out = {"time": self.time, "step": float(self.step_count), "frame": float(self.frame)}
+        times = self.stage_times()
+        if times:
+            out["step_seconds"] = float(sum(times.values()))
         if self.fluid is not None:
             d = self.fluid.diagnostics()
             d.pop("step", None)
@@ -532,6 +543,11 @@ class Simulation:
         self.fluid = self._build_fluid() if self.scene.has_fluid else None
         self.sand = self._build_sand() if self.scene.has_sand else None
         self.coupler = self._build_coupler() if self.coupled else None
+        from .schedulers.lockstep import LockstepScheduler
+
+        self.scheduler = LockstepScheduler(
+            self.fluid, self.sand, self.coupler, source_term=self.scene.effects.source_term, timing=self._timing
+        )
 
     def _build_coupler(self):
         from .coupling.coupler import SandFluidCoupler
@@ -701,6 +717,8 @@ class Simulation:
             result.update(frames=self.frame, steps=steps_done)
             if bar is not None:
                 bar.close()
+            if steps_done:
+                self._log(self.cost_summary())
             if log_file is not None:
                 log_file.close()
             if previous is not None:
