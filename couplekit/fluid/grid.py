@@ -20,6 +20,11 @@ Faces are described by :class:`Face` objects; a ghost cell beyond several faces 
 takes the strongest non-periodic kind among them (wall > inflow > outflow); a ghost whose every outside axis
 is periodic is a *periodic ghost*: it copies its interior image before a stage that reads it
 (:func:`periodic_lists`).
+
+An inflow on *part* of a face (a jet from an outlet in a wall) is an :class:`InflowRegion`: a boolean mask over
+the face's ghost cells (one per interior cell of the face, :func:`face_plane_shape`), with a velocity and a
+phase value per cell; those ghosts become INFLOW, the rest of the face keeps the face's own kind. Edge and
+corner ghosts are never part of a region.
 """
 
 from __future__ import annotations
@@ -54,11 +59,57 @@ class Face:
             raise ValueError(f"face velocity must have 3 components, got {self.velocity!r}")
 
 
+@dataclass(frozen=True, eq=False)
+class InflowRegion:
+    """A velocity inlet on part of one face: the face ghosts where ``mask`` is True become INFLOW.
+
+    ``face``: ``x-, x+, y-, y+, z-, z+`` (must not be periodic); ``mask``: boolean array of the face's plane
+    shape (:func:`face_plane_shape`: ``(ny, nx)`` for a z face, ``(nz, nx)`` for a y face, ``(nz, ny)`` for an
+    x face; index ``[i, j]`` is the ghost facing interior cell ``i, j`` of those axes); ``velocity``: lattice
+    units (x, y, z), either 3 numbers or a per-cell array ``(3, *mask.shape)``; ``phi``: the phase value it
+    carries (1 water, 0 air), a number or a per-cell array of the mask's shape. Cells outside the mask keep
+    the face's own kind (:class:`Face`), e.g. a wall around a jet's outlet.
+    """
+
+    face: str
+    mask: np.ndarray
+    velocity: tuple[float, float, float] | np.ndarray = (0.0, 0.0, 0.0)
+    phi: float | np.ndarray = 1.0
+
+    def __post_init__(self) -> None:
+        if self.face not in FACE_NAMES:
+            raise ValueError(f"inflow region on unknown face {self.face!r}; faces are {', '.join(FACE_NAMES)}")
+        mask = np.asarray(self.mask)
+        if mask.ndim != 2 or mask.dtype != bool:
+            raise ValueError(f"inflow region mask must be a 2-D boolean array, got {mask.dtype} {mask.shape}")
+        if not mask.any():
+            raise ValueError(f"inflow region on face {self.face} covers no cell (empty mask)")
+        vel = np.asarray(self.velocity, np.float64)
+        if vel.shape != (3,) and vel.shape != (3,) + mask.shape:
+            raise ValueError(f"inflow region velocity must have shape (3,) or {(3,) + mask.shape}, got {vel.shape}")
+        phi = np.asarray(self.phi, np.float64)
+        if phi.shape not in ((), mask.shape):
+            raise ValueError(f"inflow region phi must be a number or an array of shape {mask.shape}, got {phi.shape}")
+
+    def cell_velocity(self) -> np.ndarray:
+        """The velocity ``(3, *mask.shape)`` of every cell of the plane (float64)."""
+        vel = np.asarray(self.velocity, np.float64)
+        if vel.shape == (3,):
+            vel = vel[:, None, None]
+        return np.broadcast_to(vel, (3,) + np.asarray(self.mask).shape)
+
+    def cell_phi(self) -> np.ndarray:
+        """The carried phase value of every cell of the plane (float64)."""
+        return np.broadcast_to(np.asarray(self.phi, np.float64), np.asarray(self.mask).shape)
+
+
 @dataclass(frozen=True)
 class Boundaries:
-    """The six faces of the box, by name ``x-, x+, y-, y+, z-, z+`` (default: all periodic)."""
+    """The six faces of the box, by name ``x-, x+, y-, y+, z-, z+`` (default: all periodic), and inflow
+    regions on parts of non-periodic faces (:class:`InflowRegion`; they must not overlap)."""
 
     faces: dict[str, Face] = field(default_factory=dict)
+    regions: tuple[InflowRegion, ...] = ()
 
     def face(self, name: str) -> Face:
         """The face called ``name`` (periodic unless set)."""
@@ -72,6 +123,9 @@ class Boundaries:
             lo, hi = self.face(axis + "-").kind, self.face(axis + "+").kind
             if (lo == "periodic") != (hi == "periodic"):
                 raise ValueError(f"axis {axis}: periodic must be set on both faces ({axis}- is {lo}, {axis}+ is {hi})")
+        for r in self.regions:
+            if self.face(r.face).kind == "periodic":
+                raise ValueError(f"inflow region on face {r.face}, which is periodic: make the face a wall or outflow")
 
     @classmethod
     def channel(cls, walls: str = "y", moving: dict[str, tuple[float, float, float]] | None = None) -> Boundaries:
@@ -92,6 +146,24 @@ def padded_shape(shape: tuple[int, int, int]) -> tuple[int, int, int]:
 
 INTERIOR = (slice(1, -1), slice(1, -1), slice(1, -1))
 """Index of the interior cells inside a padded spatial array."""
+
+
+def face_plane_shape(shape: tuple[int, int, int], face: str) -> tuple[int, int]:
+    """Shape of the ghost plane of ``face`` without its edges, in array order: ``(ny, nx)`` for ``z±``,
+    ``(nz, nx)`` for ``y±``, ``(nz, ny)`` for ``x±`` (the shape of an :class:`InflowRegion` mask)."""
+    nz, ny, nx = (int(s) for s in shape)
+    return {"x": (nz, ny), "y": (nz, nx), "z": (ny, nx)}[face[0]]
+
+
+def face_plane_index(shape: tuple[int, int, int], face: str) -> tuple[slice | int, ...]:
+    """Index of the ghost plane of ``face`` without its edges in a padded spatial array (a basic index, so
+    ``a[face_plane_index(...)]`` is a view of shape :func:`face_plane_shape`)."""
+    nz, ny, nx = (int(s) for s in shape)
+    axis = "zyx".index(face[0])
+    ghost = 0 if face[1] == "-" else (nz, ny, nx)[axis] + 1
+    index: list[slice | int] = [slice(1, -1)] * 3
+    index[axis] = ghost
+    return tuple(index)
 
 
 def build_flags(
@@ -131,11 +203,38 @@ def build_flags(
             for d in range(3):
                 wall_u[d][take] = face.velocity[d]
             wall_phi[take] = face.phi if kind == INFLOW else 0.0
+    _apply_regions(shape, boundaries.regions, flags, wall_u, wall_phi)
     # periodic ghosts: flag of their image
     periodic_ghost = outside_any & (best == 0)
     src = _wrap_index(shape, zz[periodic_ghost], yy[periodic_ghost], xx[periodic_ghost])
     flags[periodic_ghost] = flags.reshape(-1)[src]
     return flags, wall_u, wall_phi
+
+
+def _apply_regions(
+    shape: tuple[int, int, int],
+    regions: tuple[InflowRegion, ...],
+    flags: np.ndarray,
+    wall_u: np.ndarray,
+    wall_phi: np.ndarray,
+) -> None:
+    """Mark the ghost cells of every inflow region INFLOW with its per-cell velocity and phase value."""
+    taken: dict[str, np.ndarray] = {}
+    for r in regions:
+        plane = face_plane_shape(shape, r.face)
+        mask = np.asarray(r.mask, bool)
+        if mask.shape != plane:
+            raise ValueError(f"inflow region mask on face {r.face} has shape {mask.shape}, the face has {plane}")
+        used = taken.setdefault(r.face, np.zeros(plane, bool))
+        if (used & mask).any():
+            raise ValueError(f"inflow regions overlap on face {r.face} ({int((used & mask).sum())} cells)")
+        used |= mask
+        index = face_plane_index(shape, r.face)
+        flags[index][mask] = INFLOW
+        vel = r.cell_velocity()
+        for d in range(3):
+            wall_u[(d, *index)][mask] = vel[d][mask]
+        wall_phi[index][mask] = r.cell_phi()[mask]
 
 
 def _wrap_index(shape: tuple[int, int, int], z: np.ndarray, y: np.ndarray, x: np.ndarray) -> np.ndarray:
