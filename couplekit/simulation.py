@@ -48,9 +48,6 @@ __all__ = [
     "RunResult",
 ]
 
-_COUPLER_STATE = ("eps_sand", "fluid_u", "eps_prev", "water", "bound_in", "bound", "d_bound", "moisture_ratio")
-"""SandFluidCoupler arrays saved in checkpoints (it has no state()/load_state() of its own)."""
-
 _FACE = {"x_min": "x-", "x_max": "x+", "y_min": "y-", "y_max": "y+", "z_min": "z-", "z_max": "z+"}
 _SAND_FACE = {"x_min": "-x", "x_max": "+x", "y_min": "-y", "y_max": "+y", "z_min": "-z", "z_max": "+z"}
 
@@ -248,7 +245,8 @@ class Simulation:
         return Union(shapes) if shapes else None
 
     def _build_fluid(self):
-        from .fluid.grid import Boundaries, Face
+        from .fluid.grid import Boundaries, Face, InflowRegion
+        from .fluid.inflow import region_mask
         from .fluid.solver import FluidParams, FluidSolver
 
         sc, u = self.scene, self.units
@@ -265,8 +263,8 @@ class Simulation:
             width=fl.interface_width,
             eta=fl.controller_eta if eff.volume_controller else 0.0,
         )
-        inflow = {i.face: i for i in sc.inflows}
-        faces = {}
+        inflow = {i.face: i for i in sc.inflows if i.shape == "face"}
+        faces, regions = {}, []
         for name, kind in dom.boundary.items():
             if kind == "inflow":
                 i = inflow[name]
@@ -274,6 +272,11 @@ class Simulation:
                 faces[_FACE[name]] = Face("inflow", vel, 1.0 if i.kind == "water" else 0.0)
             else:
                 faces[_FACE[name]] = Face(kind)
+        for i in sc.inflows:  # outlets: inflow on part of a wall / outflow face (couplekit.fluid.inflow)
+            if i.shape != "face":
+                vel = tuple(u.to_lattice(v, "velocity") for v in i.velocity)
+                mask = region_mask(dom.shape, dom.dx, _FACE[i.face], i.shape, i.center, i.size, i.radius)
+                regions.append(InflowRegion(_FACE[i.face], mask, vel, 1.0 if i.kind == "water" else 0.0))
         obstacles = self._shape_of("obstacle")
         solid = sdf_on_grid(obstacles, dom.resolution, dom.dx) < 0 if obstacles else None
         phi = velocity = None
@@ -294,17 +297,22 @@ class Simulation:
                     for c in range(3):
                         velocity[c][inside] = u.to_lattice(b.velocity[c], "velocity")
         self._fluid_params = prm
-        return FluidSolver(
+        fluid = FluidSolver(
             self.backend,
             dom.shape,
             prm,
-            Boundaries(faces),
+            Boundaries(faces, tuple(regions)),
             solid=solid,
             phi=phi,
             velocity=velocity,
             mixture=self.coupled,
-            external_force=self.coupled,
+            external_force=self.coupled or sc.stirring is not None,
         )
+        if sc.stirring is not None:  # the swirl of [stirring], added to the force input (couplekit.scene.forces)
+            from .scene.forces import StirringForce
+
+            StirringForce(sc.stirring, dom, u).attach(fluid)
+        return fluid
 
     def _build_sand(self):
         from .sand.boundaries import DomainWalls, SdfCollider, Wall
@@ -515,11 +523,7 @@ class Simulation:
         if self.sand is not None:
             out["sand"] = self.sand.state()
         if self.coupler is not None:
-            c = self.coupler
-            out["coupler"] = {
-                k: self.backend.to_host(getattr(c, k)) for k in _COUPLER_STATE if getattr(c, k) is not None
-            }
-            out["coupler"]["started"] = np.array(c._started)
+            out["coupler"] = self.coupler.state()
         return out
 
     def _load_states(self, states: dict[str, dict[str, np.ndarray]], step: int) -> None:
@@ -532,10 +536,7 @@ class Simulation:
             st = states.get("coupler")
             if st is None:
                 raise ValueError("the checkpoint has no coupler state, the scene is coupled")
-            for k in _COUPLER_STATE:
-                if getattr(self.coupler, k) is not None:
-                    setattr(self.coupler, k, self.backend.asarray(np.asarray(st[k]), np.float32))
-            self.coupler._started = bool(st["started"])
+            self.coupler.load_state(st)
         self.step_count = int(step)
 
     def _rebuild(self) -> None:

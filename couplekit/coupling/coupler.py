@@ -39,6 +39,9 @@ from .params import CouplingParams
 
 __all__ = ["SandFluidCoupler"]
 
+_STATE = ("eps_sand", "fluid_u", "eps_prev", "water", "bound_in", "bound", "d_bound", "moisture_ratio")
+"""Arrays of :meth:`SandFluidCoupler.state` (the retention ones only when retention is on)."""
+
 
 class SandFluidCoupler:
     """Coupling of ``sand`` (SandSolver) and ``fluid`` (FluidSolver) on the same grid.
@@ -160,6 +163,31 @@ class SandFluidCoupler:
 
             self._scheduler = LockstepScheduler(self.fluid, self.sand, self, timing=False)
         self._scheduler.step(n)
+
+    # ------------------------------------------------------------------ checkpoint
+    def state(self) -> dict[str, np.ndarray]:
+        """Everything of the coupler a bitwise restart needs (host arrays; ``started`` as a 0-d bool array):
+        the padded sand fraction, the fluid velocity of the exchange, last step's porosity, the free water
+        of Eq. 59, and with retention the bound water (Eqs. 53–56) and the particles' moisture ratio."""
+        be = self.fluid.backend
+        st = {k: be.to_host(getattr(self, k)) for k in _STATE if getattr(self, k) is not None}
+        st["started"] = np.array(self._started)
+        return st
+
+    def load_state(self, st: dict) -> None:
+        """Restore a :meth:`state` dict (same grid, retention setting and particle count), in place."""
+        be = self.fluid.backend
+        for k in _STATE:
+            mine = getattr(self, k)
+            if mine is None:
+                continue
+            if k not in st:
+                raise ValueError(f"coupler state has no {k!r} (retention {'on' if self.retention else 'off'} here)")
+            a = np.asarray(st[k])
+            if a.shape != tuple(mine.shape):
+                raise ValueError(f"coupler state {k!r} has shape {a.shape}, this coupler {tuple(mine.shape)}")
+            mine[...] = be.asarray(a, np.float32)
+        self._started = bool(np.asarray(st["started"]))
 
     # ------------------------------------------------------------------ outputs
     def fields(self) -> dict[str, np.ndarray]:
