@@ -8,6 +8,9 @@ before anything is allocated:
 * the grid: ``dx`` or ``resolution`` (not both, consistent with ``size``, whole number of cells);
 * boundaries: periodic on both faces of an axis; an ``inflow`` face needs an ``[[inflows]]`` entry and an
   entry needs an ``inflow`` face (an inflow on a periodic face is refused); inflow velocity pointing in;
+  an outlet (an inflow with ``shape = "rect"`` or ``"disc"``) lies on a wall or outflow face, inside the
+  face, covers at least one cell and overlaps no other outlet;
+* stirring: needs a [fluid]; its axis is not zero and its centre lies in the domain;
 * bodies: geometry inside the domain (sand at least two cells from each face, where the MPM walls are);
   files exist; what each body kind needs ([fluid] for water and inflows, sand keys only on sand bodies);
 * time step: the lattice Mach number of the fastest expected flow (:class:`couplekit.units.Units`), the
@@ -42,7 +45,20 @@ from .schema import (
     read_table,
 )
 
-__all__ = ["Scene", "Domain", "Time", "Fluid", "Sand", "Body", "Geometry", "Inflow", "Outputs", "Effects", "LIMITS"]
+__all__ = [
+    "Scene",
+    "Domain",
+    "Time",
+    "Fluid",
+    "Sand",
+    "Body",
+    "Geometry",
+    "Inflow",
+    "Stirring",
+    "Outputs",
+    "Effects",
+    "LIMITS",
+]
 
 LIMITS = {
     "min_lattice_viscosity": 1e-5,
@@ -191,10 +207,34 @@ class Body:
 
 @dataclass(frozen=True)
 class Inflow:
+    """A velocity inlet: the whole ``face`` (``shape = "face"``) or an outlet in it (``"rect"``: ``center``,
+    ``size``; ``"disc"``: ``center``, ``radius``; face coordinates in metres, see
+    :mod:`couplekit.fluid.inflow`)."""
+
     face: str
     kind: str
     velocity: tuple[float, float, float]
     sand_fraction: float = 0.0
+    shape: str = "face"
+    center: tuple[float, float] | None = None
+    size: tuple[float, float] | None = None
+    radius: float | None = None
+
+
+@dataclass(frozen=True)
+class Stirring:
+    """A swirling body force on the water in a cylinder (paper 000 Fig. 11), SI units: tangential
+    acceleration ``acceleration × r / radius`` about the axis through ``center`` along ``axis`` (unit),
+    within ``radius`` and ``length`` (None: unbounded) of it, on steps starting in [start, start + duration)
+    (duration None: to the end). See :mod:`couplekit.scene.forces`."""
+
+    center: tuple[float, float, float]
+    axis: tuple[float, float, float]
+    radius: float
+    length: float | None
+    acceleration: float
+    start: float = 0.0
+    duration: float | None = None
 
 
 @dataclass(frozen=True)
@@ -234,6 +274,7 @@ class Scene:
     inflows: tuple[Inflow, ...]
     outputs: Outputs
     effects: Effects
+    stirring: Stirring | None = None
     source: dict = field(default_factory=dict, compare=False, repr=False)
     """The checked input dict with file paths made absolute (kept in checkpoints to rebuild the scene)."""
 
@@ -440,10 +481,27 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
         raw_inflows = []
     for i, ri in enumerate(raw_inflows):
         v = read_table(ri, f"inflows[{i}]", INFLOW_KEYS, problems)
-        if None in (v["face"], v["velocity"]):
+        if None in (v["face"], v["velocity"], v["shape"]):
             continue
-        inflows.append(Inflow(v["face"], v["kind"], tuple(v["velocity"]), v["sand_fraction"]))
-    _check_inflows(inflows, bnd, fluid, problems)
+        inflows.append(
+            Inflow(
+                v["face"],
+                v["kind"],
+                tuple(v["velocity"]),
+                v["sand_fraction"],
+                v["shape"],
+                None if v["center"] is None else tuple(v["center"]),
+                None if v["size"] is None else tuple(v["size"]),
+                v["radius"],
+            )
+        )
+    _check_inflows(inflows, bnd, fluid, problems, domain)
+
+    # ---- stirring
+    stirring = None
+    if "stirring" in data:
+        st = read_table(data["stirring"], "stirring", SECTIONS["stirring"], problems)
+        stirring = _stirring(st, domain, fluid, problems)
 
     # ---- what each body needs
     for i, b in enumerate(bodies):
@@ -554,6 +612,7 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
         inflows=tuple(inflows),
         outputs=outputs,
         effects=effects,
+        stirring=stirring,
         source=source,
     )
 
@@ -755,34 +814,50 @@ def _geometry(raw: Any, path: str, base_dir: Path, source: dict | None, problems
     return Geometry(gtype, params, v["scale"], tuple(v["rotate"]), tuple(v["translate"]), v["invert"])
 
 
-def _check_inflows(inflows: list[Inflow], bnd: dict, fluid: Fluid | None, problems: list[Problem]) -> None:
-    faces_used = {}
+def _check_inflows(
+    inflows: list[Inflow], bnd: dict, fluid: Fluid | None, problems: list[Problem], domain: Domain | None = None
+) -> None:
+    faces_used: dict[str, int] = {}
     for i, inf in enumerate(inflows):
         key = f"inflows[{i}]"
         kind = bnd.get(inf.face)
-        if inf.face in faces_used:
+        outlet = inf.shape != "face"
+        if inf.face in faces_used and not (outlet and inflows[faces_used[inf.face]].shape != "face"):
             problems.append(
                 Problem(
-                    f"{key}.face", f"face {inf.face} already has inflows[{faces_used[inf.face]}]", "one inflow per face"
+                    f"{key}.face",
+                    f"face {inf.face} already has inflows[{faces_used[inf.face]}]",
+                    "one whole-face inflow per face (several outlets, shape = 'rect' or 'disc', may share a face)",
                 )
             )
-        faces_used[inf.face] = i
+        faces_used.setdefault(inf.face, i)
         if kind == "periodic":
             problems.append(
                 Problem(
                     f"{key}.face",
                     f"face {inf.face} is periodic (domain.boundary.{inf.face} = 'periodic'); an inflow cannot enter through a periodic face",
-                    f"set domain.boundary.{inf.face} = 'inflow' and its opposite face to 'wall' or 'outflow'",
+                    f"set domain.boundary.{inf.face} = 'wall' (around an outlet) or 'inflow' (whole face), and its opposite face to 'wall' or 'outflow'"
+                    if outlet
+                    else f"set domain.boundary.{inf.face} = 'inflow' and its opposite face to 'wall' or 'outflow'",
                 )
             )
-        elif kind != "inflow":
+        elif outlet and kind == "inflow":
+            problems.append(
+                Problem(
+                    f"domain.boundary.{inf.face}",
+                    f"is 'inflow', but inflows[{i}] is an outlet (shape = {inf.shape!r}): the rest of the face keeps domain.boundary.{inf.face}",
+                    f"set domain.boundary.{inf.face} = 'wall' (or 'outflow') around the outlet, or shape = 'face' for a whole-face inflow",
+                )
+            )
+        elif not outlet and kind != "inflow":
             problems.append(
                 Problem(
                     f"{key}.face",
                     f"domain.boundary.{inf.face} is {kind!r}, not 'inflow'",
-                    f"set domain.boundary.{inf.face} = 'inflow'",
+                    f"set domain.boundary.{inf.face} = 'inflow', or give the inflow an outlet (shape = 'rect' or 'disc')",
                 )
             )
+        _check_outlet_keys(inf, key, problems)
         axis, side = "xyz".index(inf.face[0]), (1 if inf.face.endswith("min") else -1)
         if inf.velocity[axis] * side <= 0:
             problems.append(
@@ -801,14 +876,113 @@ def _check_inflows(inflows: list[Inflow], bnd: dict, fluid: Fluid | None, proble
         elif fluid.phases == 1 and inf.kind == "wind":
             problems.append(Problem(f"{key}.kind", "wind needs two fluid phases", "set fluid.phases = 2"))
     for face in FACES:
-        if bnd.get(face) == "inflow" and face not in faces_used:
+        if bnd.get(face) == "inflow" and not any(inf.face == face and inf.shape == "face" for inf in inflows):
             problems.append(
                 Problem(
                     f"domain.boundary.{face}",
-                    "is 'inflow' but no [[inflows]] entry has this face",
+                    "is 'inflow' but no [[inflows]] entry covers the whole face (shape = 'face')",
                     f"add [[inflows]] with face = '{face}' and a velocity, or make the face a 'wall'",
                 )
             )
+    if domain is not None:
+        _check_outlets_on_grid(inflows, domain, problems)
+
+
+def _check_outlet_keys(inf: Inflow, key: str, problems: list[Problem]) -> None:
+    """The keys each shape takes: none for 'face'; center + size for 'rect'; center + radius for 'disc'."""
+    given = {k for k in ("center", "size", "radius") if getattr(inf, k) is not None}
+    needs = {"face": set(), "rect": {"center", "size"}, "disc": {"center", "radius"}}[inf.shape]
+    for k in sorted(needs - given):
+        problems.append(Problem(f"{key}.{k}", f"an outlet with shape = {inf.shape!r} needs {k}", f"add {k} = ..."))
+    for k in sorted(given - needs):
+        problems.append(
+            Problem(
+                f"{key}.{k}",
+                f"shape = {inf.shape!r} takes no {k}",
+                "remove it" if inf.shape != "face" else "remove it, or set shape = 'rect' or 'disc' for an outlet",
+            )
+        )
+
+
+def _check_outlets_on_grid(inflows: list[Inflow], domain: Domain, problems: list[Problem]) -> None:
+    """Every outlet inside its face, covering at least one cell centre, overlapping no other outlet."""
+    from ..fluid.inflow import PLANE_AXES, face_extent, region_bounds, region_mask
+
+    masks: dict[str, tuple[int, np.ndarray]] = {}
+    for i, inf in enumerate(inflows):
+        if inf.shape == "face" or inf.center is None or (inf.size is None and inf.radius is None):
+            continue
+        if (inf.shape == "rect" and inf.size is None) or (inf.shape == "disc" and inf.radius is None):
+            continue
+        key = f"inflows[{i}]"
+        lo, hi = region_bounds(inf.shape, inf.center, inf.size, inf.radius)
+        extent = face_extent(domain.size, inf.face)
+        tol = 1e-9 * max(domain.size)
+        names = ["xyz"[a] for a in PLANE_AXES[inf.face[0]]]
+        bad = [k for k in range(2) if lo[k] < -tol or hi[k] > extent[k] + tol]
+        if bad:
+            k = bad[0]
+            problems.append(
+                Problem(
+                    f"{key}.center",
+                    f"the outlet reaches outside face {inf.face} along {names[k]}: {lo[k]:.6g} .. {hi[k]:.6g} m, the face spans 0 .. {extent[k]:g} m",
+                    f"move or shrink it so that it lies within [0, {extent[k]:g}] m along {names[k]} "
+                    f"(center holds the ({names[0]}, {names[1]}) coordinates on this face)",
+                )
+            )
+            continue
+        mask = region_mask(domain.shape, domain.dx, inf.face, inf.shape, inf.center, inf.size, inf.radius)
+        if not mask.any():
+            problems.append(
+                Problem(
+                    f"{key}.{'size' if inf.shape == 'rect' else 'radius'}",
+                    f"the outlet covers no cell centre at dx = {domain.dx:g} m (zero area on the grid)",
+                    f"make it at least one cell ({domain.dx:g} m) across, centred on a cell",
+                )
+            )
+            continue
+        if inf.face in masks and (masks[inf.face][1] & mask).any():
+            problems.append(
+                Problem(
+                    f"{key}.center",
+                    f"the outlet overlaps inflows[{masks[inf.face][0]}] on face {inf.face} ({int((masks[inf.face][1] & mask).sum())} cells)",
+                    "move the outlets apart",
+                )
+            )
+            continue
+        prev = masks.get(inf.face)
+        masks[inf.face] = (i if prev is None else prev[0], mask if prev is None else prev[1] | mask)
+
+
+def _stirring(st: dict, domain: Domain | None, fluid: Fluid | None, problems: list[Problem]) -> Stirring | None:
+    """The [stirring] table checked across keys (it needs a fluid, a non-zero axis, a centre in the domain)."""
+    n = len(problems)
+    if fluid is None:
+        problems.append(Problem("stirring", "stirring acts on the water: it needs a [fluid] table", "add [fluid]"))
+    if st["axis"] is not None and not any(st["axis"]):
+        problems.append(Problem("stirring.axis", "is the zero vector", "give the axis direction, e.g. [0.0, 0.0, 1.0]"))
+    if st["center"] is not None and domain is not None:
+        c, size = np.asarray(st["center"]), np.asarray(domain.size)
+        if np.any(c < 0) or np.any(c > size):
+            problems.append(
+                Problem(
+                    "stirring.center",
+                    f"{c.tolist()} m lies outside the domain [0, {size.tolist()}] m",
+                    "put the axis point inside the domain",
+                )
+            )
+    if len(problems) > n or None in (st["center"], st["radius"], st["acceleration"], st["axis"]):
+        return None
+    axis = np.asarray(st["axis"], np.float64)
+    return Stirring(
+        tuple(st["center"]),
+        tuple((axis / np.linalg.norm(axis)).tolist()),
+        st["radius"],
+        st["length"],
+        st["acceleration"],
+        st["start"],
+        st["duration"],
+    )
 
 
 def _check_inside(body: Body, i: int, domain: Domain, problems: list[Problem]) -> None:

@@ -350,6 +350,52 @@ SECTIONS: dict[str, list[Key]] = {
         Key("cohesion", "bool", True, "false makes the sand cohesionless"),
         Key("hardening", "bool", True, "false keeps the friction angle at h0"),
     ],
+    "stirring": [
+        Key(
+            "center",
+            "vec3",
+            REQUIRED,
+            "a point on the stirring axis, the middle of the stirred cylinder (paper 000 Fig. 11: a tangential "
+            "force on the water starts the swirl)",
+            "m",
+        ),
+        Key(
+            "axis",
+            "vec3",
+            [0.0, 0.0, 1.0],
+            "direction of the axis (any length); a positive acceleration turns the water counter-clockwise "
+            "seen from the axis tip (right-hand rule)",
+        ),
+        Key("radius", "float", REQUIRED, "radius of the stirred cylinder", "m", lo=0.0, lo_open=True),
+        Key(
+            "length",
+            "float",
+            None,
+            "extent of the cylinder along the axis, centred on center; default: unbounded (through the domain)",
+            "m",
+            lo=0.0,
+            lo_open=True,
+        ),
+        Key(
+            "acceleration",
+            "float",
+            REQUIRED,
+            "tangential acceleration of the water at r = radius; inside the cylinder a = acceleration × r / "
+            "radius (a solid-body spin-up, nothing on the axis), 0 outside; it acts on the water only: force "
+            "density ρ_water φ ε a, added to the drag in coupled scenes",
+            "m/s²",
+        ),
+        Key("start", "float", 0.0, "time the forcing starts", "s", lo=0.0),
+        Key(
+            "duration",
+            "float",
+            None,
+            "how long it lasts (steps starting in [start, start + duration)); default: to the end of the run",
+            "s",
+            lo=0.0,
+            lo_open=True,
+        ),
+    ],
 }
 """The single tables of a scene, by dotted name."""
 
@@ -445,10 +491,47 @@ INFLOW_KEYS: list[Key] = [
         lo=0.0,
         hi=0.64,
     ),
+    Key(
+        "shape",
+        "choice",
+        "face",
+        "'face': the whole face (its domain.boundary must be 'inflow'); 'rect' or 'disc': an outlet in the face "
+        "(a jet), the rest of the face keeps its domain.boundary ('wall' or 'outflow'); several outlets may "
+        "share a face if they do not overlap",
+        choices=("face", "rect", "disc"),
+    ),
+    Key(
+        "center",
+        "floats",
+        None,
+        "centre of an outlet in the face's two in-plane coordinates in x, y, z order: (y, z) on x faces, "
+        "(x, z) on y faces, (x, y) on z faces, from the domain's origin",
+        "m",
+        length=2,
+    ),
+    Key(
+        "size",
+        "floats",
+        None,
+        "side lengths of a 'rect' outlet along the same two axes (it takes the cells whose centres lie inside)",
+        "m",
+        lo=0.0,
+        lo_open=True,
+        length=2,
+    ),
+    Key(
+        "radius",
+        "float",
+        None,
+        "radius of a 'disc' outlet (it takes the cells whose centres lie inside)",
+        "m",
+        lo=0.0,
+        lo_open=True,
+    ),
 ]
 """Keys of one ``[[inflows]]`` entry."""
 
-TOP_LEVEL = ("scene", "domain", "time", "fluid", "sand", "bodies", "inflows", "outputs", "effects")
+TOP_LEVEL = ("scene", "domain", "time", "fluid", "sand", "bodies", "inflows", "stirring", "outputs", "effects")
 """Top-level tables of a scene file."""
 
 
