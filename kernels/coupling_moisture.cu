@@ -1,5 +1,5 @@
-// Particle side of the water-retention model (paper 000 Sec. 4.5) and of the saturation that drives the
-// sand's cohesion.  Spec: couplekit/coupling/reference.py ReferenceOps.bound_water_p2g / particle_moisture.
+// The water-retention model (paper 000 Sec. 4.5): its particle side, its node update, and the saturation that
+// drives the sand's cohesion.  Spec: couplekit/coupling/reference.py ReferenceOps.bound_water_p2g / particle_moisture.
 // Grid: the MPM grid (unpadded (nz, ny, nx), node (i, j, k) at ((i + 1/2) dx, ...)), quadratic B-splines
 // N_i(x_p) exactly as the sand's transfers; x, V_p in SI (m, m^3), fractions dimensionless.
 //
@@ -14,11 +14,32 @@
 //   (With Eq. 25's clamped eps the particles would gain more water than the grid absorbed wherever the sand
 //   is packed beyond eps_max.)  Call it with the positions of this step's P2G, before the sand's G2P moves
 //   the particles.
-// variants: CK_RETENTION=0,1
+//
+// coupling_absorption (called with retention only): the node side, Eqs. 54-56 and the Eq. 59 summand, run after
+// coupling_fractions (built with CK_RETENTION=0, which fills eps_sand with its ghosts):
+//   free   = min(1 - eps_s - R_i, eps_prev)                            (Eq. 54 before the update)
+//   dR     = min(max(free, 0) phi, min(R_a dt r_max eps_s phi, r_max eps_s - R_i))   (Eq. 55, dt = 1 step)
+//   R'     = R_i + dR;  eps_f = 1 - eps_s - R';  water = R' + eps_f phi         (Eqs. 56, 54, 59)
+// The uptake rate is Eq. 55's R_a dt r_max eps_s times the pores' water fraction phi (phi = 1: the paper's
+// rate).  With the paper's rate alone, the outer min is the only limit in a partly wet node, so every node
+// of the phase field's diffuse tail inside a dry plug's air-filled pores (phi ~ 1e-4 .. 0.1) lost ALL its
+// water in one step: phi undershot below 0 there, the density flipped between air and tail water every
+// step under the old hydrostatic pressure gradient, which accelerates air by (d rho / rho_l) g, and the dry
+// plug under water went NaN at step ~97 at R_a = 0.01 (~1900 at 0.001).  With the rate proportional to phi
+// a node loses at most R_a r_max eps_s / eps_f of its water per step.  Measurements and the ruled-out
+// causes: couplekit/coupling/reference.py (module docstring).
+// phi is clamped to [0, 1] (CK_TWO_PHASE=1) or 1 (single-phase water).  Every padded cell takes R_i,
+// phi and eps_prev from its source node (periodic image / nearest interior node, as coupling_fractions),
+// so eps_fluid comes out with its ghosts; the unpadded outputs are written by interior cells only.
+// eps_prev must not alias eps_fluid.
+// variants: CK_RETENTION=0,1 CK_TWO_PHASE=0,1
 #include "common.cuh"
 
 #ifndef CK_RETENTION
 #define CK_RETENTION 0
+#endif
+#ifndef CK_TWO_PHASE
+#define CK_TWO_PHASE 1
 #endif
 
 DEVICE int coupling_bspline(const float X, float w[3]) {
@@ -138,5 +159,57 @@ KERNEL void coupling_particle_moisture(const long long n, const float* RESTRICT 
     (void)r;
     (void)d_bound;
     (void)grid_vol;
+#endif
+}
+
+// interior source node (0-based) of padded coordinate X (0 .. n + 1): periodic image or nearest interior node
+DEVICE int coupling_absorption_source(const int X, const int n, const int periodic) {
+    if (X < 1) return periodic ? n - 1 : 0;
+    if (X > n) return periodic ? 0 : n - 1;
+    return X - 1;
+}
+
+// n = (nx + 2) * (ny + 2) * (nz + 2).  Single-phase (CK_TWO_PHASE=0): phi is not read (pass a 1-element array).
+KERNEL void coupling_absorption(const long long n, const float* RESTRICT eps_sand /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                                const float* RESTRICT phi /* size >= 1 */,
+                                const float* RESTRICT bound_in /* size: nx * ny * nz */,
+                                const float* RESTRICT eps_prev /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                                float* RESTRICT eps_fluid /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                                float* RESTRICT d_bound /* size: nx * ny * nz */,
+                                float* RESTRICT bound_out /* size: nx * ny * nz */,
+                                float* RESTRICT water /* size: nx * ny * nz */, const int nx, const int ny,
+                                const int nz, const int px, const int py, const int pz, const float r_max,
+                                const float absorption) {
+    const int PX = nx + 2;
+    const long long PXY = (long long)PX * (ny + 2);
+    FOR_EACH_CELL(X, Y, Z, nx + 2, ny + 2, nz + 2) {
+        const int ix = coupling_absorption_source(X, nx, px);
+        const int iy = coupling_absorption_source(Y, ny, py);
+        const int iz = coupling_absorption_source(Z, nz, pz);
+        const long long node = ix + (long long)nx * (iy + (long long)ny * iz);
+        const long long cell = X + PX * (long long)Y + PXY * Z;
+        const long long image = (ix + 1) + PX * (long long)(iy + 1) + PXY * (iz + 1);
+        const float es = eps_sand[cell];
+#if CK_TWO_PHASE
+        const float ph = fminf(fmaxf(phi[image], 0.f), 1.f);
+#else
+        const float ph = 1.f;
+#endif
+        const float R = bound_in[node];
+        const float cap = r_max * es;  // retention capacity
+        const float free_water = fmaxf(fminf(1.f - es - R, eps_prev[image]), 0.f) * ph;
+        const float dR = fminf(free_water, fminf(absorption * cap * ph, cap - R));  // Eq. 55, rate x phi
+        const float Rn = R + dR;                                                    // Eq. 56
+        const float ef = 1.f - es - Rn;                                             // Eq. 54
+        eps_fluid[cell] = ef;
+        const int inside = X >= 1 && X <= nx && Y >= 1 && Y <= ny && Z >= 1 && Z <= nz;
+        if (inside) {
+            water[node] = Rn + ef * ph;  // Eq. 59 summand
+            d_bound[node] = dR;
+            bound_out[node] = Rn;
+        }
+    }
+#if !CK_TWO_PHASE
+    (void)phi;
 #endif
 }

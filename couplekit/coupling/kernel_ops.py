@@ -61,17 +61,31 @@ class KernelOps:
         dx: float,
         periodic: Sequence[bool] = (True, True, True),
     ) -> None:
-        """Sand fraction ε and porosity (padded, ghosts filled), dR, R' and the water fraction (MPM grid)."""
+        """Sand fraction ε and porosity (padded, ghosts filled), dR, R' and the water fraction (MPM grid).
+
+        With retention two passes: ``coupling_fractions`` (built without retention: Eq. 25, ghosts) then
+        ``coupling_absorption`` (kernels/coupling_moisture.cu: Eqs. 54–56 and 59 with the φ-scaled uptake
+        rate that keeps a dry plug under water stable; the CK_RETENTION=1 branch of coupling_fractions.cu
+        still has the unscaled rate and is not used)."""
         nz, ny, nx = grid_vol.shape
         p = self.params
         ret = self.retention
-        self._fn("coupling_fractions.cu", "coupling_fractions", "CK_RETENTION", "CK_TWO_PHASE")(
-            (nx + 2) * (ny + 2) * (nz + 2), grid_vol, self._opt(phi, self.two_phase, "phi"),
-            self._opt(bound_in, ret, "bound_in"), self._opt(eps_prev, ret, "eps_prev"), eps_sand, eps_fluid, self._opt(d_bound, ret, "d_bound"),
-            self._opt(bound_out, ret, "bound_out"), water, np.int32(nx), np.int32(ny), np.int32(nz),
-            *(np.int32(bool(v)) for v in periodic), np.float32(1.0 / dx**3), np.float32(p.eps_max),
+        npad = (nx + 2) * (ny + 2) * (nz + 2)
+        phi_in = self._opt(phi, self.two_phase, "phi")
+        per = tuple(np.int32(bool(v)) for v in periodic)
+        self.backend.module("coupling_fractions.cu", {"CK_RETENTION": 0, "CK_TWO_PHASE": int(self.two_phase)}).function(
+            "coupling_fractions"
+        )(
+            npad, grid_vol, phi_in, self._none, self._none, eps_sand, eps_fluid, self._none, self._none, water,
+            np.int32(nx), np.int32(ny), np.int32(nz), *per, np.float32(1.0 / dx**3), np.float32(p.eps_max),
             np.float32(p.r_max), np.float32(p.absorption_rate),
         )  # fmt: skip
+        if ret:
+            self._fn("coupling_moisture.cu", "coupling_absorption", "CK_RETENTION", "CK_TWO_PHASE")(
+                npad, eps_sand, phi_in, self._opt(bound_in, ret, "bound_in"), self._opt(eps_prev, ret, "eps_prev"),
+                eps_fluid, self._opt(d_bound, ret, "d_bound"), self._opt(bound_out, ret, "bound_out"), water,
+                np.int32(nx), np.int32(ny), np.int32(nz), *per, np.float32(p.r_max), np.float32(p.absorption_rate),
+            )  # fmt: skip
 
     def sand_velocity(self, grid_v, sand_v, units: Units, periodic: Sequence[bool] = (True, True, True)) -> None:
         """MPM grid velocity (SI) -> padded lattice ``sand_velocity`` input of Eq. 39, ghosts filled."""

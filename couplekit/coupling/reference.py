@@ -20,7 +20,21 @@ Readings of the extracted paper text chosen here (the PDF extraction garbles acc
 * Eq. 54's effective porosity is written ε̃ = 1 − ε − R (the tilde is lost in the text); Eq. 57 and Eq. 59
   use ε̃; Eq. 55's "ε_i φ_i" is the free water ε̃_i φ_i (the outer min "caps the intake at the currently
   available fluid volume").
-* Eq. 55's R_a Δt r_max ε with Δt = 1 lattice step (Table 1 gives R_a "in dimensionless space").
+* Eq. 55's R_a Δt r_max ε with Δt = 1 lattice step (Table 1 gives R_a "in dimensionless space"), times φ:
+  the uptake rate of a node whose pores hold the water fraction φ is φ R_a Δt r_max ε (the paper's rate in
+  water, φ = 1).  Why: with the paper's rate the only limit in a partly wet node is the outer min ε̃ φ, so
+  every node of the phase field's diffuse tail (φ ~ 1e-4 … 0.1, up to 3 cells deep in a dry plug's
+  air-filled pores) loses ALL its water in one step.  Measured on the dry plug under water
+  (tests/coupling/test_coupled_validation.py): φ then undershoots below 0 in the air-filled pores (−0.004
+  by step 10 at R_a = 0.01, the emptied cells' D3Q7 populations far from equilibrium), the density there
+  flips between ρ_l and tail water each step while the pressure still carries the old hydrostatic gradient,
+  which in cells of air density accelerates the air by (Δρ/ρ_l) g (2.5 g by step 5, 10³ g by step 50): the
+  air jets through the pores, advects the tail deeper and the run is NaN at step ~97 (~1900 at R_a =
+  0.001).  Ruled out by the same measurement: the volume controller (η = 0 diverges too), surface tension
+  (σ = 0 too), the shrinking ε̃ seen by the fluid (Eqs. 39/16 with ε̃ but no water removed: stable), and
+  the D3Q7 spreading of the sink (applied to the rest population only: diverges too).  With the rate ∝ φ
+  a node loses at most R_a r_max ε / ε̃ of its water per step (0.34 % at R_a = 0.01), φ stays ≥ 0 and the
+  plug runs; the capacity bound (inner min) and the conservation (Eq. 57) are unchanged.
 * The drag's (ε_i^n)^(−χ) is the fluid fraction 1 − ε (Eq. 33) — retention only replaces it in Eqs. 39
   and 16; the fluid mass the exchange moves is ρ ε̃ V_cell, the mass the fluid solver accelerates.
 * φ is clamped to [0, 1] where it measures water (density, Eq. 55, Eq. 59), not in the source term
@@ -144,7 +158,8 @@ class ReferenceOps:
             R = bound_in.astype(np.float64)
             cap = p.r_max * eps_node  # retention capacity r_max ε
             free = np.maximum(np.minimum(1.0 - eps_node - R, _interior(eps_prev)), 0.0)  # Eq. 54 before the update
-            dR = np.minimum(free * ph_node, np.minimum(p.absorption_rate * cap, cap - R))  # Eq. 55 (Δt = 1)
+            # Eq. 55 (Δt = 1), uptake rate scaled by the pores' water fraction φ (module docstring)
+            dR = np.minimum(free * ph_node, np.minimum(p.absorption_rate * cap * ph_node, cap - R))
             R_new = R + dR  # Eq. 56
             ef_node = 1.0 - eps_node - R_new  # Eq. 54
             wet = R_new + ef_node * ph_node  # Eq. 59 summand

@@ -53,26 +53,31 @@ def test_sand_fraction_never_exceeds_eps_max_and_ghosts_follow_the_boundary(cpu)
 
 
 def test_absorption_follows_each_branch_of_eq55(cpu):
-    """Hand-computed Eq. 55 on four nodes, ε = 0.5, r_max = 0.28 (capacity 0.14), R_a = 0.1:
-    (a) plenty of water, R = 0: rate-limited, dR = R_a r_max ε = 0.014;
-    (b) plenty of water, R = 0.135: capacity-limited, dR = 0.14 − 0.135 = 0.005;
-    (c) little water, φ = 0.01, R = 0: water-limited, dR = ε̃ φ = (1 − 0.5) · 0.01 = 0.005;
-    (d) no water, φ = 0: dR = 0.
-    Then ε̃ = 1 − ε − R' (Eq. 54) and water = R' + ε̃ φ (Eq. 59).  (Last step's porosity is 1 here, so it
-    does not limit the free water.)"""
+    """Hand-computed Eq. 55 (uptake rate scaled by φ, reference.py module docstring) on five nodes,
+    ε = 0.5, r_max = 0.28 (capacity 0.14), R_a = 0.1:
+    (a) water, R = 0: rate-limited, dR = R_a r_max ε φ = 0.014;
+    (b) water, R = 0.135: capacity-limited, dR = 0.14 − 0.135 = 0.005;
+    (c) the diffuse tail, φ = 0.01, R = 0: dR = R_a r_max ε φ = 1.4e-4 — 2.8 % of the free water
+        ε̃ φ = 0.005 (the paper's unscaled rate took all of it in one step: the dry-plug divergence);
+    (d) no water, φ = 0: dR = 0;
+    (e) water, but last step's porosity only 0.004: water-limited (outer min), dR = 0.004 · φ = 0.004.
+    Then ε̃ = 1 − ε − R' (Eq. 54) and water = R' + ε̃ φ (Eq. 59)."""
     ops = KernelOps(cpu, CouplingParams(retention=True, absorption_rate=0.1), two_phase=True)
-    shape = (1, 1, 4)
+    shape = (1, 1, 5)
     grid_vol = np.full(shape, 0.5 * DX**3, np.float32)
-    bound = np.array([0.0, 0.135, 0.0, 0.0], np.float32).reshape(shape)
+    bound = np.array([0.0, 0.135, 0.0, 0.0, 0.0], np.float32).reshape(shape)
     phi = np.zeros(padded(shape), np.float32)
-    phi[1, 1, 1:-1] = [1.0, 1.0, 0.01, 0.0]
-    o = _fractions(ops, grid_vol, phi, bound)
-    np.testing.assert_allclose(o["dR"].ravel(), [0.014, 0.005, 0.005, 0.0], rtol=1e-5, atol=1e-8)
+    ph = np.array([1.0, 1.0, 0.01, 0.0, 1.0])
+    phi[1, 1, 1:-1] = ph
+    eps_prev = np.ones(padded(shape), np.float32)
+    eps_prev[1, 1, 5] = 0.004
+    o = _fractions(ops, grid_vol, phi, bound, eps_prev=eps_prev)
+    np.testing.assert_allclose(o["dR"].ravel(), [0.014, 0.005, 1.4e-4, 0.0, 0.004], rtol=1e-5, atol=1e-9)
     R = bound.ravel() + o["dR"].ravel()
     np.testing.assert_allclose(o["R"].ravel(), R, rtol=1e-6)
     ef = 1 - 0.5 - R
     np.testing.assert_allclose(o["ef"][1, 1, 1:-1], ef, rtol=1e-6)
-    np.testing.assert_allclose(o["water"].ravel(), R + ef * np.array([1.0, 1.0, 0.01, 0.0]), rtol=1e-6)
+    np.testing.assert_allclose(o["water"].ravel(), R + ef * ph, rtol=1e-6)
 
 
 def _closed_box(cpu1, retention: bool, steps: int, phi0: float | None = None):
