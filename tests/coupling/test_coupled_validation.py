@@ -130,19 +130,37 @@ def test_volume_preservation_ablation(cpu1, mode):
         assert drifts.max() < 0.01  # measured 0.001 %
 
 
-# ------------------------------------------------------------------ Fig. 10 (retention): known failure
-@pytest.mark.xfail(strict=True, reason="known defect: retention with air in the pores diverges (see docstring)")
+# ------------------------------------------------------------------ Fig. 10 (retention)
 def test_dry_plug_under_water_with_retention_stays_finite(cpu1):
-    """Paper Fig. 10's setting: a dry plug (air in its pores) under a water layer, retention on.  Measured:
-    at R_a = 0.01 the air inside the plug accelerates to 0.1–0.18 lattice speed by step ~75 and everything
-    is NaN by step ~97 (at the paper's R_a = 0.001: step ~1900); without retention, or with R_a = 0, the
-    same scene runs 4000 steps.  Not yet understood (Eq. 55 absorbs at the capacity rate even from the thin
-    water of the diffuse interface inside the plug, so bound water appears 3 cells deep in air-filled pores;
-    the air must then leave the shrinking pores).  Until fixed, the wetting-front comparison with and
-    without retention cannot be measured; strict xfail: this test fails once the defect is gone."""
+    """Paper Fig. 10's setting: a dry plug (air in its pores) under a water layer, retention on, R_a = 0.01:
+    300 steps finite, max lattice speed < 0.05 (measured 0.02–0.035; without retention 0.01–0.03).
+
+    Cause of the former divergence (NaN by step ~97 at R_a = 0.01, ~1900 at 0.001; without retention, with
+    R_a = 0, with η = 0, with σ = 0 the same, measured): Eq. 55 taken literally limits the uptake of a
+    partly wet node only by its free water ε̃ φ, so every node of the phase field's diffuse tail inside
+    the air-filled pores (φ ~ 1e-4 … 0.1, 3 cells deep) lost ALL its water in one step.  φ undershot below 0
+    there (−0.004 by step 10), the density flipped between air and tail water while the pressure kept the
+    old hydrostatic gradient, which accelerates air by (Δρ/ρ_l) g (2.5 g at step 5, ~10³ g at step 50); the
+    air jetted through the pores.  Keeping φ untouched while ε̃ shrinks ran stable; removing the water
+    while the fluid saw the old ε̃ diverged: the water sink, not Eqs. 39/16, was the trigger.  Fix: the
+    uptake rate is R_a r_max ε φ (reference.py module docstring, kernels/coupling_moisture.cu).
+
+    Not fixed (a second defect, measured): this plug still goes NaN after ~2300–2500 steps with retention
+    at R_a = 0.01 and 0.001 (without retention it runs 4000), growing in the wall-adjacent columns that
+    hold only the B-spline tail of the sand (ε ≈ 0.09), while the volume controller sits at γ = −2 for
+    hundreds of steps (it scales the whole S_φ, so with γ < 0 the retention sink turns into a water source);
+    with η = 0 it grows there too, later (~3300)."""
     from couplekit.coupling.scenes import dry_plug_under_water
 
     sc = dry_plug_under_water(cpu1, retention=True, absorption_rate=0.01, nu_h=NU, youngs_modulus=1e5,
                               sand_params={"cohesion_max": 0.0})  # fmt: skip
-    sc.step(150)
-    assert sc.finite() and sc.max_lattice_speed() < 0.3
+    sc.step(1)  # the coupler's first step sets the porosity (at construction ε̃ ≡ 1)
+    w0 = sc.water_volume()
+    worst = 0.0
+    for _ in range(3):
+        sc.step(100)
+        worst = max(worst, sc.max_lattice_speed())
+        assert sc.finite() and worst < 0.05, worst
+    bound = float(sc.coupler.fields()["bound_water"].sum())
+    assert bound > 1.0, "the test must actually move water into the sand"  # measured ~10 cells of water
+    assert abs(sc.water_volume() / w0 - 1) < 0.01  # free + bound water (issue bound 1 %)
