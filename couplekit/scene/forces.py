@@ -101,10 +101,16 @@ class _StirredOps:
         self._fluid = fluid
         self._stirring = stirring
         be = fluid.backend
-        padded = np.zeros((3,) + tuple(s + 2 for s in fluid.shape), np.float32)
-        padded[:, 1:-1, 1:-1, 1:-1] = stirring.acceleration * fluid.params.rho_h
-        self._rho_a = be.asarray(padded)  # ρ_w a, padded (zero in ghosts)
-        self._total = fluid.xp.zeros_like(self._rho_a)
+        # the bounding box of the stirred cells in the padded arrays: only there is anything added
+        cells = np.nonzero(stirring.inside)
+        if cells[0].size:
+            self._box = tuple(slice(int(c.min()) + 1, int(c.max()) + 2) for c in cells)
+        else:
+            self._box = (slice(0, 0),) * 3
+        interior = np.zeros((3,) + tuple(s + 2 for s in fluid.shape), np.float32)
+        interior[:, 1:-1, 1:-1, 1:-1] = stirring.acceleration * fluid.params.rho_h
+        self._rho_a = be.asarray(np.ascontiguousarray(interior[(slice(None), *self._box)]))  # ρ_w a in the box
+        self._total = fluid.xp.zeros_like(fluid.force)
 
     def __getattr__(self, name: str):
         return getattr(self._inner, name)
@@ -113,18 +119,17 @@ class _StirredOps:
         fluid = self._fluid
         if not self._stirring.active(fluid.step_count):
             return self._inner.collide_stream(*args, **kwargs)
-        xp, total = fluid.xp, self._total
+        xp, total, box = fluid.xp, self._total, self._box
         force = fluid.force
+        total[...] = force
         weight = None
         if fluid.two_phase:
-            weight = xp.clip(fluid.phi, 0.0, 1.0)
+            weight = xp.clip(fluid.phi[box], 0.0, 1.0)
         if fluid.mixture:
-            weight = fluid.fluid_fraction if weight is None else weight * fluid.fluid_fraction
-        if weight is None:
-            xp.add(force, self._rho_a, out=total)
-        else:
-            xp.multiply(self._rho_a, weight[None], out=total)
-            total += force
+            eps = fluid.fluid_fraction[box]
+            weight = eps if weight is None else weight * eps
+        inner = total[(slice(None), *box)]
+        inner += self._rho_a if weight is None else self._rho_a * weight[None]
         args = tuple(total if a is force else a for a in args)
         kwargs = {k: (total if v is force else v) for k, v in kwargs.items()}
         return self._inner.collide_stream(*args, **kwargs)
