@@ -216,7 +216,13 @@ def test_narrow_outlet_jet_diverges(cpu, width, u_in):
     whole face 8 × 8 (*)  ✓ (ξ = 2)           ✓ (ξ = 4)
     ====================  ========  ========  ========
 
-    (*) an 8 × 8 duct, 200 steps. What differs from the whole face is the outlet's rim: a sharp lateral jump of the carried φ and of the
+    (*) an 8 × 8 duct, 200 steps.
+
+    How it fails (ξ = 4, u_in = 0.08, traced step by step): from step ~45 (the ramped inflow φ ≈ 0.4) the air
+    cells beside the rim's corners in the first two layers (φ ≈ 0.01-0.03, so ρ ≈ 0.02) reach 3-4.5 u_in,
+    i.e. they are thrown by the pressure gradient over 1/ρ; from step ~70 φ undershoots to −0.01 … −0.1 at
+    the jet's edge two cells up, speeds there reach 1.8 at step 78 and NaN follows at step 81.
+    What differs from the whole face is the outlet's rim: a sharp lateral jump of the carried φ and of the
     velocity between the INFLOW ghosts and the WALL ghosts beside them. Tapering both across the rim along
     ½(1 + tanh(2 d/ξ)) (d: distance of the cell centre into the outlet; InflowRegion takes per-cell velocity
     and φ arrays) runs both failing cases 400 steps, but delivers less water than u_in × area; tapering only
