@@ -114,7 +114,8 @@ def test_stirring_acts_on_the_water_not_the_air():
     or less. Tolerance 2e-3 of the water's speed: the rasterised cylinder's force is not discretely
     divergence-free at its staircase rim and ends, and the first pressure response moves cells by up to
     8e-4 of the kick (measured), also outside the cylinder. After 60 steps the total angular momentum is
-    (n − ½) Σ ρ_w φ a_θ r dV Δt within 2 % (φ taken at the end: the interface diffuses little over the run; measured 1.001)."""
+    (n − ½) Σ ρ_w φ a_θ r dV Δt within 2 % (φ taken at the end: the interface diffuses little over the run;
+    measured 1.001)."""
     st = {"center": list(CENTER), "radius": 0.03, "acceleration": 2.0}  # through the whole height
     sim = Simulation(Scene.from_dict(_tank(st, phases=2, water_top=0.03)), "cpu", log=None)
     stir = StirringForce(sim.scene.stirring, sim.scene.domain, sim.units)
@@ -147,10 +148,11 @@ def test_stirring_acts_on_the_water_not_the_air():
 @pytest.mark.parametrize("backend_name", ["cpu", "numpy"])
 def test_stirring_adds_to_the_force_input_and_leaves_it_alone(backend_name):
     """FluidSolver level, as in a coupled step: ``force`` holds a uniform F0 (standing in for the drag the
-    coupler writes); the box is periodic, so momentum changes only by the forces. With the stirring attached, the fluid's momentum grows at F0 + Σ F_stir per step (the
-    swirl has no net linear momentum: Σ F_stir = 0 by symmetry, to float32 round-off) and its angular
-    momentum at the stirring torque, while ``force`` itself still holds F0 afterwards (the stirring goes into
-    a separate buffer, so the coupler's next overwrite of ``force`` loses nothing). Both backends."""
+    coupler writes); the box is periodic, so momentum changes only by the forces. With the stirring attached,
+    the fluid's momentum grows at F0 + Σ F_stir per step (the swirl has no net linear momentum: Σ F_stir = 0
+    by symmetry, to float32 round-off) and its angular momentum at the stirring torque, while ``force`` itself
+    still holds F0 afterwards (the stirring goes into a separate buffer, so the coupler's next overwrite of
+    ``force`` loses nothing). Both backends."""
     backend = get_backend(backend_name)
     scene = Scene.from_dict(_tank({"center": list(CENTER), "radius": 0.03, "length": 0.06, "acceleration": 2.0}))
     stir = StirringForce(scene.stirring, scene.domain, scene.units())
