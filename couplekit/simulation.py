@@ -16,6 +16,14 @@ the end of :meth:`Simulation.run` and ``step_seconds`` in the diagnostics. Refus
 :class:`CouplingUnavailableError`: what the coupler cannot do yet (a jet carrying sand, sand bodies of
 different densities or with and without retention in one scene, drag or buoyancy switched off).
 
+Seeding (as :mod:`couplekit.coupling.scenes` does): a sand body gets ``particles_per_cell`` particles per
+cell, each of volume V_p = ε0 dx³ / particles_per_cell with ε0 = ``sand.packing_fraction`` (default 0.6, at
+most ε_max = 0.64) and mass ϱ V_p with ϱ the body's ``density``. So a body's sand fraction (Eq. 25) is ε0 and
+ϱ is the grain density, the ϱ of paper Eq. 31's balance (sand weight ϱ ε V_cell g against the buoyancy
+ρ_f ε V_cell g): sand lighter than water rises, as paper Fig. 8's 950 kg/m³ ball does. (With V_p = dx³ /
+particles_per_cell, ε would clamp at ε_max while the mass stayed ϱ V_cell, and the neutral density would be
+0.64 ρ_w.)
+
 Before anything is allocated the constructor prints the backend and why it was chosen, and a memory
 estimate; a scene that will not fit the device (or the host's available memory) is refused
 (:class:`InsufficientMemoryError`). After every frame the fields are checked for NaN/Inf; on a hit the
@@ -352,7 +360,7 @@ class Simulation:
             if seeded.count == 0:
                 raise ValueError(f"sand body {b.name!r} is thinner than the particle spacing: no particle seeded")
             xs.append(seeded.x)
-            vols.append(seeded.volume)
+            vols.append(sd.packing_fraction * seeded.volume)  # grain volume: ε0 of the sub-cell (module doc)
             vels.append(np.repeat(np.asarray(b.velocity, np.float64)[:, None], seeded.count, axis=1))
         walls = DomainWalls.from_dict({_SAND_FACE[f]: Wall("separate", sd.wall_friction) for f in dom.boundary})
         obstacles = [b for b in sc.bodies if b.kind == "obstacle"]

@@ -137,6 +137,9 @@ class Sand:
     retention: bool
     absorption_rate: float
     max_moisture: float
+    packing_fraction: float = 0.6
+    """ε0: sand volume fraction of a seeded body (particle volume ε0 dx³ / particles_per_cell; ``density`` is
+    the grain density, mass per grain volume)."""
 
     @property
     def particles_per_axis(self) -> int:
@@ -725,6 +728,7 @@ def _sand(snd: dict, problems: list[Problem]) -> Sand | None:
         snd["retention"],
         snd["absorption_rate"],
         snd["max_moisture"],
+        snd["packing_fraction"],
     )
 
 

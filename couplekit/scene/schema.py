@@ -285,6 +285,16 @@ SECTIONS: dict[str, list[Key]] = {
         ),
         Key("particles_per_cell", "int", 8, "particles seeded per cell: a cube k³ (1, 8, 27, 64)", "", lo=1, hi=512),
         Key(
+            "packing_fraction",
+            "float",
+            0.6,
+            "sand volume fraction ε0 of a seeded body: a particle's volume is ε0 dx³ / particles_per_cell and its mass `density` × that volume, so `density` is the grain density of Eq. 31's balance (sand lighter than water floats); at most ε_max = 0.64 (Eq. 25)",
+            "",
+            lo=0.0,
+            lo_open=True,
+            hi=0.64,
+        ),
+        Key(
             "jitter", "float", 0.5, "random displacement of seeded particles, in sub-cell spacings", "", lo=0.0, hi=1.0
         ),
         Key("seed", "int", 0, "random seed of the jitter", "", lo=0),

@@ -44,15 +44,16 @@ def test_restart_is_bitwise_on_cpu(tmp_path, scene):
 def test_sand_scene_wiring():
     sim = _sim(tiny_sand())
     p = sim.particles()
-    # a 4x4x3-cell block at 2 particles per axis: 8x8x6 particles of volume (dx/2)³
+    # a 4x4x3-cell block at 2 particles per axis: 8x8x6 particles of grain volume ε0 (dx/2)³, ε0 = 0.6
+    # (sand.packing_fraction's default), and mass 1500 kg/m³ × that
     assert p["x"].shape == (3, 384)
-    np.testing.assert_allclose(p["volume"].sum(), 0.02 * 0.02 * 0.015, rtol=1e-6)
+    np.testing.assert_allclose(p["volume"].sum(), 0.6 * 0.02 * 0.02 * 0.015, rtol=1e-6)
     np.testing.assert_allclose(p["v"][2], -0.5)
     assert sim.effects["sand"] and sim.effects["obstacles"] and not sim.effects["fluid"]
     sim.step(3)
     d = sim.diagnostics()
     assert d["step"] == 3 and d["time"] == pytest.approx(6e-4)
-    np.testing.assert_allclose(d["sand_mass"], 1500 * 0.02 * 0.02 * 0.015, rtol=1e-6)
+    np.testing.assert_allclose(d["sand_mass"], 1500 * 0.6 * 0.02 * 0.02 * 0.015, rtol=1e-6)
     assert sim.fields()["sand_fraction"].shape == (12, 12, 12)
 
 
