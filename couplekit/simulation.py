@@ -24,6 +24,10 @@ most ε_max = 0.64) and mass ϱ V_p with ϱ the body's ``density``. So a body's 
 particles_per_cell, ε would clamp at ε_max while the mass stayed ϱ V_cell, and the neutral density would be
 0.64 ρ_w.)
 
+The fluid starts hydrostatic when gravity lies along one non-periodic axis (:func:`hydrostatic_pressure`:
+p = ∫ ρ(φ) g along each column, in lattice units), so water at rest stays at rest instead of ringing with the
+pressure wave of a start from p = 0.
+
 Before anything is allocated the constructor prints the backend and why it was chosen, and a memory
 estimate; a scene that will not fit the device (or the host's available memory) is refused
 (:class:`InsufficientMemoryError`). After every frame the fields are checked for NaN/Inf; on a hit the
@@ -53,6 +57,7 @@ __all__ = [
     "CouplingUnavailableError",
     "InsufficientMemoryError",
     "memory_estimate",
+    "hydrostatic_pressure",
     "RunResult",
 ]
 
@@ -104,6 +109,44 @@ def _refuse_unsupported(scene: Scene) -> None:
         raise CouplingUnavailableError(
             f"scene {scene.name!r} needs what the coupling module does not do yet: " + "; ".join(problems)
         )
+
+
+def hydrostatic_pressure(
+    shape: tuple[int, int, int],
+    gravity: tuple[float, float, float],
+    phi: np.ndarray | None = None,
+    rho_l: float = 1.0,
+    boundary: dict[str, str] | None = None,
+) -> np.ndarray | None:
+    """The hydrostatic pressure (nz, ny, nx) of a fluid at rest in FluidSolver's lattice units (water ρ = 1,
+    ``gravity`` the lattice acceleration), or None when there is none to set: no gravity, gravity not along
+    one axis, or periodic faces (``boundary``, scene face names) along it.
+
+    Per column along gravity, from the face gravity points away from (p = 0 there): p_k = |g| (Σ_{k' above k}
+    ρ_k' + ρ_k / 2), the cell-centred integral of ρ g, with ρ = ρ_l + (1 − ρ_l) φ of the two-phase mixture
+    (``phi``; None: single-phase water, ρ = 1). Then −∇p/ρ + g = 0 to second order (Eq. 15's pressure and
+    gravity terms) and a tank at rest starts at rest, without the pressure wave a start from p = 0 sends
+    through it (the water falls by g Δt in the first step, the floor stops it, and it rings with a speed of
+    order |g| H / c_s). Obstacles are integrated through with the φ they were given (the water's SDF ignores
+    them): right under a submerged obstacle, irrelevant inside one.
+    """
+    g = np.asarray(gravity, np.float64)
+    axes = np.flatnonzero(g)
+    if len(axes) != 1:
+        return None
+    a = int(axes[0])  # 0 = x, 1 = y, 2 = z
+    if boundary and boundary.get(f"{'xyz'[a]}_min") == "periodic":
+        return None
+    if phi is None:
+        rho = np.ones(tuple(shape), np.float64)
+    else:
+        rho = rho_l + (1.0 - rho_l) * np.clip(np.asarray(phi, np.float64), 0.0, 1.0)
+    r = np.moveaxis(rho, 2 - a, 0)  # array axes are (z, y, x)
+    if g[a] < 0:  # gravity towards the low end: integrate down from the high end
+        above = np.cumsum(r[::-1], axis=0)[::-1] - 0.5 * r
+    else:
+        above = np.cumsum(r, axis=0) - 0.5 * r
+    return np.moveaxis(abs(g[a]) * above, 0, 2 - a).astype(np.float32)
 
 
 # ---------------------------------------------------------------------------------------------- memory
@@ -304,6 +347,9 @@ class Simulation:
                     inside = sdf_on_grid(b.geometry.shape(dom, 0.25 * dom.dx), dom.resolution, dom.dx) < 0
                     for c in range(3):
                         velocity[c][inside] = u.to_lattice(b.velocity[c], "velocity")
+        pressure = hydrostatic_pressure(dom.shape, prm.gravity, phi if two else None, prm.rho_l, dom.boundary)
+        if pressure is None and any(prm.gravity):
+            self._log("note: no hydrostatic start (gravity not along one non-periodic axis): the fluid starts at p = 0")
         self._fluid_params = prm
         fluid = FluidSolver(
             self.backend,
@@ -313,6 +359,7 @@ class Simulation:
             solid=solid,
             phi=phi,
             velocity=velocity,
+            pressure=pressure,
             mixture=self.coupled,
             external_force=self.coupled or sc.stirring is not None,
         )
