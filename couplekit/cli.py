@@ -58,7 +58,7 @@ def _cmd_info(args: argparse.Namespace) -> int:
 
 def _cmd_validate(args: argparse.Namespace) -> int:
     from .scene import Scene, SceneError
-    from .simulation import _gib, memory_estimate
+    from .simulation import CouplingUnavailableError, _gib, _refuse_unsupported, memory_estimate
 
     try:
         scene = Scene.load(args.scene)
@@ -76,8 +76,10 @@ def _cmd_validate(args: argparse.Namespace) -> int:
         f"memory estimate: {_gib(est['total'])}"
         + (f", about {est['particle_count']:,.0f} particles at most" if est["particle_count"] else "")
     )
-    if scene.has_fluid and scene.has_sand:
-        print("note: fluid and sand together need the coupling module, not built yet: `run` refuses this scene")
+    try:
+        _refuse_unsupported(scene)
+    except CouplingUnavailableError as exc:
+        print(f"note: `run` refuses this scene: {exc}")
     return 0
 
 

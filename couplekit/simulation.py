@@ -13,8 +13,9 @@ obstacles as an SDF collider), and both, coupled by :class:`couplekit.coupling.c
 :class:`couplekit.schedulers.lockstep.LockstepScheduler` (paper Algorithm 1: one MPM step per LBM step, same
 Δt), which times every stage: :meth:`Simulation.stage_times`, :meth:`Simulation.cost_report`, a cost line at
 the end of :meth:`Simulation.run` and ``step_seconds`` in the diagnostics. Refused with
-:class:`CouplingUnavailableError`: what the coupler cannot do yet (a jet carrying sand, sand bodies of
-different densities or with and without retention in one scene, drag or buoyancy switched off).
+:class:`CouplingUnavailableError`: what the coupler cannot do yet (a jet carrying sand, sand bodies with and
+without retention in one scene, drag or buoyancy switched off). Sand bodies may have different densities
+(``bodies[*].density``, paper Fig. 8): each particle carries its body's.
 
 Seeding (as :mod:`couplekit.coupling.scenes` does): a sand body gets ``particles_per_cell`` particles per
 cell, each of volume V_p = ε0 dx³ / particles_per_cell with ε0 = ``sand.packing_fraction`` (default 0.6, at
@@ -93,11 +94,6 @@ def _refuse_unsupported(scene: Scene) -> None:
     if scene.has_sand:
         sd = scene.sand
         bodies = [b for b in scene.bodies if b.kind == "sand"]
-        densities = sorted({b.density or sd.density for b in bodies})
-        if len(densities) > 1:
-            problems.append(
-                f"bodies[*].density: sand bodies of different densities {densities} need per-body materials"
-            )
         if scene.has_fluid:
             ret = {b.retention if b.retention is not None else sd.retention for b in bodies}
             if len(ret) > 1:
@@ -378,13 +374,12 @@ class Simulation:
         sc = self.scene
         sd, dom, eff = sc.sand, sc.domain, sc.effects
         bodies = [b for b in sc.bodies if b.kind == "sand"]
-        densities = {b.density or sd.density for b in bodies}
         if not self.coupled and any(b.retention if b.retention is not None else sd.retention for b in bodies):
             self._log("note: water retention has no effect in a sand-only scene (no water to retain)")
         h0, h1, h2, h3 = sd.hardening
         s1, s2, s3 = sd.cohesion_saturation
         params = SandParams(
-            density=densities.pop(),
+            density=sd.density,
             youngs_modulus=sd.youngs_modulus,
             poisson_ratio=sd.poisson_ratio,
             h0=h0,
@@ -397,7 +392,7 @@ class Simulation:
             cohesion_s3=s3,
             hardening=eff.hardening,
         )
-        xs, vols, vels = [], [], []
+        xs, vols, vels, dens = [], [], [], []
         size = np.asarray(dom.size)
         for i, b in enumerate(bodies):
             shape = b.geometry.shape(dom, 0.25 * dom.dx)
@@ -409,6 +404,7 @@ class Simulation:
             xs.append(seeded.x)
             vols.append(sd.packing_fraction * seeded.volume)  # grain volume: ε0 of the sub-cell (module doc)
             vels.append(np.repeat(np.asarray(b.velocity, np.float64)[:, None], seeded.count, axis=1))
+            dens.append(np.full(seeded.count, b.density or sd.density))  # per-body grain density
         walls = DomainWalls.from_dict({_SAND_FACE[f]: Wall("separate", sd.wall_friction) for f in dom.boundary})
         obstacles = [b for b in sc.bodies if b.kind == "obstacle"]
         collider = None
@@ -425,6 +421,7 @@ class Simulation:
             np.concatenate(xs, axis=1),
             np.concatenate(vols),
             velocities=np.concatenate(vels, axis=1),
+            densities=np.concatenate(dens),
             gravity=dom.gravity,
             walls=walls,
             sdf_collider=collider,
@@ -478,8 +475,9 @@ class Simulation:
         return self.scheduler.stage_times()
 
     def cost_report(self) -> dict[str, dict[str, float]]:
-        """Per stage over every timed step since the solvers were built (or :meth:`reset_timing`):
-        ``total`` s, ``mean`` s per step, ``fraction`` of the step."""
+        """Per stage over every timed step since the solvers were built (or :meth:`reset_timing`), except the
+        first step of fresh solvers, which loads (or compiles) the kernels: ``total`` s, ``mean`` s per step,
+        ``fraction`` of the step."""
         return self.scheduler.cost_report()
 
     def reset_timing(self) -> None:
@@ -602,7 +600,12 @@ class Simulation:
         from .schedulers.lockstep import LockstepScheduler
 
         self.scheduler = LockstepScheduler(
-            self.fluid, self.sand, self.coupler, source_term=self.scene.effects.source_term, timing=self._timing
+            self.fluid,
+            self.sand,
+            self.coupler,
+            source_term=self.scene.effects.source_term,
+            timing=self._timing,
+            warm_up_steps=1,
         )
 
     def _build_coupler(self):

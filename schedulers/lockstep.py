@@ -129,10 +129,19 @@ class LockstepScheduler:
 
     ``source_term``: apply the phase-field source S_φ (Eq. 45); False for the paper's Fig. 14 ablation.
     ``timing``: time every stage (module docstring).  :meth:`stage_times` is the cost of each stage in the
-    last step, :meth:`cost_report` the totals and means over all timed steps.
+    last step, :meth:`cost_report` the totals and means over all timed steps but the first
+    ``warm_up_steps`` (steps that load or compile kernels, which are not a cost of the scene).
     """
 
-    def __init__(self, fluid=None, sand=None, coupler=None, source_term: bool = True, timing: bool = True):
+    def __init__(
+        self,
+        fluid=None,
+        sand=None,
+        coupler=None,
+        source_term: bool = True,
+        timing: bool = True,
+        warm_up_steps: int = 0,
+    ):
         if fluid is None and sand is None:
             raise ValueError("LockstepScheduler needs a fluid, a sand solver, or both")
         if fluid is not None and sand is not None:
@@ -147,6 +156,7 @@ class LockstepScheduler:
         self.fluid, self.sand, self.coupler = fluid, sand, coupler
         self.source_term = bool(source_term)
         self.timing = bool(timing)
+        self.warm_up_steps = int(warm_up_steps)
         self.backend = (fluid or sand).backend
         self.steps = 0
         self._in_fluid = False
@@ -202,7 +212,7 @@ class LockstepScheduler:
                 if self.fluid is not None:
                     self._fluid_step()
             self.steps += 1
-            if self.timing:
+            if self.timing and self.steps > self.warm_up_steps:
                 self._timed_steps += 1
                 for k, v in self._last.items():
                     self._total[k] = self._total.get(k, 0.0) + v

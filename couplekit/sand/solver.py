@@ -48,7 +48,9 @@ class SandSolver:
     dx: node spacing, m.   dt: time step, s (refused when above :meth:`max_stable_dt`).
     params: the sand material (:class:`SandParams`).
     positions: particle positions (3, P) in m (see :mod:`couplekit.sand.seeding`).
-    volumes: particle volumes (P,) or one number, m³; particle mass = params.density × volume.
+    volumes: particle volumes (P,) or one number, m³; particle mass = density × volume.
+    densities: per-particle density (P,) or one number, kg/m³ (default ``params.density``), e.g. sand bodies
+        of different densities in one scene; the elastic time-step limit uses the smallest (fastest c_p).
     velocities: initial particle velocities (3, P) or one 3-vector, m/s (default 0).
     gravity: m/s², default (0, 0, −9.81) (z up).
     walls: :class:`DomainWalls` (default: every face separating, friction 0.5, 2 node layers).
@@ -75,6 +77,7 @@ class SandSolver:
         colliders: Sequence[Collider] = (),
         sdf_collider: SdfCollider | None = None,
         saturation: np.ndarray | float | None = None,
+        densities: np.ndarray | float | None = None,
         cfl: float = 0.5,
         elastic_cfl: float = 0.5,
         cfl_check_every: int = 20,
@@ -123,6 +126,11 @@ class SandSolver:
         vel = np.zeros((3, n)) if velocities is None else np.asarray(velocities, dtype=np.float64)
         vel = np.broadcast_to(vel.reshape(3, -1) if vel.ndim == 1 else vel, (3, n))
         sat = np.zeros(n) if saturation is None else np.broadcast_to(np.asarray(saturation, dtype=np.float64), (n,))
+        rho = np.broadcast_to(np.asarray(params.density if densities is None else densities, dtype=np.float64), (n,))
+        if not np.all(rho > 0):
+            raise ValueError("particle densities must be > 0")
+        self.min_density = float(rho.min())
+        """Smallest particle density, kg/m³ (sets the P-wave speed of the elastic time-step limit)."""
 
         f32 = np.float32
         self.n_particles = n
@@ -135,7 +143,7 @@ class SandSolver:
         self.vc = xp.zeros(n, dtype=f32)
         self.saturation = be.asarray(sat, f32)
         self.volume = be.asarray(vol, f32)
-        self.mass = be.asarray(vol * params.density, f32)
+        self.mass = be.asarray(vol * rho, f32)
 
         self.grid_m = xp.zeros(self.shape, dtype=f32)
         self.grid_mv = xp.zeros((3, *self.shape), dtype=f32)
@@ -153,9 +161,14 @@ class SandSolver:
         self.set_dt(dt)
 
     # ------------------------------------------------------------------ time step
+    @property
+    def p_wave_speed(self) -> float:
+        """c_p = sqrt((λ + 2μ)/ϱ) at the smallest particle density, m/s (the fastest elastic wave)."""
+        return self.params.p_wave_speed * (self.params.density / self.min_density) ** 0.5
+
     def max_stable_dt(self) -> float:
         """Largest stable Δt: min(C_e dx / c_p, C_v dx / max|v_p|) (notes §4; c_p the P-wave speed)."""
-        elastic = self.elastic_cfl * self.dx / self.params.p_wave_speed
+        elastic = self.elastic_cfl * self.dx / self.p_wave_speed
         vmax = self._max_speed()
         return min(elastic, self.cfl * self.dx / vmax) if vmax > 0 else elastic
 
@@ -169,12 +182,12 @@ class SandSolver:
     def _check_dt(self, dt: float) -> None:
         limit = self.max_stable_dt()
         if dt > limit:
-            elastic = self.elastic_cfl * self.dx / self.params.p_wave_speed
+            elastic = self.elastic_cfl * self.dx / self.p_wave_speed
             vmax = self._max_speed()
             raise TimeStepError(
                 f"MPM time step {dt:.4g} s exceeds the stability limit {limit:.4g} s "
                 f"(elastic: {self.elastic_cfl} dx / c_p = {elastic:.4g} s with c_p = "
-                f"{self.params.p_wave_speed:.4g} m/s; particle CFL: {self.cfl} dx / max|v| with max|v| = "
+                f"{self.p_wave_speed:.4g} m/s; particle CFL: {self.cfl} dx / max|v| with max|v| = "
                 f"{vmax:.4g} m/s); use dt <= {limit:.4g} s, or a softer sand / coarser grid"
             )
 
