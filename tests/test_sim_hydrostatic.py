@@ -73,7 +73,11 @@ def test_single_phase_tank_stays_at_rest(monkeypatch):
     pressure wave of speed amplitude ~ g_lat H / c_s = 8e-4 rings through the tank (measured max 2.3e-4
     over these steps: the wave is damped and spread). With the hydrostatic start what is left is the
     discretisation of the walls (measured 1.1e-5). The bound sits between, a factor ~4 from each; the
-    same tank started from p = 0 is run too and must exceed it."""
+    same tank started from p = 0 is run too and must exceed it.
+
+    If this fails after a change of the fluid's collision or forcing, the balance of gravity against the
+    pressure gradient at rest got worse: do not widen the bound without finding out why (an odd-moment
+    relaxation change tried in the working tree gave 4.7e-5 here, growing at the lid and floor)."""
     hydro = _speeds(Simulation(Scene.from_dict(_tank(1)), backend="cpu", log=None), 300).max()
     monkeypatch.setattr(simulation, "hydrostatic_pressure", lambda *a, **k: None)
     cold = _speeds(Simulation(Scene.from_dict(_tank(1)), backend="cpu", log=None), 300).max()
