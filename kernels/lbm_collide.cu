@@ -55,11 +55,30 @@ LBM_INLINE void chimera_backward2_k0only(float& a0, float& a1, float& a2, const 
     a2 = S + T;
 }
 
+// Forward chimera step along one axis: populations (f-, f0, f+) -> central moments (k0, k1, k2) about u, in place:
+//   k0 = f- + f0 + f+,  k1 = (f+ - f-) - u k0,  k2 = (f+ + f-) - 2u (f+ - f-) + u^2 k0.
+LBM_INLINE void chimera_forward(float& a0, float& a1, float& a2, const float u) {
+    const float s = a0 + a2, d = a2 - a0, k0 = s + a1;
+    a0 = k0;
+    a1 = d - u * k0;
+    a2 = s - (u + u) * d + u * u * k0;
+}
+
 #define CUBE(q) ((CX27[q] + 1) * 9 + (CY27[q] + 1) * 3 + (CZ27[q] + 1))
 // direction q of cube index (c_x + 1) * 9 + (c_y + 1) * 3 + (c_z + 1) (inverse of CUBE; lattice.cuh order)
 CONSTANT int QOF27[27] = {20, 8, 22, 10, 2, 16, 24, 14, 25, 12, 4, 18, 6, 0,
                           5, 17, 3, 11, 26, 13, 23, 15, 1, 9, 21, 7, 19};
 #define LBM_QOF(i) QOF27[i]
+
+// all 27 central moments kc[a*9 + b*3 + c] about (ux, uy, uz) of the populations fj (by direction; must not
+// alias kc): z, y, x passes
+LBM_INLINE void lbm_central_moments(const float* RESTRICT fj, const float ux, const float uy, const float uz,
+                                    float* RESTRICT kc) {
+    for (int i = 0; i < 27; ++i) kc[i] = fj[QOF27[i]];
+    for (int l = 0; l < 9; ++l) chimera_forward(kc[l * 3], kc[l * 3 + 1], kc[l * 3 + 2], uz);
+    for (int l = 0; l < 9; ++l) chimera_forward(kc[l / 3 * 9 + l % 3], kc[l / 3 * 9 + 3 + l % 3], kc[l / 3 * 9 + 6 + l % 3], uy);
+    for (int l = 0; l < 9; ++l) chimera_forward(kc[l], kc[9 + l], kc[18 + l], ux);
+}
 
 // host rows are processed in chunks of this many cells (the link masks of a chunk live on the stack)
 #define LBM_ROW_CHUNK 512
@@ -72,7 +91,8 @@ LBM_INLINE void lbm_collide_cell(const long long c, float* RESTRICT f, const uns
                                  const float* RESTRICT eps, const float* RESTRICT force,
                                  const float* RESTRICT pbar, const int px, const long long pxy, const long long N,
                                  const float rho_h, const float rho_l, const float nu_h, const float nu_l,
-                                 const float gx, const float gy, const float gz, const unsigned int mask) {
+                                 const float gx, const float gy, const float gz, const float c_les,
+                                 const float lambda_odd, const float odd_nu_max, const unsigned int mask) {
     float fj[27];
     lbm_load<ODD>(f, c, N, px, pxy, fj);
 
@@ -118,7 +138,6 @@ LBM_INLINE void lbm_collide_cell(const long long c, float* RESTRICT f, const uns
     const float rho = rho_h;
     const float nu = nu_h;
 #endif
-    const float rs = 1.f / (3.f * nu + 0.5f);
     const float inv_rho = 1.f / rho;
 #if CK_MIXTURE
     const float e = eps[c];
@@ -146,18 +165,31 @@ LBM_INLINE void lbm_collide_cell(const long long c, float* RESTRICT f, const uns
     ay += force[N + c] * inv_erho;
     az += force[2 * N + c] * inv_erho;
 #endif
+    // pre-collision second central moments about the velocity shifted by the forces so far (all but F_mu)
+    const float vx = mx + 0.5f * ax, vy = my + 0.5f * ay, vz = mz + 0.5f * az;
+    const float vkxx = mxx - 2.f * vx * mx + vx * vx * m0;
+    const float vkyy = myy - 2.f * vy * my + vy * vy * m0;
+    const float vkzz = mzz - 2.f * vz * mz + vz * vz * m0;
+    const float vkxy = mxy - vx * my - vy * mx + vx * vy * m0;
+    const float vkxz = mxz - vx * mz - vz * mx + vx * vz * m0;
+    const float vkyz = myz - vy * mz - vz * my + vy * vz * m0;
+    const float vtr3 = (vkxx + vkyy + vkzz) * (1.f / 3.f);
+    // Smagorinsky subgrid viscosity (Hou et al. 1996) from the deviatoric non-equilibrium stress
+    // Q = |dev kappa_2| (its equilibrium is 0): tau = (tau0 + sqrt(tau0^2 + 18 sqrt(2) C^2 Q)) / 2, i.e.
+    // nu_t = (C dx)^2 |S| with |S| = sqrt(2 S:S) taken from Q / (2 c_s^2 tau).  C = 0 (c_les) leaves nu.
+    float tau = 3.f * nu + 0.5f;
+    if (c_les > 0.f) {
+        const float dxx = vkxx - vtr3, dyy = vkyy - vtr3, dzz = vkzz - vtr3;
+        const float q2 = dxx * dxx + dyy * dyy + dzz * dzz + 2.f * (vkxy * vkxy + vkxz * vkxz + vkyz * vkyz);
+        tau = 0.5f * (tau + sqrtf(tau * tau + 25.455844f * c_les * c_les * sqrtf(q2)));
+    }
+    const float rs = 1.f / tau;
 #if CK_TWO_PHASE || CK_MIXTURE
     {
         // viscous correction F_mu = nu grad^sym u . [grad rho + (rho/eps) grad eps]   (Eq. 16), with
         // grad^sym u ~ -3 r_s dev(kappa_2) + (2/3)(1 - m0) I from the pre-collision central moments
-        const float vx = mx + 0.5f * ax, vy = my + 0.5f * ay, vz = mz + 0.5f * az;
-        const float kxx = mxx - 2.f * vx * mx + vx * vx * m0;
-        const float kyy = myy - 2.f * vy * my + vy * vy * m0;
-        const float kzz = mzz - 2.f * vz * mz + vz * vz * m0;
-        const float kxy = mxy - vx * my - vy * mx + vx * vy * m0;
-        const float kxz = mxz - vx * mz - vz * mx + vx * vz * m0;
-        const float kyz = myz - vy * mz - vz * my + vy * vz * m0;
-        const float tr3 = (kxx + kyy + kzz) * (1.f / 3.f);
+        // (nu and r_s include the subgrid viscosity)
+        const float kxx = vkxx, kyy = vkyy, kzz = vkzz, kxy = vkxy, kxz = vkxz, kyz = vkyz, tr3 = vtr3;
         const float iso = (2.f / 3.f) * (1.f - m0);
         const float s = -3.f * rs;
         const float sxx = s * (kxx - tr3) + iso, syy = s * (kyy - tr3) + iso, szz = s * (kzz - tr3) + iso;
@@ -175,7 +207,7 @@ LBM_INLINE void lbm_collide_cell(const long long c, float* RESTRICT f, const uns
         g1 += rho / e * ge[1];
         g2 += rho / e * ge[2];
 #endif
-        const float k = nu / (e * rho);
+        const float k = (tau - 0.5f) * (1.f / 3.f) / (e * rho);
         ax += k * (sxx * g0 + sxy * g1 + sxz * g2);
         ay += k * (sxy * g0 + syy * g1 + syz * g2);
         az += k * (sxz * g0 + syz * g1 + szz * g2);
@@ -208,21 +240,56 @@ LBM_INLINE void lbm_collide_cell(const long long c, float* RESTRICT f, const uns
     float K[27];
     // backward chimera transform: x (folding the known zeros), then y, then z; afterwards K holds the
     // populations by cube index (c_x + 1) * 9 + (c_y + 1) * 3 + (c_z + 1)
-    K[0] = 0.125f, K[9] = hax, K[18] = k200;  // bc = 00
-    chimera_backward2(K[0], K[9], K[18], ux, ux2, uxx);
-    K[1] = haz, K[10] = om8 * kxz, K[19] = saz;  // 01
-    chimera_backward2(K[1], K[10], K[19], ux, ux2, uxx);
-    K[2] = k200 - dxz8, K[11] = sax, K[20] = 1.f / 72.f;  // 02
-    chimera_backward2(K[2], K[11], K[20], ux, ux2, uxx);
-    K[3] = hay, K[12] = om8 * kxy, K[21] = say;  // 10
-    chimera_backward2(K[3], K[12], K[21], ux, ux2, uxx);
-    chimera_backward2_k0only(K[4], K[13], K[22], om8 * kyz, ux, uxx);                        // 11
-    chimera_backward2_k1zero(K[5], K[14], K[23], say, ay * (1.f / 144.f), ux, uxx);          // 12
-    K[6] = k200 - dxy8, K[15] = sax, K[24] = 1.f / 72.f;  // 20
-    chimera_backward2(K[6], K[15], K[24], ux, ux2, uxx);
-    chimera_backward2_k1zero(K[7], K[16], K[25], saz, az * (1.f / 144.f), ux, uxx);          // 21
-    K[8] = 1.f / 72.f, K[17] = ax * (1.f / 144.f), K[26] = 1.f / 216.f;  // 22
-    chimera_backward2(K[8], K[17], K[26], ux, ux2, uxx);
+    if (lambda_odd > 0.f) {
+        // odd central moments (orders 3 and 5: K120, K102, K210, K012, K201, K021, K111, K122, K212, K221)
+        // relax at r_o = min(1, 1 / (1/2 + Lambda / (tau - 1/2))) instead of 1, towards their forced value k^F / 2
+        // (the rate-1 value above, k*_1): k* = k - r_o (k - k^F / 2) = r_o k*_1 + (1 - r_o) k.  (Guo's (1 - r/2) k^F
+        // would make the steady odd moments (1 - r_o/2) k^F / r_o, 50x the paper's at r_o = 0.02: measured to lift
+        // a saturated sand bed by 3 cells.)  The two-relaxation-time "magic" product Lambda = (1/r_s - 1/2)
+        // (1/r_o - 1/2) is kept >= lambda_odd.  At r_o = 1 and nu_h = 1e-4 (Lambda = 1.5e-4) the no-slip walls'
+        // edges and corners are linearly unstable (docs/fluid-stability.md).  The populations are read again
+        // (same addresses, nothing stored yet) rather than kept live through the force computation.
+        float ro = 1.f / (0.5f + lambda_odd / (tau - 0.5f));
+        ro = (ro < 1.f && nu < odd_nu_max) ? ro : 1.f;  // only where nu < odd_nu_max (see reference.odd_rate)
+#if CK_MIXTURE
+        ro = e < 1.f ? 1.f : ro;  // and in sand-free cells only
+#endif
+        const float co = 0.125f * (1.f - ro), rf = ro;  // k* = (1 - r_o) k + r_o k^F / 2
+        float kc[27];
+        {
+            float fr[27];
+            lbm_load<ODD>(f, c, N, px, pxy, fr);
+            lbm_central_moments(fr, ux, uy, uz, kc);
+        }
+        K[0] = 0.125f, K[9] = hax, K[18] = k200;
+        K[1] = haz, K[10] = om8 * kxz, K[19] = rf * saz + co * kc[19];
+        K[2] = k200 - dxz8, K[11] = rf * sax + co * kc[11], K[20] = 1.f / 72.f;
+        K[3] = hay, K[12] = om8 * kxy, K[21] = rf * say + co * kc[21];
+        K[4] = om8 * kyz, K[13] = co * kc[13], K[22] = 0.f;
+        K[5] = rf * say + co * kc[5], K[14] = 0.f, K[23] = rf * ay * (1.f / 144.f) + co * kc[23];
+        K[6] = k200 - dxy8, K[15] = rf * sax + co * kc[15], K[24] = 1.f / 72.f;
+        K[7] = rf * saz + co * kc[7], K[16] = 0.f, K[25] = rf * az * (1.f / 144.f) + co * kc[25];
+        K[8] = 1.f / 72.f, K[17] = rf * ax * (1.f / 144.f) + co * kc[17], K[26] = 1.f / 216.f;
+#define LBM_BACK_X(l) chimera_backward2(K[l], K[9 + (l)], K[18 + (l)], ux, ux2, uxx);
+        LBM_REP9(LBM_BACK_X, 0)
+#undef LBM_BACK_X
+    } else {
+        K[0] = 0.125f, K[9] = hax, K[18] = k200;  // bc = 00
+        chimera_backward2(K[0], K[9], K[18], ux, ux2, uxx);
+        K[1] = haz, K[10] = om8 * kxz, K[19] = saz;  // 01
+        chimera_backward2(K[1], K[10], K[19], ux, ux2, uxx);
+        K[2] = k200 - dxz8, K[11] = sax, K[20] = 1.f / 72.f;  // 02
+        chimera_backward2(K[2], K[11], K[20], ux, ux2, uxx);
+        K[3] = hay, K[12] = om8 * kxy, K[21] = say;  // 10
+        chimera_backward2(K[3], K[12], K[21], ux, ux2, uxx);
+        chimera_backward2_k0only(K[4], K[13], K[22], om8 * kyz, ux, uxx);                // 11
+        chimera_backward2_k1zero(K[5], K[14], K[23], say, ay * (1.f / 144.f), ux, uxx);  // 12
+        K[6] = k200 - dxy8, K[15] = sax, K[24] = 1.f / 72.f;  // 20
+        chimera_backward2(K[6], K[15], K[24], ux, ux2, uxx);
+        chimera_backward2_k1zero(K[7], K[16], K[25], saz, az * (1.f / 144.f), ux, uxx);  // 21
+        K[8] = 1.f / 72.f, K[17] = ax * (1.f / 144.f), K[26] = 1.f / 216.f;  // 22
+        chimera_backward2(K[8], K[17], K[26], ux, ux2, uxx);
+    }
 #define LBM_BACK_Y(i) chimera_backward2(K[(i) / 3 * 9 + (i) % 3], K[(i) / 3 * 9 + 3 + (i) % 3], K[(i) / 3 * 9 + 6 + (i) % 3], uy, uy2, uyy);
     LBM_REP9(LBM_BACK_Y, 0)
 #undef LBM_BACK_Y
@@ -251,11 +318,12 @@ KERNEL void lbm_collide_stream(const long long n, float* RESTRICT f /* size: 27 
                                const float* RESTRICT pbar /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                                const int parity, const int nx, const int ny, const int nz, const float rho_h,
                                const float rho_l, const float nu_h, const float nu_l, const float gx,
-                               const float gy, const float gz) {
+                               const float gy, const float gz, const float c_les,
+                               const float lambda_odd, const float odd_nu_max) {
     const int px = nx + 2;
     const long long pxy = (long long)px * (ny + 2);
     const long long N = pxy * (nz + 2);
-#define LBM_CELL_ARGS f, flags, vel, phi, mu, eps, force, pbar, px, pxy, N, rho_h, rho_l, nu_h, nu_l, gx, gy, gz
+#define LBM_CELL_ARGS f, flags, vel, phi, mu, eps, force, pbar, px, pxy, N, rho_h, rho_l, nu_h, nu_l, gx, gy, gz, c_les, lambda_odd, odd_nu_max
 #if CK_ON_GPU
     // one thread per cell; the flag tests of the stencils cost little next to the memory traffic
 #define LBM_COLLIDE_LOOP(ODD)                                                    \

@@ -139,6 +139,9 @@ class KernelOps:
         gx: float,
         gy: float,
         gz: float,
+        smagorinsky: float = 0.0,
+        odd_lambda: float = 0.0,
+        odd_nu_max: float = 1.0,
     ) -> None:
         """Fused forces + NOCM-MRT collision + AA streaming (see ReferenceOps.collide_stream)."""
         n, nx, ny, nz = self._interior(flags)
@@ -158,7 +161,7 @@ class KernelOps:
             np.int32(nx),
             np.int32(ny),
             np.int32(nz),
-            *(np.float32(v) for v in (rho_h, rho_l, nu_h, nu_l, gx, gy, gz)),
+            *(np.float32(v) for v in (rho_h, rho_l, nu_h, nu_l, gx, gy, gz, smagorinsky, odd_lambda, odd_nu_max)),
         )
         if parity & 1:
             self._wall_call(self._bounce, f, flags, velocity)

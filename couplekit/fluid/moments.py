@@ -59,6 +59,9 @@ BASIS_INV = np.linalg.inv(BASIS)
 SHEAR_ROWS = (4, 5, 6, 7, 8)
 """Rows relaxed with the shear rate r_s (the deviatoric second-order moments); every other rate is 1."""
 
+ODD_ROWS = (10, 11, 12, 13, 14, 15, 16, 23, 24, 25)
+"""Rows of odd total order (3 and 5): the antisymmetric moments, relaxed at the odd rate (1 in the paper)."""
+
 
 def _kappa_table(values_1d: tuple[float, float, float]) -> np.ndarray:
     v = np.asarray(values_1d)

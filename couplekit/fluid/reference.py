@@ -88,6 +88,20 @@ def local_average(s: np.ndarray, flags: np.ndarray) -> np.ndarray:
     return out
 
 
+def odd_rate(r_s, odd_lambda: float):
+    """Relaxation rate of the odd central moments (orders 3 and 5): r_o = min(1, 1 / (½ + Λ / (1/r_s − ½))).
+
+    The two-relaxation-time "magic" product Λ = (1/r_s − ½)(1/r_o − ½) (Ginzburg 2008) of the even (shear)
+    and odd rates is thereby kept ≥ ``odd_lambda``; with the paper's r_o = 1 it is Λ = 3ν/2, which at
+    ν = 1e-4 leaves the half-way bounce-back walls' edges and corners linearly unstable (an eigenvalue
+    −1.007 per step of the linearised step at rest, docs/fluid-stability.md). ``odd_lambda`` = 0 keeps
+    r_o = 1; cells whose viscosity gives Λ ≥ ``odd_lambda`` at r_o = 1 keep 1.
+    """
+    if odd_lambda <= 0:
+        return 1.0
+    return np.minimum(1.0, 1.0 / (0.5 + odd_lambda / (1.0 / np.asarray(r_s, np.float64) - 0.5)))
+
+
 def equilibrium(u: np.ndarray) -> np.ndarray:
     """Density-normalised D3Q27 equilibrium (27, ...) for velocity u (3, ...): sixth-order Hermite, product form.
 
@@ -168,6 +182,13 @@ class ReferenceOps:
         ph = np.clip(interior(phi).astype(np.float64), 0.0, 1.0)
         return rho_l + (rho_h - rho_l) * ph
 
+    def _viscosity(self, phi, rho_h: float, rho_l: float, nu_h: float, nu_l: float) -> np.ndarray | float:
+        """Eq. 4: kinematic viscosity μ/ρ with μ = μ_l + (μ_h − μ_l) φ (φ clamped); ν_h single-phase."""
+        if not self.two_phase:
+            return float(nu_h)
+        ph = np.clip(interior(phi).astype(np.float64), 0.0, 1.0)
+        return (rho_l * nu_l + (rho_h * nu_h - rho_l * nu_l) * ph) / self._density(phi, rho_h, rho_l)
+
     # ------------------------------------------------------------------------------------------ stages
     def macro_pressure(self, f, flags, velocity, phi, eps, sand_v, p, parity: int, rho_h: float, rho_l: float) -> None:
         """Pressure update, Eq. 39, in place on the interior fluid cells of ``p``.
@@ -205,24 +226,23 @@ class ReferenceOps:
         fluid = interior(flags) == FLUID
         interior(pbar)[fluid] = local_average(p, flags)[fluid]
 
-    def forces(self, fi, flags, phi, mu, eps, force, pbar, rho_h, rho_l, nu_h, nu_l, gravity):
+    def forces(self, fi, flags, phi, mu, eps, force, pbar, rho_h, rho_l, nu_h, nu_l, gravity, smagorinsky=0.0):
         """Acceleration a (3, ...) of Eq. 15 and the shifted velocity u = Σ f c + a/2, for populations fi.
 
         a = F_μ/(ερ) − ∇p̄/ρ + F_s/ρ + g + F_ext/(ερ), with F_s = μ_φ ∇φ (Eq. 20) and the viscous correction
         F_μ = ν ∇^sym u · [∇ρ + (ρ/ε)∇ε] (Eq. 16). ∇^sym u is estimated from the pre-collision
         non-equilibrium central second moments, ∇^sym u ≈ −3 r_s dev(κ_2) + (2/3)(1 − Σf) I (note §1a), about
         the velocity shifted by the other forces. Returns (a, u, r_s).
+
+        ``smagorinsky`` = C > 0 adds the Smagorinsky subgrid viscosity ν_t = (C Δx)² |S̄|, |S̄| = √(2 S:S)
+        (Hou et al. 1996), with the strain rate from the same deviatoric non-equilibrium moments,
+        S = −dev(κ_2)/(2 c_s² τ): solving τ = τ0 + 3 ν_t(τ) gives τ = (τ0 + √(τ0² + 18√2 C² Q))/2 with
+        Q = |dev κ_2| (its equilibrium is 0). ν and r_s of the collision and of F_μ then include ν_t.
         """
         s0 = fi.sum(axis=0)
         m = np.einsum("jd,j...->d...", C27.astype(np.float64), fi)
         rho = self._density(phi, rho_h, rho_l)
-        if self.two_phase:
-            ph = np.clip(interior(phi).astype(np.float64), 0.0, 1.0)
-            mu_dyn = rho_l * nu_l + (rho_h * nu_h - rho_l * nu_l) * ph  # Eq. 4
-            nu = mu_dyn / rho
-        else:
-            nu = np.full(s0.shape, float(nu_h))
-        r_s = 1.0 / (nu / CS2 + 0.5)
+        nu = self._viscosity(phi, rho_h, rho_l, nu_h, nu_l) * np.ones(s0.shape)
         e = interior(eps).astype(np.float64) if self.mixture else 1.0
         a = -isotropic_gradient(pbar, flags, extrapolate=True) / rho
         a = a + np.asarray(gravity, np.float64).reshape(3, 1, 1, 1)
@@ -232,17 +252,24 @@ class ReferenceOps:
                 a = a + interior(mu).astype(np.float64) * grad_phi / rho
         if self.external_force:
             a = a + interior(force).astype(np.float64) / (e * rho)
+        # pre-collision second central moments about the velocity shifted by the forces so far (all but F_μ)
+        u0 = m + 0.5 * a
+        kappa = moments.to_central(fi, u0).reshape((3, 3, 3) + s0.shape)
+        k2 = np.empty((3, 3) + s0.shape)
+        unit = np.eye(3, dtype=int)
+        for i in range(3):
+            for k in range(3):
+                a_, b_, c_ = unit[i] + unit[k]
+                k2[i, k] = kappa[a_, b_, c_]
+        dev_k2 = k2 - np.eye(3).reshape(3, 3, 1, 1, 1) * (k2[0, 0] + k2[1, 1] + k2[2, 2]) / 3.0
+        tau = nu / CS2 + 0.5
+        if smagorinsky > 0:
+            q = np.sqrt(np.einsum("ik...,ik...->...", dev_k2, dev_k2))
+            tau = 0.5 * (tau + np.sqrt(tau * tau + 18.0 * np.sqrt(2.0) * smagorinsky**2 * q))
+            nu = CS2 * (tau - 0.5)
+        r_s = 1.0 / tau
         if self.two_phase or self.mixture:
-            u0 = m + 0.5 * a
-            kappa = moments.to_central(fi, u0).reshape((3, 3, 3) + s0.shape)
-            k2 = np.empty((3, 3) + s0.shape)
-            unit = np.eye(3, dtype=int)
-            for i in range(3):
-                for k in range(3):
-                    a_, b_, c_ = unit[i] + unit[k]
-                    k2[i, k] = kappa[a_, b_, c_]
-            trace = k2[0, 0] + k2[1, 1] + k2[2, 2]
-            sym_grad = -3.0 * r_s * (k2 - np.eye(3).reshape(3, 3, 1, 1, 1) * trace / 3.0)
+            sym_grad = -3.0 * r_s * dev_k2
             sym_grad = sym_grad + np.eye(3).reshape(3, 3, 1, 1, 1) * (2.0 / 3.0) * (1.0 - s0)
             g = np.zeros((3,) + s0.shape)
             if self.two_phase:
@@ -254,12 +281,13 @@ class ReferenceOps:
         return a, m + 0.5 * a, r_s
 
     @staticmethod
-    def collide(fi: np.ndarray, u: np.ndarray, a: np.ndarray, r_s: np.ndarray) -> np.ndarray:
+    def collide(fi: np.ndarray, u: np.ndarray, a: np.ndarray, r_s: np.ndarray, r_o=1.0) -> np.ndarray:
         """NOCM-MRT collision with forcing, Eqs. 9, 11, 12, in the polynomial central-moment basis.
 
-        k* = k − R (k − k^eq) + (I − R/2) k^F, R = diag(r_j): r_s for k4…k8 (shear), 1 for every other row,
-        including k0 (the zeroth moment is reset to 1 each step, note §1a); k^F are the central moments of
-        the Guo forcing term. Returns f* (27, ...).
+        k* = k − R (k − k^eq) + (I − R/2) k^F, R = diag(r_j): r_s for k4…k8 (shear), ``r_o`` for the odd
+        rows k10…k16, k23…k25 (third and fifth order; 1 in the paper, see :func:`odd_rate`), 1 for every
+        other row, including k0 (the zeroth moment is reset to 1 each step, note §1a); k^F are the central
+        moments of the Guo forcing term. Returns f* (27, ...).
         """
         k = np.einsum("ab,b...->a...", moments.BASIS, moments.to_central(fi, u))
         k_eq = moments.K_EQ.reshape((27,) + (1,) * (fi.ndim - 1))
@@ -268,6 +296,10 @@ class ReferenceOps:
         for row in moments.SHEAR_ROWS:
             rates[row] = r_s
         k_star = k - rates * (k - k_eq) + (1.0 - rates / 2.0) * k_f
+        # odd rows relax towards their forced value k^F / 2 (the paper's rate-1 result):
+        # k* = k − r_o (k − k^F / 2); Guo's (1 − r_o/2) k^F would pile the odd moments up to k^F / r_o
+        odd = list(moments.ODD_ROWS)
+        k_star[odd] = k[odd] - r_o * (k[odd] - 0.5 * k_f[odd])
         return moments.from_central(np.einsum("ab,b...->a...", moments.BASIS_INV, k_star), u)
 
     def collide_stream(
@@ -288,11 +320,24 @@ class ReferenceOps:
         gx: float,
         gy: float,
         gz: float,
+        smagorinsky: float = 0.0,
+        odd_lambda: float = 0.0,
+        odd_nu_max: float = 1.0,
     ) -> None:
-        """Fused collide + stream (Eqs. 8-10): forces, NOCM-MRT collision, AA store; writes u to ``velocity``."""
+        """Fused collide + stream (Eqs. 8-10): forces, NOCM-MRT collision, AA store; writes u to ``velocity``.
+        ``smagorinsky``: the Smagorinsky constant C of the subgrid viscosity (0 = off, the paper's model);
+        ``odd_lambda``: the floor Λ of the odd-moment rate (:func:`odd_rate`; 0 = rate 1, the paper's), applied in
+        sand-free cells whose molecular viscosity is below ``odd_nu_max``."""
         fi = self.load(f, flags, velocity, parity)
-        a, u, r_s = self.forces(fi, flags, phi, mu, eps, force, pbar, rho_h, rho_l, nu_h, nu_l, (gx, gy, gz))
-        fstar = self.collide(fi, u, a, r_s)
+        a, u, r_s = self.forces(
+            fi, flags, phi, mu, eps, force, pbar, rho_h, rho_l, nu_h, nu_l, (gx, gy, gz), smagorinsky
+        )
+        r_o = odd_rate(r_s, odd_lambda)
+        # the floor acts only in cells of molecular viscosity below odd_nu_max, and without sand (see odd_rate)
+        r_o = np.where(self._viscosity(phi, rho_h, rho_l, nu_h, nu_l) < odd_nu_max, r_o, 1.0)
+        if self.mixture:
+            r_o = np.where(interior(eps) < 1.0, 1.0, r_o)
+        fstar = self.collide(fi, u, a, r_s, r_o)
         self.store(f, flags, velocity, parity, fstar)
         fluid = interior(flags) == FLUID
         for d in range(3):

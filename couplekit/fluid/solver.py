@@ -56,6 +56,17 @@ class FluidParams:
     pressure field") replaces p by p̄ every step; False keeps p unfiltered and uses p̄ only for the force.
     The stored filter is what keeps the 800:1, ν_h = 1e-4 regime stable: without it the pressure of the
     light phase grows exponentially within ~300 steps of a column collapse (measured at 32³).
+    ``odd_lambda``: floor Λ of the two-relaxation-time product (1/r_s − ½)(1/r_o − ½) that sets the rate r_o of
+    the odd central moments (orders 3, 5; :func:`~couplekit.fluid.reference.odd_rate`). The paper relaxes
+    them at 1, which at its ν_h = 1e-4 makes the edges and corners of no-slip walls linearly unstable (a
+    period-2 oscillation along the edge, ×e every ~150 steps; docs/fluid-stability.md). The default 0.015
+    lies inside the window measured stable (linear ≥ 0.01, non-linear noise tests ≤ 0.02; 0.03 diverges in
+    a closed box). It acts only in sand-free cells whose viscosity is below ``odd_nu_max`` (default 5e-4:
+    ν = 1e-3 is stable at rate 1, and there, and inside sand beds, the floor was measured to disturb the
+    coupled validations: a floating ball 0.8 cell high, a saturated bed lifted 3 cells). 0 = the paper's
+    collision exactly.
+    ``smagorinsky``: Smagorinsky constant C of a subgrid viscosity ν_t = (C Δx)² |S̄| added to ν (0 = off, the
+    default and the paper's model); 0.1–0.17 is usual for under-resolved turbulent flows.
     """
 
     rho_h: float = 1.0
@@ -68,6 +79,9 @@ class FluidParams:
     width: float = 4.0
     eta: float = 0.0
     store_filtered_pressure: bool = True
+    smagorinsky: float = 0.0
+    odd_lambda: float = 0.015
+    odd_nu_max: float = 5e-4
 
     def __post_init__(self) -> None:
         for name in ("rho_h", "rho_l", "nu_h", "nu_l", "mobility", "width"):
@@ -75,6 +89,12 @@ class FluidParams:
                 raise ValueError(f"FluidParams.{name} must be > 0, got {getattr(self, name)}")
         if self.sigma < 0 or self.eta < 0:
             raise ValueError("FluidParams.sigma and .eta must be >= 0")
+        if not self.odd_nu_max > 0:
+            raise ValueError(f"FluidParams.odd_nu_max must be > 0, got {self.odd_nu_max}")
+        if not 0.0 <= self.odd_lambda <= 1.0:
+            raise ValueError(f"FluidParams.odd_lambda must be in [0, 1] (e.g. 0.25), got {self.odd_lambda}")
+        if not 0.0 <= self.smagorinsky <= 1.0:
+            raise ValueError(f"FluidParams.smagorinsky must be in [0, 1] (typical 0.1-0.2), got {self.smagorinsky}")
         if len(self.gravity) != 3:
             raise ValueError(f"FluidParams.gravity needs 3 components, got {self.gravity!r}")
 
@@ -117,6 +137,11 @@ class FluidSolver:
         if len(self.shape) != 3 or min(self.shape) < 2:
             raise ValueError(f"shape must be (nz, ny, nx) with every extent >= 2, got {shape!r}")
         self.params = params
+        # the odd-rate floor acts only where nu < 2 Λ / 3 (see reference.odd_rate); 0 when no cell can reach it,
+        # so the kernel keeps its rate-1 fast path
+        nu_min = min(params.nu_h, params.nu_l) if phi is not None else params.nu_h
+        active = nu_min < min(2.0 * params.odd_lambda / 3.0, params.odd_nu_max)
+        self._odd_lambda = params.odd_lambda if active else 0.0
         self.boundaries = boundaries or Boundaries()
         self.two_phase = phi is not None
         self.surface_tension = self.two_phase and params.sigma > 0
@@ -264,7 +289,8 @@ class FluidSolver:
             ops.halo_copy(force_p, self._ghost, self._image)
             ops.collide_stream(
                 self.f, self.flags, self.velocity, self.phi, self.mu, self.fluid_fraction, self.force, force_p,
-                parity, prm.rho_h, prm.rho_l, prm.nu_h, prm.nu_l, *prm.gravity,
+                parity, prm.rho_h, prm.rho_l, prm.nu_h, prm.nu_l, *prm.gravity, prm.smagorinsky, self._odd_lambda,
+                prm.odd_nu_max,
             )  # fmt: skip
             if parity:
                 ops.fold(self.f, self._ghost, self._image)
