@@ -309,6 +309,8 @@ class Simulation:
             mobility=fl.mobility,
             width=fl.interface_width,
             eta=fl.controller_eta if eff.volume_controller else 0.0,
+            odd_lambda=fl.odd_lambda,
+            smagorinsky=fl.smagorinsky,
         )
         inflow = {i.face: i for i in sc.inflows if i.shape == "face"}
         faces, regions = {}, []

@@ -118,6 +118,8 @@ class Fluid:
     interface_width: float
     mobility: float
     controller_eta: float
+    odd_lambda: float = 0.015
+    smagorinsky: float = 0.1
 
 
 @dataclass(frozen=True)
@@ -671,6 +673,8 @@ def _fluid(flu: dict, raw: dict, domain: Domain | None, tim: dict, problems: lis
             "interface_width",
             "mobility",
             "controller_eta",
+            "odd_lambda",
+            "smagorinsky",
         )
     ):
         return None
@@ -684,6 +688,8 @@ def _fluid(flu: dict, raw: dict, domain: Domain | None, tim: dict, problems: lis
         flu["interface_width"],
         flu["mobility"],
         flu["controller_eta"],
+        flu["odd_lambda"],
+        flu["smagorinsky"],
     )
 
 

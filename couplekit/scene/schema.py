@@ -236,6 +236,26 @@ SECTIONS: dict[str, list[Key]] = {
             lo=0.0,
             hi=10.0,
         ),
+        Key(
+            "odd_lambda",
+            "float",
+            0.015,
+            "floor Λ of the odd-moment relaxation (keeps no-slip wall edges stable at ν_h < 5e-4, "
+            "docs/fluid-stability.md); 0 = the paper's rate 1",
+            "",
+            lo=0.0,
+            hi=0.1,
+        ),
+        Key(
+            "smagorinsky",
+            "float",
+            0.1,
+            "Smagorinsky constant C of a subgrid viscosity (keeps violent flows at ν_h = 1e-4 finite, "
+            "docs/fluid-stability.md); 0 = off, the paper's collision",
+            "",
+            lo=0.0,
+            hi=0.5,
+        ),
     ],
     "sand": [
         Key(
