@@ -213,8 +213,63 @@ class FluidSolver:
             self.pf_ops.set_equilibrium(self.h, self.phi, self.velocity, self.flags, 0)
             self._phase_macroscopic()
         self.volume0 = self._volume()
+        self._setup_open_faces(flags, wall_u, out_ghost, out_src)
 
     # ------------------------------------------------------------------------------------------ stepping
+    def _setup_open_faces(self, flags, wall_u, out_ghost, out_src) -> None:
+        """Cells through which water enters or leaves the box, for the volume controller's target.
+
+        The controller (Eq. 52) steers the phase volume towards ``volume0``; with an inflow or outflow face
+        that target must follow what the faces let in and out, else it fights the jet (it turned the sand's
+        source term into a sink of the inflowing water). Per step the target moves by the water flux through
+        the open faces, Σ φ u·n_in over the interior cells behind face-adjacent inflow and outflow ghosts
+        (their current φ and velocity, n_in the inward normal, unit face area)."""
+        self._open_in = self._open_out = None
+        if not self.two_phase or self.params.eta <= 0:
+            return
+        pz, py, px = flags.shape
+
+        def normal(idx, towards_outside: bool):
+            z, rem = np.divmod(idx, px * py)
+            y, x = np.divmod(rem, px)
+            n = np.zeros((3, idx.size))
+            for d, (c, m) in enumerate(((x, px), (y, py), (z, pz))):
+                n[d] = (c == m - 1).astype(float) - (c == 0).astype(float)
+            return n if towards_outside else -n
+
+        nz, ny, nx = self.shape
+
+        def behind(idx):  # the interior cell next to a face ghost
+            z, rem = np.divmod(idx, px * py)
+            y, x = np.divmod(rem, px)
+            return np.clip(x, 1, nx) + px * (np.clip(y, 1, ny) + py * np.clip(z, 1, nz))
+
+        idx = np.flatnonzero(flags.reshape(-1) == INFLOW)
+        n = normal(idx, towards_outside=False)
+        face = np.abs(n).sum(axis=0) == 1
+        src = behind(idx[face])
+        src_ok = flags.reshape(-1)[src] == FLUID
+        if face.any() and src_ok.any():
+            self._open_in = (self.backend.asarray(src[src_ok]), n[:, face][:, src_ok])
+        if out_ghost.size:
+            n = normal(out_ghost, towards_outside=True)
+            face = np.abs(n).sum(axis=0) == 1
+            if face.any():
+                self._open_out = (self.backend.asarray(out_src[face]), -n[:, face])
+
+    def _open_face_volume(self) -> float:
+        """Water volume (float64) the inflow faces let in minus what the outflow faces let out in one step:
+        Σ φ u·n_in over the interior cells behind the open faces (n_in the inward normal)."""
+        dv = 0.0
+        for open_cells in (self._open_in, self._open_out):
+            if open_cells is None:
+                continue
+            idx, n_in = open_cells
+            ph = self.backend.to_host(self.phi.reshape(-1)[idx]).astype(np.float64)
+            u = self.backend.to_host(self.velocity.reshape(3, -1)[:, idx]).astype(np.float64)
+            dv += float((ph * (u * n_in).sum(axis=0)).sum())
+        return dv
+
     def _setup_inflow_front(
         self, flags: np.ndarray, wall_u: np.ndarray, wall_phi: np.ndarray, phi_p: np.ndarray
     ) -> None:
@@ -297,6 +352,8 @@ class FluidSolver:
                 ops.outflow_fix(self.f, self._out_ghost, self._out_src)
             if self.two_phase:
                 if prm.eta > 0:
+                    if self._open_in is not None or self._open_out is not None:
+                        self.volume0 += self._open_face_volume()
                     volume, source_sum = self._controller_sums()
                     self.gamma = self._pf.volume_controller_gamma(self.volume0, volume, source_sum, prm.eta)
                 self._set_inflow_front()
