@@ -9,7 +9,9 @@ Cases (couplekit.coupling.scenes, LockstepScheduler, cpu backend): sand balls of
 20,000 steps at about 32³ and for 1 s.  Each run stops at the first non-finite value or lattice speed
 ≥ 0.3; recorded: steps survived, simulated seconds, the largest lattice speed, the final sand centre, the
 fluid volume drift, wall time and the per-stage cost (LockstepScheduler.cost_report).  Water viscosity
-per ``--nu`` (the paper's 1e-4 and the CI's 1e-3; see the test module's docstring for why both).
+per ``--nu`` (the paper's 1e-4 and the CI's 1e-3; see the test module's docstring for why both); the fluid's
+closures per ``--smagorinsky`` / ``--odd-lambda`` (the scenes' defaults 0.1 / 0.015; 0 / 0 is the paper's
+collision, which diverges at 1e-4: docs/fluid-stability.md).
 """
 
 from __future__ import annotations
@@ -26,8 +28,8 @@ from couplekit.coupling.scenes import sand_ball_into_water, saturated_bed
 CASES = ("ball_600", "ball_950", "ball_1500", "ball_2500", "impact_3mps", "saturated_bed")
 
 
-def build(case: str, be, shape, nu: float):
-    common = {"nu_h": nu, "youngs_modulus": 1e5, "timing": True}
+def build(case: str, be, shape, nu: float, closures: dict | None = None):
+    common = {"nu_h": nu, "youngs_modulus": 1e5, "timing": True, **(closures or {})}
     r = min(shape) / 6  # leaves room above the pool for the drop at 32³
     if case.startswith("ball_"):
         return sand_ball_into_water(be, shape, density=float(case.split("_")[1]), radius=r, **common)
@@ -41,8 +43,8 @@ def build(case: str, be, shape, nu: float):
     raise ValueError(f"unknown case {case!r}; choose from {', '.join(CASES)}")
 
 
-def run_case(case: str, be, shape, steps: int, nu: float, chunk: int = 250) -> dict:
-    sc = build(case, be, shape, nu)
+def run_case(case: str, be, shape, steps: int, nu: float, chunk: int = 250, closures: dict | None = None) -> dict:
+    sc = build(case, be, shape, nu, closures)
     t0 = time.perf_counter()
     worst, done, finite = 0.0, 0, True
     while done < steps:
@@ -65,6 +67,7 @@ def run_case(case: str, be, shape, steps: int, nu: float, chunk: int = 250) -> d
         "wall_seconds": wall,
         "stage_cost": sc.scheduler.cost_report(),
         "scene": sc.info,
+        "closures": closures or {},
     }
     print(f"{case:14s} nu {nu:g}: {'stable' if out['stable'] else 'FAILED'} after {done} steps, max speed "
           f"{worst:.3f}, {wall:.0f} s", flush=True)  # fmt: skip
@@ -78,6 +81,8 @@ def main() -> None:
     ap.add_argument("--nu", default="1e-3,1e-4", help="comma-separated water lattice viscosities")
     ap.add_argument("--cases", default=",".join(CASES))
     ap.add_argument("--threads", type=int, default=None)
+    ap.add_argument("--smagorinsky", type=float, default=0.1, help="fluid Smagorinsky constant (scenes' default)")
+    ap.add_argument("--odd-lambda", type=float, default=0.015, help="fluid odd-rate floor (0 = paper's rates)")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "coupled_stability.json"))
     a = ap.parse_args()
     shape = tuple(int(v) for v in a.shape.split(","))
@@ -85,12 +90,14 @@ def main() -> None:
     res: dict = {"runs": {}}
     for nu in (float(v) for v in a.nu.split(",")):
         for case in a.cases.split(","):
-            res["runs"][f"{case}@nu={nu:g}"] = run_case(case, be, shape, a.steps, nu)
+            closures = {"smagorinsky": a.smagorinsky, "odd_lambda": a.odd_lambda}
+            res["runs"][f"{case}@nu={nu:g}"] = run_case(case, be, shape, a.steps, nu, closures=closures)
             Path(a.out).parent.mkdir(parents=True, exist_ok=True)
             res["meta"] = {"shape_nz_ny_nx": list(shape), "steps": a.steps, "dt": 1e-4, "dx": 0.005,
                            "threads": be.threads, "machine": platform.platform(),
                            "command": f"python benchmarks/coupled_stability.py --shape {a.shape} --steps {a.steps} "
-                                      f"--nu {a.nu} --cases {a.cases}"}  # fmt: skip
+                                      f"--nu {a.nu} --cases {a.cases} --smagorinsky {a.smagorinsky} "
+                                      f"--odd-lambda {a.odd_lambda}"}  # fmt: skip
             Path(a.out).write_text(json.dumps(res, indent=1, default=float))
     print("wrote", a.out)
     if not all(r["stable"] for r in res["runs"].values()):

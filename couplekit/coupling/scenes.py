@@ -142,6 +142,8 @@ def build_scene(
     periodic_xy: bool = False,
     wall_layers: int = 2,
     sand_params: dict | None = None,
+    smagorinsky: float = 0.0,
+    odd_lambda: float | None = None,
 ) -> CoupledScene:
     """The common builder: a closed tank (``shape`` cells, ``units``) of water up to ``water_depth`` m
     (``None``: single-phase water everywhere) under air, and the sand particles ``seeded`` (positions in m)
@@ -150,7 +152,8 @@ def build_scene(
     ``fluid_gravity``: the fluid's vertical acceleration in m/s² (default −g; the settling test replaces it
     by the mean pressure gradient of a closed column, see :func:`uniform_suspension`).  ``periodic_xy``:
     periodic fluid faces in x and y; ``wall_layers``: node layers of the sand's domain walls (particles must
-    start inside them); ``sand_params``: further SandParams fields (e.g. cohesion).  The rest: module docstring.
+    start inside them); ``sand_params``: further SandParams fields (e.g. cohesion); ``smagorinsky``,
+    ``odd_lambda``: the fluid's closures (FluidParams; docs/fluid-stability.md; None = FluidParams' default).  The rest: module docstring.
     """
     nz, ny, nx = shape
     dx = units.dx
@@ -169,7 +172,8 @@ def build_scene(
         pressure = _hydrostatic(np.ones(shape, np.float32), 1.0, g_lat)
     sigma = units.to_lattice(surface_tension, "surface_tension") if two_phase else 0.0
     params = FluidParams(rho_h=1.0, rho_l=rho_l, nu_h=nu_h, nu_l=nu_l if two_phase else nu_h, gravity=(0.0, 0.0, g_lat),
-                         sigma=sigma, eta=eta if two_phase else 0.0)  # fmt: skip
+                         sigma=sigma, eta=eta if two_phase else 0.0, smagorinsky=smagorinsky,
+                         **({} if odd_lambda is None else {"odd_lambda": odd_lambda}))  # fmt: skip
     bounds = Boundaries.channel("z" if periodic_xy else "xyz")
     fluid = FluidSolver(backend, shape, params, boundaries=bounds, phi=phi, pressure=pressure, mixture=True,
                         external_force=True)  # fmt: skip
