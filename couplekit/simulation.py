@@ -176,7 +176,12 @@ def memory_estimate(scene: Scene) -> dict[str, float]:
         retention = any(b.retention if b.retention is not None else scene.sand.retention for b in scene.bodies)
         out["coupling"] = padded * 4.0 * (7 + 1 + 3 + 1) + nx * ny * nz * 4.0 * (1 + (3 if retention else 0))
         out["particles"] += 4.0 * count * (1 if retention else 0)
-    out["total"] = out["fluid"] + out["sand_grid"] + out["particles"] + out.get("coupling", 0.0)
+    if scene.fluid is not None and getattr(scene, "stirring", None) is not None:
+        # the stirring force's buffer, plus the force input a fluid-only scene would not have
+        out["stirring"] = padded * 4.0 * (3 if scene.has_sand else 6)
+    out["total"] = (
+        out["fluid"] + out["sand_grid"] + out["particles"] + out.get("coupling", 0.0) + out.get("stirring", 0.0)
+    )
     return out
 
 
@@ -455,6 +460,7 @@ class Simulation:
             "volume_controller": bool(two and self._fluid_params.eta > 0) if self.fluid else False,
             "obstacles": any(b.kind == "obstacle" for b in sc.bodies),
             "inflows": bool(sc.inflows),
+            "stirring": sc.stirring is not None,
             "sand": sand,
             "cohesion": bool(sand and self.sand.params.cohesion_on),
             "hardening": bool(sand and self.sand.params.hardening),

@@ -133,6 +133,7 @@ def render() -> str:
         "sand": 'Material of the sand bodies (used only when a body has `kind = "sand"`).',
         "outputs": "Optional. Files go to `directory`, frame by frame.",
         "effects": "Optional switches for ablations: an effect the scene does not need is off anyway (DESIGN 'Effects').",
+        "stirring": "Optional: a swirling body force on the water (paper Fig. 11), added to the drag in coupled scenes.",
     }
     for name, keys in SECTIONS.items():
         parts.append(f"## [{name}]\n\n{notes.get(name, '')}\n\n{_table(keys)}\n")
@@ -157,9 +158,11 @@ def render() -> str:
     for gtype, keys in GEOMETRY_KEYS.items():
         parts.append(f'### type = "{gtype}"\n\n{descriptions[gtype]}\n\n{_table(keys)}\n')
     parts.append(
-        "## [[inflows]]\n\nA velocity inlet over a whole face whose `domain.boundary` is `inflow`. A water jet fills\n"
-        "the face with water (φ = 1), wind with air (φ = 0). An inflow on a periodic face is refused.\n"
-        "Outflows need no entry: set the face's boundary to `outflow`.\n\n" + _table(INFLOW_KEYS) + "\n"
+        '## [[inflows]]\n\nA velocity inlet over a whole face whose `domain.boundary` is `inflow` (`shape = "face"`), or\n'
+        'an outlet in a wall or outflow face (`shape = "rect"` or `"disc"`: a jet; the rest of the face keeps its\n'
+        "boundary). A water inflow carries water (φ = 1), wind carries air (φ = 0). An inflow on a periodic face\n"
+        "is refused. Outflows need no entry: set the face's boundary to `outflow`. With the volume controller on,\n"
+        "its target follows the water let in and out through these faces.\n\n" + _table(INFLOW_KEYS) + "\n"
     )
     parts.append(_CHECKS)
     return "\n".join(parts)
