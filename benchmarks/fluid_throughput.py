@@ -105,20 +105,29 @@ def ours_collide(backend, n: int):
     return run
 
 
-def two_phase_solver(backend, n: int) -> FluidSolver:
-    """The benchmark's two-phase scene on n³: a flat 800:1 interface, σ > 0, walls in z, periodic in x and y."""
+def two_phase_solver(backend, n: int, **closures) -> FluidSolver:
+    """The benchmark's two-phase scene on n³: a flat 800:1 interface, σ > 0, walls in z, periodic in x and y;
+    ``closures``: FluidParams' odd_lambda / smagorinsky (default: FluidParams' defaults)."""
     c = np.arange(n) + 0.5
     z, y, x = np.meshgrid(c, c, c, indexing="ij")
     phi = 0.5 * (1 + np.tanh(2 * (n / 2 - z) / 4.0))
     params = FluidParams(
-        rho_h=1.0, rho_l=1 / 800, nu_h=1e-4, nu_l=1e-2, gravity=(0, 0, -1e-6), sigma=1e-4, mobility=0.02, width=4.0
+        rho_h=1.0,
+        rho_l=1 / 800,
+        nu_h=1e-4,
+        nu_l=1e-2,
+        gravity=(0, 0, -1e-6),
+        sigma=1e-4,
+        mobility=0.02,
+        width=4.0,
+        **closures,
     )
     return FluidSolver(backend, (n, n, n), params, Boundaries.channel("z"), phi=phi)
 
 
-def ours_two_phase_step(backend, n: int):
+def ours_two_phase_step(backend, n: int, **closures):
     """A callable running two full two-phase steps (flow + phase field, σ > 0, walls) on n³."""
-    s = two_phase_solver(backend, n)
+    s = two_phase_solver(backend, n, **closures)
     return lambda: s.step(2)
 
 
@@ -219,7 +228,13 @@ def main() -> None:
     for n in args.sizes:
         cells = n**3
         peer, peer_info = lbmpy_collide(n, args.threads)
-        contenders = {"collide_stream": ours_collide(backend, n), "two_phase_step": ours_two_phase_step(backend, n)}
+        contenders = {
+            "collide_stream": ours_collide(backend, n),
+            "two_phase_step": ours_two_phase_step(backend, n),  # FluidParams' defaults: odd-rate floor on
+            # the cost of the closures (docs/fluid-stability.md), same run
+            "two_phase_step_paper_rates": ours_two_phase_step(backend, n, odd_lambda=0.0),
+            "two_phase_step_scene_closures": ours_two_phase_step(backend, n, smagorinsky=0.1),
+        }
         if peer is not None:
             contenders["lbmpy_collide_stream"] = peer
         inner = max(1, int(2e6 // cells))
@@ -231,6 +246,11 @@ def main() -> None:
         roofline = bw["in_place_update_GBs"] * 1e9 / bytes_step / 1e6
         entry = {
             "mlups": mlups,
+            "closure_cost": {
+                "odd_rate_floor_vs_paper_rates": mlups["two_phase_step_paper_rates"] / mlups["two_phase_step"],
+                "floor_and_smagorinsky_vs_paper_rates": mlups["two_phase_step_paper_rates"]
+                / mlups["two_phase_step_scene_closures"],
+            },
             "two_phase_step_ms_by_stage": two_phase_stage_times(backend, n),
             "peer": peer_info,
             "two_phase_roofline_mlups": roofline,
