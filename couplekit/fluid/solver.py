@@ -59,9 +59,11 @@ class FluidParams:
     ``odd_lambda``: floor Λ of the two-relaxation-time product (1/r_s − ½)(1/r_o − ½) that sets the rate r_o of
     the odd central moments (orders 3, 5; :func:`~couplekit.fluid.reference.odd_rate`). The paper relaxes
     them at 1, which at its ν_h = 1e-4 makes the edges and corners of no-slip walls linearly unstable (a
-    period-2 oscillation along the edge, ×e every ~150 steps; docs/fluid-stability.md). The default 0.015
-    lies inside the window measured stable (linear ≥ 0.01, non-linear noise tests ≤ 0.02; 0.03 diverges in
-    a closed box). It acts only in sand-free cells whose viscosity is below ``odd_nu_max`` (default 5e-4:
+    period-2 oscillation along the edge, ×e every ~150 steps; docs/fluid-stability.md). Scenes use 0.015,
+    inside the window measured stable (linear ≥ 0.01, non-linear noise tests ≤ 0.02; 0.03 diverges in a
+    closed box), together with ``smagorinsky`` = 0.1: alone, the floor makes violent flows at ν = 1e-4 fail
+    sooner (an 800:1 column collapse at 32³ diverged near step 750 instead of running). Default 0 here (the
+    paper's collision, which the validations test). It acts only in sand-free cells whose viscosity is below ``odd_nu_max`` (default 5e-4:
     ν = 1e-3 is stable at rate 1, and there, and inside sand beds, the floor was measured to disturb the
     coupled validations: a floating ball 0.8 cell high, a saturated bed lifted 3 cells). 0 = the paper's
     collision exactly.
@@ -80,7 +82,7 @@ class FluidParams:
     eta: float = 0.0
     store_filtered_pressure: bool = True
     smagorinsky: float = 0.0
-    odd_lambda: float = 0.015
+    odd_lambda: float = 0.0
     odd_nu_max: float = 5e-4
 
     def __post_init__(self) -> None:

@@ -174,7 +174,7 @@ def test_paper_viscosity_with_scene_closures_stays_finite(cpu1, case):
     Smagorinsky C = 0.1; docs/fluid-stability.md), 3000 steps: finite, max lattice speed < 0.3 (the issue's
     bound), and a saturated 2500 kg/m³ bed stays put (< 0.5 cell; measured 0.22).  With the paper's collision
     the bed goes NaN near step 1500 and the ball scene near step 3100 (measured)."""
-    kw = {"nu_h": 1e-4, "youngs_modulus": 1e5, "smagorinsky": 0.1}
+    kw = {"nu_h": 1e-4, "youngs_modulus": 1e5, "smagorinsky": 0.1, "odd_lambda": 0.015}
     if case == "saturated_bed":
         sc = saturated_bed(cpu1, SMALL, density=2500.0, bed_height=6.0, water_depth=14.0, **kw)
     else:
