@@ -28,18 +28,24 @@ def kernel_sources() -> list[Path]:
 
 
 def build_variants(source: Path) -> list[dict[str, str]]:
-    """The define combinations a source declares with ``// variants: A=0,1 B=0,1`` ([{}] if none)."""
-    axes: list[tuple[str, list[str]]] = []
+    """The define combinations a source declares with ``// variants: A=0,1 B=0,1`` lines ([{}] if none).
+
+    Each line is the product of its axes; several lines add their products (e.g. a second line for the
+    superset of every optional effect), duplicates dropped."""
+    out: list[dict[str, str]] = []
     for line in _VARIANTS.findall(source.read_text()):
+        axes: list[tuple[str, list[str]]] = []
         for item in line.split():
             name, _, values = item.partition("=")
             if not name.isidentifier() or not values:
                 raise ValueError(f"{source.name}: cannot read variant {item!r} (expected NAME=v1,v2)")
             axes.append((name, values.split(",")))
-    if not axes:
-        return [{}]
-    names = [a[0] for a in axes]
-    return [dict(zip(names, combo, strict=True)) for combo in itertools.product(*(a[1] for a in axes))]
+        names = [a[0] for a in axes]
+        for combo in itertools.product(*(a[1] for a in axes)):
+            variant = dict(zip(names, combo, strict=True))
+            if variant not in out:
+                out.append(variant)
+    return out or [{}]
 
 
 def nvcc_path() -> str | None:

@@ -1,7 +1,8 @@
 """Compiled fluid stages (cuda or cpu build of ``kernels/lbm_*.cu``), same signatures as :class:`ReferenceOps`.
 
 Effects are compile-time defines (DESIGN "Effects"): ``CK_TWO_PHASE``, ``CK_SURFACE_TENSION``,
-``CK_MIXTURE``, ``CK_EXT_FORCE``; one cached module per flag set. Inputs of switched-off effects are not read
+``CK_MIXTURE``, ``CK_EXT_FORCE``, and the fluid closures ``CK_LES`` (Smagorinsky) and ``CK_ODD_RATE``
+(odd-moment rate floor); one cached module per flag set. Inputs of switched-off effects are not read
 by the kernels and may be ``None``.
 """
 
@@ -10,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..backend import Backend
+from .reference import check_closures
 
 
 class KernelOps:
@@ -22,6 +24,8 @@ class KernelOps:
         surface_tension: bool = False,
         mixture: bool = False,
         external_force: bool = False,
+        les: bool = False,
+        odd_rate: bool = False,
     ):
         self.backend = backend
         self.name = backend.name
@@ -29,6 +33,8 @@ class KernelOps:
         self.surface_tension = bool(surface_tension) and self.two_phase
         self.mixture = bool(mixture)
         self.external_force = bool(external_force)
+        self.les = bool(les)
+        self.odd_rate = bool(odd_rate)
         defines = self.defines()
         collide = backend.module("lbm_collide.cu", defines)
         pressure = backend.module(
@@ -55,6 +61,8 @@ class KernelOps:
             "CK_SURFACE_TENSION": int(self.surface_tension),
             "CK_MIXTURE": int(self.mixture),
             "CK_EXT_FORCE": int(self.external_force),
+            "CK_LES": int(self.les),
+            "CK_ODD_RATE": int(self.odd_rate),
         }
 
     def _wall_links(self, flags):
@@ -144,6 +152,7 @@ class KernelOps:
         odd_nu_max: float = 1.0,
     ) -> None:
         """Fused forces + NOCM-MRT collision + AA streaming (see ReferenceOps.collide_stream)."""
+        check_closures(self, smagorinsky, odd_lambda)
         n, nx, ny, nz = self._interior(flags)
         if parity & 1:
             self._wall_call(self._prefill, f, flags, velocity)

@@ -88,6 +88,15 @@ def local_average(s: np.ndarray, flags: np.ndarray) -> np.ndarray:
     return out
 
 
+def check_closures(ops, smagorinsky: float, odd_lambda: float) -> None:
+    """Refuse closure values an ops object was not built for (its ``les`` / ``odd_rate`` flags, which the
+    kernels compile in): a silently ignored closure would run the paper's collision instead."""
+    if smagorinsky > 0 and not ops.les:
+        raise ValueError(f"smagorinsky = {smagorinsky} needs ops built with les=True (FluidParams.smagorinsky > 0)")
+    if odd_lambda > 0 and not ops.odd_rate:
+        raise ValueError(f"odd_lambda = {odd_lambda} needs ops built with odd_rate=True (FluidParams.odd_lambda > 0)")
+
+
 def odd_rate(r_s, odd_lambda: float):
     """Relaxation rate of the odd central moments (orders 3 and 5): r_o = min(1, 1 / (½ + Λ / (1/r_s − ½))).
 
@@ -121,7 +130,9 @@ class ReferenceOps:
 
     The switches mirror the kernel defines: ``two_phase`` (ρ, μ from φ; else ρ = rho_h, ν = nu_h),
     ``surface_tension`` (F_s = μ_φ ∇φ from a chemical-potential field), ``mixture`` (fluid fraction ε and
-    sand velocity v inputs; else ε ≡ 1), ``external_force`` (a force-density input field, e.g. drag).
+    sand velocity v inputs; else ε ≡ 1), ``external_force`` (a force-density input field, e.g. drag), and the
+    closures ``les`` (Smagorinsky) and ``odd_rate`` (odd-moment rate floor), which allow non-zero
+    ``smagorinsky`` / ``odd_lambda`` in :meth:`collide_stream`.
     Arrays of switched-off effects are ignored (pass ``None``).
     """
 
@@ -133,11 +144,15 @@ class ReferenceOps:
         surface_tension: bool = False,
         mixture: bool = False,
         external_force: bool = False,
+        les: bool = False,
+        odd_rate: bool = False,
     ):
         self.two_phase = bool(two_phase)
         self.surface_tension = bool(surface_tension) and self.two_phase
         self.mixture = bool(mixture)
         self.external_force = bool(external_force)
+        self.les = bool(les)
+        self.odd_rate = bool(odd_rate)
 
     # ------------------------------------------------------------------------------------------ helpers
     @staticmethod
@@ -328,6 +343,7 @@ class ReferenceOps:
         ``smagorinsky``: the Smagorinsky constant C of the subgrid viscosity (0 = off, the paper's model);
         ``odd_lambda``: the floor Λ of the odd-moment rate (:func:`odd_rate`; 0 = rate 1, the paper's), applied in
         sand-free cells whose molecular viscosity is below ``odd_nu_max``."""
+        check_closures(self, smagorinsky, odd_lambda)
         fi = self.load(f, flags, velocity, parity)
         a, u, r_s = self.forces(
             fi, flags, phi, mu, eps, force, pbar, rho_h, rho_l, nu_h, nu_l, (gx, gy, gz), smagorinsky

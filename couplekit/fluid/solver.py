@@ -156,6 +156,8 @@ class FluidSolver:
             surface_tension=self.surface_tension,
             mixture=self.mixture,
             external_force=self.external_force,
+            les=params.smagorinsky > 0,
+            odd_rate=self._odd_lambda > 0,
         )
         self.ops = KernelOps(backend, **effects) if backend.has_kernels else ReferenceOps(**effects)
         pshape = padded_shape(self.shape)

@@ -67,7 +67,9 @@ CLOSURES = {"smagorinsky": (0.17, 0.0), "odd_rate": (0.0, 0.25), "both": (0.1, 0
 @pytest.mark.parametrize("effects", ["single", "all"])
 @pytest.mark.parametrize("parity", [0, 1])
 def test_collide_stream_closures_match_reference(cpu, closure, effects, parity):
-    ko, ro = KernelOps(cpu, **EFFECTS[effects]), ReferenceOps(**EFFECTS[effects])
+    les, odd = (v > 0 for v in CLOSURES[closure])
+    flags = {**EFFECTS[effects], "les": les, "odd_rate": odd}
+    ko, ro = KernelOps(cpu, **flags), ReferenceOps(**flags)
     boundaries = BOUNDARY_SETS["mixed"]
     sk, sr = _pair(31 + parity, boundaries)
     # 5 % non-equilibrium (the shared states carry 0.1 %), so the strain-dependent viscosity matters
@@ -92,6 +94,18 @@ def test_collide_stream_closures_match_reference(cpu, closure, effects, parity):
         plain["pbar"], parity, *PARAMS, *GRAVITY,
     )  # fmt: skip
     assert np.abs(plain["f"][:, state] - sr["f"][:, state]).max() > 1e-4
+
+
+@pytest.mark.parametrize("ops_class", ["kernel", "reference"])
+def test_closure_values_need_their_build(cpu, ops_class):
+    """A closure value passed to ops built without it is refused, not silently ignored."""
+    ops = KernelOps(cpu) if ops_class == "kernel" else ReferenceOps()
+    s = random_state(3, BOUNDARY_SETS["periodic"])
+    args = (s["f"], s["flags"], s["velocity"], None, None, None, None, s["pbar"], 0, *PARAMS, *GRAVITY)
+    with pytest.raises(ValueError, match="les=True"):
+        ops.collide_stream(*args, 0.1, 0.0)
+    with pytest.raises(ValueError, match="odd_rate=True"):
+        ops.collide_stream(*args, 0.0, 0.015)
 
 
 @pytest.mark.parametrize("effects", ["single", "all"])
