@@ -64,3 +64,23 @@ def _smooth_phi(rng, pshape) -> np.ndarray:
     centre = [n / 2 + rng.uniform(-1, 1) for n in pshape]
     r = np.sqrt((zz - centre[0]) ** 2 + (yy - centre[1]) ** 2 + (xx - centre[2]) ** 2)
     return 0.5 * (1 + np.tanh(2 * (3.0 - r) / 4.0)) + 0.01 * rng.standard_normal(pshape)
+
+
+JET_SHAPE, JET_SPEED = (8, 8, 32), 0.02
+
+
+def water_jet_into_air(backend, eta: float = 0.0):
+    """A FluidSolver of a water jet into air (800:1): inflow face x- carrying φ = 1 at u_in = 0.02, outflow x+,
+    walls around, 8 × 8 × 32; it starts from a smooth water plug (tanh, ξ = 4) moving at u_in. ``eta``: the
+    volume controller's bound."""
+    from couplekit.fluid.solver import FluidParams, FluidSolver
+
+    n, u_in = JET_SHAPE, JET_SPEED
+    faces = {"x-": Face("inflow", velocity=(u_in, 0, 0), phi=1.0), "x+": Face("outflow")}
+    faces.update({k: Face("wall") for k in ("y-", "y+", "z-", "z+")})
+    params = FluidParams(rho_h=1.0, rho_l=1 / 800, nu_h=0.01, nu_l=0.01, sigma=1e-4, mobility=0.02, width=4.0, eta=eta)
+    xc = np.arange(n[2]) + 0.5
+    phi0 = np.broadcast_to(0.5 * (1 + np.tanh(2 * (6 - xc) / 4.0)), n).copy()
+    vel0 = np.zeros((3,) + n)
+    vel0[0] = u_in * phi0
+    return FluidSolver(backend, n, params, Boundaries(faces), phi=phi0, velocity=vel0)

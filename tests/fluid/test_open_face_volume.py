@@ -10,12 +10,10 @@ as with η = 0; bound 0.9–1.02 as there), and the target must track the volume
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
+from fluid_states import JET_SHAPE, JET_SPEED, water_jet_into_air
 
 from couplekit.backend import get_backend
-from couplekit.fluid.grid import Boundaries, Face
-from couplekit.fluid.solver import FluidParams, FluidSolver
 
 
 @pytest.fixture(scope="module")
@@ -24,15 +22,8 @@ def cpu():
 
 
 def test_controller_lets_the_jet_in(cpu):
-    n, u_in = (8, 8, 32), 0.02
-    faces = {"x-": Face("inflow", velocity=(u_in, 0, 0), phi=1.0), "x+": Face("outflow")}
-    faces.update({k: Face("wall") for k in ("y-", "y+", "z-", "z+")})
-    params = FluidParams(rho_h=1.0, rho_l=1 / 800, nu_h=0.01, nu_l=0.01, sigma=1e-4, width=4.0, eta=2.0)
-    xc = np.arange(n[2]) + 0.5
-    phi0 = np.broadcast_to(0.5 * (1 + np.tanh(2 * (6 - xc) / 4.0)), n).copy()
-    vel0 = np.zeros((3,) + n)
-    vel0[0] = u_in * phi0
-    solver = FluidSolver(cpu, n, params, Boundaries(faces), phi=phi0, velocity=vel0)
+    n, u_in = JET_SHAPE, JET_SPEED
+    solver = water_jet_into_air(cpu, eta=2.0)
     v0 = solver.diagnostics()["fluid_volume"]
     solver.step(200)
     d = solver.diagnostics()

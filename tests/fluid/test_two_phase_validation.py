@@ -131,17 +131,10 @@ def test_water_jet_into_air_800_to_1_volume_inflow(cpu):
     the plug delivers 0.97 u_in·A on 12 rows; here 8×8 rows): measured 0.93 u_in·A t over 200 steps;
     tolerance 10 %. The jet starts from a smooth water plug (tanh, ξ = 4) moving at u_in; the abrupt start into air at
     rest is covered by test_inflow_front.py (the inflow's phase value enters along the interface profile)."""
-    from couplekit.fluid.grid import Face
+    from fluid_states import JET_SHAPE, JET_SPEED, water_jet_into_air
 
-    n, u_in = (8, 8, 32), 0.02
-    faces = {"x-": Face("inflow", velocity=(u_in, 0, 0), phi=1.0), "x+": Face("outflow")}
-    faces.update({k: Face("wall") for k in ("y-", "y+", "z-", "z+")})
-    params = FluidParams(rho_h=1.0, rho_l=1 / 800, nu_h=0.01, nu_l=0.01, sigma=1e-4, mobility=0.02, width=4.0)
-    xc = np.arange(n[2]) + 0.5
-    phi0 = np.broadcast_to(0.5 * (1 + np.tanh(2 * (6 - xc) / 4.0)), n).copy()
-    vel0 = np.zeros((3,) + n)
-    vel0[0] = u_in * phi0
-    solver = FluidSolver(cpu, n, params, Boundaries(faces), phi=phi0, velocity=vel0)
+    n, u_in = JET_SHAPE, JET_SPEED
+    solver = water_jet_into_air(cpu)
     v0 = solver.diagnostics()["fluid_volume"]
     solver.step(200)
     d = solver.diagnostics()
