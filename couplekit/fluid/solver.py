@@ -42,6 +42,19 @@ from .kernel_ops import KernelOps
 from .reference import ReferenceOps, equilibrium
 
 
+def _ghost_faces(idx: np.ndarray, pshape: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """For padded indices ``idx`` of ghost cells: their inward normals (3, k) (a sum of unit vectors at edges
+    and corners) and the padded index of the nearest interior cell of each."""
+    pz, py, px = pshape
+    z, rem = np.divmod(idx, px * py)
+    y, x = np.divmod(rem, px)
+    inward = np.zeros((3, idx.size))
+    for d, (c, n) in enumerate(((x, px), (y, py), (z, pz))):
+        inward[d] = (c == 0).astype(float) - (c == n - 1).astype(float)
+    near = np.clip(x, 1, px - 2) + px * (np.clip(y, 1, py - 2) + py * np.clip(z, 1, pz - 2))
+    return inward, near
+
+
 @dataclass(frozen=True)
 class FluidParams:
     """Lattice-unit parameters of the fluid (Δx = Δt = 1).
@@ -63,10 +76,10 @@ class FluidParams:
     inside the window measured stable (linear ≥ 0.01, non-linear noise tests ≤ 0.02; 0.03 diverges in a
     closed box), together with ``smagorinsky`` = 0.1: alone, the floor makes violent flows at ν = 1e-4 fail
     sooner (an 800:1 column collapse at 32³ diverged near step 750 instead of running). Default 0 here (the
-    paper's collision, which the validations test). It acts only in sand-free cells whose viscosity is below ``odd_nu_max`` (default 5e-4:
-    ν = 1e-3 is stable at rate 1, and there, and inside sand beds, the floor was measured to disturb the
-    coupled validations: a floating ball 0.8 cell high, a saturated bed lifted 3 cells). 0 = the paper's
-    collision exactly.
+    paper's collision, which the validations test). It acts only in sand-free cells whose viscosity is below
+    ``odd_nu_max`` (default 5e-4: ν = 1e-3 is stable at rate 1, and there, and inside sand beds, the floor
+    was measured to disturb the coupled validations: a floating ball 0.8 cell high, a saturated bed lifted 3
+    cells). 0 = the paper's collision exactly.
     ``smagorinsky``: Smagorinsky constant C of a subgrid viscosity ν_t = (C Δx)² |S̄| added to ν (0 = off, the
     default and the paper's model); 0.1–0.17 is usual for under-resolved turbulent flows.
     """
@@ -231,35 +244,15 @@ class FluidSolver:
         self._open_in = self._open_out = None
         if not self.two_phase or self.params.eta <= 0:
             return
-        pz, py, px = flags.shape
-
-        def normal(idx, towards_outside: bool):
-            z, rem = np.divmod(idx, px * py)
-            y, x = np.divmod(rem, px)
-            n = np.zeros((3, idx.size))
-            for d, (c, m) in enumerate(((x, px), (y, py), (z, pz))):
-                n[d] = (c == m - 1).astype(float) - (c == 0).astype(float)
-            return n if towards_outside else -n
-
-        nz, ny, nx = self.shape
-
-        def behind(idx):  # the interior cell next to a face ghost
-            z, rem = np.divmod(idx, px * py)
-            y, x = np.divmod(rem, px)
-            return np.clip(x, 1, nx) + px * (np.clip(y, 1, ny) + py * np.clip(z, 1, nz))
-
         idx = np.flatnonzero(flags.reshape(-1) == INFLOW)
-        n = normal(idx, towards_outside=False)
-        face = np.abs(n).sum(axis=0) == 1
-        src = behind(idx[face])
-        src_ok = flags.reshape(-1)[src] == FLUID
-        if face.any() and src_ok.any():
-            self._open_in = (self.backend.asarray(src[src_ok]), n[:, face][:, src_ok])
-        if out_ghost.size:
-            n = normal(out_ghost, towards_outside=True)
-            face = np.abs(n).sum(axis=0) == 1
-            if face.any():
-                self._open_out = (self.backend.asarray(out_src[face]), -n[:, face])
+        n_in, src = _ghost_faces(idx, flags.shape)
+        keep = (np.abs(n_in).sum(axis=0) == 1) & (flags.reshape(-1)[src] == FLUID)  # face ghosts before fluid
+        if keep.any():
+            self._open_in = (self.backend.asarray(src[keep]), n_in[:, keep])
+        n_in, _ = _ghost_faces(out_ghost, flags.shape)  # out_src: the same nearest interior cells
+        keep = np.abs(n_in).sum(axis=0) == 1
+        if keep.any():
+            self._open_out = (self.backend.asarray(out_src[keep]), n_in[:, keep])
 
     def _open_face_volume(self) -> float:
         """Water volume (float64) the inflow faces let in minus what the outflow faces let out in one step:
@@ -290,17 +283,11 @@ class FluidSolver:
         resolved profile allows. Where the adjacent fluid is already of phase φ_w nothing changes.
         """
         idx = np.flatnonzero(flags.reshape(-1) == INFLOW)
-        pz, py, px = flags.shape
-        z, rem = np.divmod(idx, px * py)
-        y, x = np.divmod(rem, px)
-        inward = np.zeros((3, idx.size))
-        for d, (c, n) in enumerate(((x, px), (y, py), (z, pz))):
-            inward[d] = (c == 0).astype(float) - (c == n - 1).astype(float)
+        inward, near = _ghost_faces(idx, flags.shape)
         norm = np.sqrt((inward**2).sum(axis=0))
         u_w = wall_u.reshape(3, -1)[:, idx].astype(np.float64)
         speed = (u_w * inward).sum(axis=0) / np.where(norm > 0, norm, 1.0)
-        near = [np.clip(c, 1, n - 2) for c, n in ((x, px), (y, py), (z, pz))]
-        start = phi_p.reshape(-1)[near[0] + px * (near[1] + py * near[2])].astype(np.float64)
+        start = phi_p.reshape(-1)[near].astype(np.float64)
         target = wall_phi.reshape(-1)[idx].astype(np.float64)
         changing = np.abs(target - start) > 1e-6
         self._inflow_front = (idx[changing], start[changing], target[changing], speed[changing])
