@@ -60,6 +60,14 @@ class SandSolver:
     cfl: particle CFL number C_v (Δt ≤ C_v dx / max|v_p|); elastic_cfl: C_e (Δt ≤ C_e dx / c_p).
     cfl_check_every: check the particle CFL every this many steps (0 = never; a violation raises).
     host_atomics: cpu backend only — use the non-deterministic atomic P2G (benchmarking).
+    allow_empty: accept zero particles (a scene whose sand only enters through an inflow, see
+        :mod:`couplekit.sand.emission`); the stages then run on an empty particle set (the grid stays empty)
+        until :meth:`append_particles` adds some.
+
+    Growth: :meth:`append_particles` reallocates every particle array to the new count (one concatenation
+    per call). The arrays stay exactly (·, P) C-contiguous, as the kernels index them (x[p], x[P + p], ...),
+    so a capacity buffer with a live prefix would not be a valid (3, P) array; an emission adds a layer every
+    few steps, and the copy costs about as much as one G2P over the same particles.
     """
 
     def __init__(
@@ -82,6 +90,7 @@ class SandSolver:
         elastic_cfl: float = 0.5,
         cfl_check_every: int = 20,
         host_atomics: bool = False,
+        allow_empty: bool = False,
     ):
         self.backend = backend if isinstance(backend, Backend) else get_backend(backend)
         be, xp = self.backend, self.backend.xp
@@ -108,29 +117,12 @@ class SandSolver:
         if pos.ndim != 2 or pos.shape[0] != 3:
             raise ValueError(f"positions must have shape (3, P), got {pos.shape}")
         n = pos.shape[1]
-        if n == 0:
+        if n == 0 and not allow_empty:
             raise ValueError("no particles: the sand body is empty")
-        nz, ny, nx = self.shape
-        b = self.walls.bound
-        ext = np.array([nx, ny, nz], dtype=np.float64) * self.dx
-        inside = np.all((pos >= b * self.dx) & (pos <= (ext - b * self.dx)[:, None]), axis=0)
-        if not inside.all():
-            bad = int(np.count_nonzero(~inside))
-            raise ValueError(
-                f"{bad} of {n} particles lie outside the domain interior [{b}·dx, extent − {b}·dx] "
-                f"(extent {ext.tolist()} m, walls take {b} node layers); enlarge the grid or move the body"
-            )
-        vol = np.broadcast_to(np.asarray(volumes, dtype=np.float64), (n,))
-        if np.any(vol <= 0):
-            raise ValueError("particle volumes must be > 0")
-        vel = np.zeros((3, n)) if velocities is None else np.asarray(velocities, dtype=np.float64)
-        vel = np.broadcast_to(vel.reshape(3, -1) if vel.ndim == 1 else vel, (3, n))
-        sat = np.zeros(n) if saturation is None else np.broadcast_to(np.asarray(saturation, dtype=np.float64), (n,))
-        rho = np.broadcast_to(np.asarray(params.density if densities is None else densities, dtype=np.float64), (n,))
-        if not np.all(rho > 0):
-            raise ValueError("particle densities must be > 0")
-        self.min_density = float(rho.min())
-        """Smallest particle density, kg/m³ (sets the P-wave speed of the elastic time-step limit)."""
+        pos, vol, vel, sat, rho = self._checked_particles(pos, volumes, velocities, saturation, densities)
+        self.min_density = float(rho.min()) if n else float(params.density)
+        """Smallest particle density, kg/m³ (sets the P-wave speed of the elastic time-step limit); with no
+        particle yet, ``params.density``."""
 
         f32 = np.float32
         self.n_particles = n
@@ -159,6 +151,87 @@ class SandSolver:
         if sdf_collider is not None:
             self._sample_sdf()
         self.set_dt(dt)
+
+    def _checked_particles(self, pos, volumes, velocities, saturation, densities):
+        """Float64 (x, volume, v, saturation, density) of new particles, refused outside the domain interior
+        [bound·dx, extent − bound·dx] or with non-positive volume or density."""
+        n = pos.shape[1]
+        nz, ny, nx = self.shape
+        b = self.walls.bound
+        ext = np.array([nx, ny, nz], dtype=np.float64) * self.dx
+        inside = np.all((pos >= b * self.dx) & (pos <= (ext - b * self.dx)[:, None]), axis=0)
+        if not inside.all():
+            bad = int(np.count_nonzero(~inside))
+            raise ValueError(
+                f"{bad} of {n} particles lie outside the domain interior [{b}·dx, extent − {b}·dx] "
+                f"(extent {ext.tolist()} m, walls take {b} node layers); enlarge the grid or move the body"
+            )
+        vol = np.broadcast_to(np.asarray(volumes, dtype=np.float64), (n,))
+        if np.any(vol <= 0):
+            raise ValueError("particle volumes must be > 0")
+        vel = np.zeros((3, n)) if velocities is None else np.asarray(velocities, dtype=np.float64)
+        vel = np.broadcast_to(vel.reshape(3, -1) if vel.ndim == 1 else vel, (3, n))
+        sat = np.zeros(n) if saturation is None else np.broadcast_to(np.asarray(saturation, dtype=np.float64), (n,))
+        dens = self.params.density if densities is None else densities
+        rho = np.broadcast_to(np.asarray(dens, dtype=np.float64), (n,))
+        if not np.all(rho > 0):
+            raise ValueError("particle densities must be > 0")
+        return pos, vol, vel, sat, rho
+
+    def append_particles(
+        self,
+        positions: np.ndarray,
+        volumes: np.ndarray | float,
+        velocities: np.ndarray | Sequence[float] | None = None,
+        densities: np.ndarray | float | None = None,
+        saturation: np.ndarray | float | None = None,
+    ) -> int:
+        """Add particles at rest in their reference configuration (F = I, C = 0, τ = 0, hardening q = 0,
+        volume correction 0), e.g. sand entering through an inflow (:mod:`couplekit.sand.emission`).
+
+        Arguments as in the constructor: positions (3, k) in m, inside the domain interior; volumes (k,) or one
+        number, m³; velocities (3, k) or one 3-vector, m/s; densities (k,) or one number (default
+        ``params.density``), kg/m³; saturation (k,) or one number (default 0). Every particle array is
+        reallocated to the new count (class docstring). A density below :attr:`min_density` raises the P-wave
+        speed: Δt is re-checked first and a violation is refused (TimeStepError) without changing anything.
+        Returns the index of the first new particle.
+        """
+        pos = np.asarray(positions, dtype=np.float64)
+        if pos.ndim != 2 or pos.shape[0] != 3:
+            raise ValueError(f"positions must have shape (3, k), got {pos.shape}")
+        first = self.n_particles
+        k = pos.shape[1]
+        if k == 0:
+            return first
+        pos, vol, vel, sat, rho = self._checked_particles(pos, volumes, velocities, saturation, densities)
+        min_density = min(self.min_density, float(rho.min())) if first else float(rho.min())
+        if min_density < self.min_density:
+            old, self.min_density = self.min_density, min_density
+            try:
+                self._check_dt(self.dt)
+            except TimeStepError:
+                self.min_density = old
+                raise
+        self.min_density = min_density
+        f32 = np.float32
+        new = {
+            "x": pos,
+            "v": vel,
+            "C": np.zeros((9, k)),
+            "F": np.repeat(np.eye(3).reshape(9, 1), k, axis=1),
+            "tau": np.zeros((6, k)),
+            "q": np.zeros(k),
+            "vc": np.zeros(k),
+            "saturation": sat,
+            "volume": vol,
+            "mass": vol * rho,
+        }
+        xp = self.backend.xp
+        for name in _PARTICLE_FIELDS:
+            grown = xp.concatenate([getattr(self, name), self.backend.asarray(new[name], f32)], axis=-1)
+            setattr(self, name, xp.ascontiguousarray(grown))
+        self.n_particles = first + k
+        return first
 
     # ------------------------------------------------------------------ time step
     @property
@@ -288,7 +361,7 @@ class SandSolver:
         m = self.backend.to_host(self.mass).astype(np.float64)
         v = self.backend.to_host(self.v).astype(np.float64)
         mom = (m * v).sum(axis=1)
-        speed = np.sqrt((v**2).sum(axis=0))
+        speed = np.sqrt((v**2).sum(axis=0)) if self.n_particles else np.zeros(1)
         return {
             "time": self.time,
             "step": float(self.steps),
@@ -307,14 +380,21 @@ class SandSolver:
         st["time"] = np.array(self.time)
         st["steps"] = np.array(self.steps)
         st["dt"] = np.array(self.dt)
+        st["min_density"] = np.array(self.min_density)
         st["collider_centres"] = np.array([c.centre for c in self.colliders]).reshape(-1, 3)
         return st
 
-    def load_state(self, st: dict) -> None:
-        """Restore a :meth:`state` dict (same particle count and colliders)."""
+    def load_state(self, st: dict, resize: bool = False) -> None:
+        """Restore a :meth:`state` dict (same colliders; same particle count unless ``resize``, which
+        reallocates the particle arrays to the state's count: a run whose inflows emitted particles)."""
         n = np.asarray(st["x"]).shape[1]
         if n != self.n_particles:
-            raise ValueError(f"state has {n} particles, this solver {self.n_particles}")
+            if not resize:
+                raise ValueError(f"state has {n} particles, this solver {self.n_particles}")
+            xp = self.backend.xp
+            for k in _PARTICLE_FIELDS:
+                setattr(self, k, xp.zeros(np.asarray(st[k]).shape, dtype=np.float32))
+            self.n_particles = n
         centres = np.asarray(st["collider_centres"]).reshape(-1, 3)
         if len(centres) != len(self.colliders):
             raise ValueError(f"state has {len(centres)} colliders, this solver {len(self.colliders)}")
@@ -323,6 +403,8 @@ class SandSolver:
         self.time = float(st["time"])
         self.steps = int(st["steps"])
         self.dt = float(st["dt"])
+        if "min_density" in st:
+            self.min_density = float(st["min_density"])
         for c, centre in zip(self.colliders, centres, strict=True):
             c.centre = centre.astype(np.float64)
         self._upload_colliders()
@@ -331,6 +413,8 @@ class SandSolver:
 
     # ------------------------------------------------------------------ helpers
     def _max_speed(self) -> float:
+        if self.n_particles == 0:
+            return 0.0
         v = self.backend.to_host(self.v)
         return float(np.sqrt((v.astype(np.float64) ** 2).sum(axis=0).max()))
 

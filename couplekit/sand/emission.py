@@ -1,0 +1,247 @@
+"""Sand entering through an inflow: MPM particles emitted layer by layer at a jet's outlet (paper 000 Fig. 1).
+
+A water inflow with ``sand_fraction`` s > 0 carries sand at volume fraction s through its open area A at the
+inflow velocity u (normal component u_n): a sand volume flux s A u_n. :class:`InflowEmitter` turns that into
+particles on a regular sub-lattice, deterministically:
+
+* **In the face plane** the sites are the sub-lattice of the MPM grid that seeds bodies
+  (:mod:`couplekit.sand.seeding`): spacing h = dx / k with k = particles per cell per axis, k² sites per open
+  face cell, at the sub-cell centres. The open cells are the inflow's own cells (the outlet's mask,
+  :func:`couplekit.fluid.inflow.region_mask`, or the whole face), less the cells within ``bound`` cells of the
+  face's edges, where the MPM domain walls are and where the quadratic stencil would leave the grid (a
+  whole-face inflow loses that rim; a scene refuses an outlet carrying sand that reaches into it). The
+  emission area A_e = sites × h² is what the flux uses.
+* **Along the jet** an accumulator L (float64, per inflow) grows by u_n Δt every step; each time it passes h a
+  layer of particles is emitted and L −= h. The layer stands for the slab of sand that entered during the last
+  h / u_n: it is placed with its centre at L + h/2 beyond the *emission plane*, the plane ``bound`` cells inside
+  the face (the first plane the MPM accepts particles on, like the 2-cell margin of sand bodies), so in a
+  uniform jet consecutive layers are exactly h apart. After N steps, floor(u_n N Δt / h) layers have been
+  emitted: the emitted volume is s A_e u_n t to within one layer.
+* **Each particle** carries the grain-volume convention of seeded bodies (``couplekit.simulation``): a body
+  particle has volume ε0 h³ (ε0 = ``sand.packing_fraction``) so that the body's sand fraction is ε0; an emitted
+  particle has volume s h³, so the jet's sand fraction (Eq. 25) is s, with mass ϱ s h³ (ϱ the grain density,
+  ``sand.density``). The alternative, body-sized particles (ε0 h³) on every (ε0 / s)-th layer, gives the same
+  flux but sheets of sand ε0 / s sub-cells apart, not a jet of fraction s. A new particle moves with the
+  inflow velocity (all three components), in its reference state (F = I, C = 0, no hardening,
+  :meth:`couplekit.sand.solver.SandSolver.append_particles`).
+
+The accumulators are the emitter's whole state (:meth:`InflowEmitter.state`), so a run resumed from a
+checkpoint emits exactly the layers an uninterrupted run does, at the same float64 positions.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["JetSource", "InflowEmitter", "emission_sites", "expected_particles", "match_particle_count"]
+
+_AXIS = {"x": 0, "y": 1, "z": 2}
+
+
+def emission_sites(
+    grid: tuple[int, int, int], dx: float, face: str, mask: np.ndarray | None, per_axis: int, bound: int = 2
+) -> np.ndarray:
+    """In-plane sub-lattice sites (2, N) in metres of an inflow, in the face's in-plane axes (x, y, z order).
+
+    ``grid``: interior shape (nz, ny, nx); ``face``: ``x-, x+, y-, y+, z-, z+``; ``mask``: the open cells of the
+    face plane (:func:`couplekit.fluid.grid.face_plane_shape`; None: the whole face); ``per_axis``: k
+    particles per cell per axis; ``bound``: cells along the face's edges left out (the MPM walls).
+    Sites are ordered cell by cell (the face's cells row-major), then by sub-cell: a fixed particle order.
+    """
+    from ..fluid.grid import face_plane_shape
+
+    rows, cols = face_plane_shape(grid, face)  # rows: second in-plane axis, cols: first
+    open_cells = np.ones((rows, cols), bool) if mask is None else np.asarray(mask, bool).copy()
+    if open_cells.shape != (rows, cols):
+        raise ValueError(f"mask has shape {open_cells.shape}, face {face} has {(rows, cols)}")
+    open_cells[:bound, :] = open_cells[rows - bound :, :] = False
+    open_cells[:, :bound] = open_cells[:, cols - bound :] = False
+    k = int(per_axis)
+    sub = (np.arange(k) + 0.5) * (dx / k)  # sub-cell centres within a cell
+    jj, ii = np.nonzero(open_cells)  # open cells, row-major
+    shape = (jj.size, k, k)  # (cell, second-axis sub-cell, first-axis sub-cell)
+    u = np.broadcast_to(ii[:, None, None] * dx + sub[None, None, :], shape)
+    v = np.broadcast_to(jj[:, None, None] * dx + sub[None, :, None], shape)
+    return np.stack([u.reshape(-1), v.reshape(-1)])
+
+
+@dataclass(frozen=True)
+class JetSource:
+    """One sand-carrying inflow, in SI units.
+
+    ``face``: ``x-, x+, y-, y+, z-, z+``; ``sites``: in-plane positions (2, N) (:func:`emission_sites`);
+    ``velocity``: inflow velocity (3,) m/s, its normal component pointing into the domain; ``sand_fraction``:
+    s; ``spacing``: h = dx / k; ``offset``: distance of the emission plane from the face (bound · dx), m;
+    ``density``: grain density ϱ, kg/m³; ``extent``: the domain's size along the face normal, m.
+    """
+
+    face: str
+    sites: np.ndarray
+    velocity: tuple[float, float, float]
+    sand_fraction: float
+    spacing: float
+    offset: float
+    density: float
+    extent: float
+
+    @property
+    def axis(self) -> int:
+        """The face normal's axis (0 = x, 1 = y, 2 = z)."""
+        return _AXIS[self.face[0]]
+
+    @property
+    def normal_speed(self) -> float:
+        """u_n: the inflow velocity's component into the domain, m/s (> 0)."""
+        sign = 1.0 if self.face[1] == "-" else -1.0
+        return sign * float(self.velocity[self.axis])
+
+    @property
+    def area(self) -> float:
+        """Emission area A_e = sites × h², m²."""
+        return self.sites.shape[1] * self.spacing**2
+
+    @property
+    def particle_volume(self) -> float:
+        """Grain volume of one emitted particle, s h³ (module docstring), m³."""
+        return self.sand_fraction * self.spacing**3
+
+    @property
+    def volume_flux(self) -> float:
+        """Sand volume flux s A_e u_n, m³/s."""
+        return self.sand_fraction * self.area * self.normal_speed
+
+    def layer(self, depth: float) -> np.ndarray:
+        """Positions (3, N) of a layer whose centre lies ``depth`` beyond the emission plane."""
+        from ..fluid.inflow import PLANE_AXES
+
+        a0, a1 = PLANE_AXES[self.face[0]]
+        d = self.offset + depth
+        normal = d if self.face[1] == "-" else self.extent - d
+        x = np.empty((3, self.sites.shape[1]))
+        x[self.axis] = normal
+        x[a0] = self.sites[0]
+        x[a1] = self.sites[1]
+        return x
+
+
+class InflowEmitter:
+    """Emits the particles of every :class:`JetSource` into a :class:`~couplekit.sand.solver.SandSolver`.
+
+    Call :meth:`advance` after every time step of length Δt (the Simulation does, between scheduler steps):
+    it adds u_n Δt to each source's accumulator and appends the layers that completed (module docstring).
+    ``coupler``: a :class:`~couplekit.coupling.coupler.SandFluidCoupler` whose per-particle moisture ratio
+    (water retention) grows with the particles (new particles start dry, r_p = 0, like seeded bodies).
+    """
+
+    def __init__(self, sources: Sequence[JetSource], coupler=None):
+        self.sources = tuple(sources)
+        self.coupler = coupler
+        self.length = np.zeros(len(self.sources))
+        """Per source: how far (m) the jet has advanced since its last emitted layer (float64)."""
+        self.layers = np.zeros(len(self.sources), np.int64)
+        """Per source: layers emitted so far."""
+
+    @classmethod
+    def from_scene(cls, scene, bound: int = 2, coupler=None) -> InflowEmitter | None:
+        """The emitter of a :class:`~couplekit.scene.Scene`'s inflows with ``sand_fraction`` > 0 (None if none):
+        outlets rasterised as the fluid does (:func:`couplekit.fluid.inflow.region_mask`), k =
+        ``sand.particles_per_axis``, ϱ = ``sand.density``."""
+        from ..fluid.inflow import region_mask
+
+        dom, sd = scene.domain, scene.sand
+        face_name = {"x_min": "x-", "x_max": "x+", "y_min": "y-", "y_max": "y+", "z_min": "z-", "z_max": "z+"}
+        sources = []
+        for inf in scene.inflows:
+            if inf.sand_fraction <= 0:
+                continue
+            face = face_name[inf.face]
+            mask = None
+            if inf.shape != "face":
+                mask = region_mask(dom.shape, dom.dx, face, inf.shape, inf.center, inf.size, inf.radius)
+            k = sd.particles_per_axis
+            sites = emission_sites(dom.shape, dom.dx, face, mask, k, bound)
+            sources.append(
+                JetSource(
+                    face,
+                    sites,
+                    tuple(float(v) for v in inf.velocity),
+                    float(inf.sand_fraction),
+                    dom.dx / k,
+                    bound * dom.dx,
+                    float(sd.density),
+                    float(dom.size[_AXIS[face[0]]]),
+                )
+            )
+        return cls(sources, coupler) if sources else None
+
+    def advance(self, sand, dt: float) -> int:
+        """Advance every jet by Δt and append the completed layers to ``sand``; returns particles added."""
+        added = 0
+        for i, src in enumerate(self.sources):
+            self.length[i] += src.normal_speed * dt
+            depths = []
+            while self.length[i] >= src.spacing:
+                self.length[i] -= src.spacing
+                depths.append(self.length[i] + 0.5 * src.spacing)
+                self.layers[i] += 1
+            if not depths:
+                continue
+            x = np.concatenate([src.layer(d) for d in reversed(depths)], axis=1)  # oldest layer first
+            n = x.shape[1]
+            sand.append_particles(x, src.particle_volume, np.asarray(src.velocity), src.density, 0.0)
+            added += n
+        if added and self.coupler is not None:
+            match_particle_count(self.coupler, sand.n_particles)
+        return added
+
+    def emitted_volume(self) -> float:
+        """Sand volume emitted so far, m³ (float64)."""
+        return float(
+            sum(n * s.sites.shape[1] * s.particle_volume for n, s in zip(self.layers, self.sources, strict=True))
+        )
+
+    def emitted_particles(self) -> int:
+        """Particles emitted so far."""
+        return int(sum(n * s.sites.shape[1] for n, s in zip(self.layers, self.sources, strict=True)))
+
+    # ------------------------------------------------------------------ checkpoint
+    def state(self) -> dict[str, np.ndarray]:
+        """The accumulators and layer counts (a bitwise restart needs nothing else)."""
+        return {"length": self.length.copy(), "layers": self.layers.copy()}
+
+    def load_state(self, st: dict) -> None:
+        """Restore a :meth:`state` dict (same number of sources)."""
+        length = np.asarray(st["length"], np.float64)
+        if length.shape != self.length.shape:
+            raise ValueError(f"emission state has {length.size} sources, this scene {self.length.size}")
+        self.length = length.copy()
+        self.layers = np.asarray(st["layers"], np.int64).copy()
+
+    def __repr__(self) -> str:
+        parts = ", ".join(f"{s.face}: {s.sites.shape[1]} sites, {s.volume_flux:.3g} m³/s" for s in self.sources)
+        return f"InflowEmitter({parts})"
+
+
+def expected_particles(emitter: InflowEmitter | None, duration: float) -> float:
+    """Particles the emitter adds over ``duration`` seconds: Σ sites × ceil(u_n t / h) (an upper bound)."""
+    if emitter is None:
+        return 0.0
+    return float(sum(s.sites.shape[1] * math.ceil(s.normal_speed * duration / s.spacing) for s in emitter.sources))
+
+
+def match_particle_count(coupler, n: int) -> None:
+    """Resize a coupler's per-particle moisture ratio r_p (water retention; nothing without) to ``n``
+    particles: existing values kept, new particles dry (r_p = 0). Used after an emission and before a
+    checkpoint's coupler state is loaded into a coupler built for fewer particles."""
+    r = getattr(coupler, "moisture_ratio", None)
+    if r is None or r.shape[0] == n:
+        return
+    xp = coupler.fluid.backend.xp
+    grown = xp.zeros(n, dtype=np.float32)
+    keep = min(n, r.shape[0])
+    grown[:keep] = r[:keep]
+    coupler.moisture_ratio = grown
