@@ -268,9 +268,6 @@ LBM_INLINE void lbm_collide_cell(const long long c, float* RESTRICT f, const uns
         // (same addresses, nothing stored yet) rather than kept live through the force computation.
         float ro = 1.f / (0.5f + lambda_odd / (tau - 0.5f));
         ro = (ro < 1.f && nu < odd_nu_max) ? ro : 1.f;  // only where nu < odd_nu_max (see reference.odd_rate)
-#if CK_MIXTURE
-        ro = e < 1.f ? 1.f : ro;  // and in sand-free cells only
-#endif
         const float co = 0.125f * (1.f - ro), rf = ro;  // k* = (1 - r_o) k + r_o k^F / 2
         float kc[27];
         {

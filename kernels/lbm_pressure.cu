@@ -14,7 +14,9 @@
 #define CK_MIXTURE 0
 #endif
 
-// p <- p - cs2 rho [(1 - sum f) + (eps_s div v + (u - v).grad eps) / eps]   (Eq. 39, 1 - sum f ~ div u, Eq. 38)
+// p <- p - cs2 rho [(1 - sum f) + (eps_s div v + (u - v).grad eps) / eps]   (Eq. 39, 1 - sum f ~ div u, Eq. 38;
+// u the velocity of Eq. 13 written by the last collision; the slip term (u - v).grad eps only in cells
+// whose neighbours are all fluid)
 KERNEL void lbm_macro_pressure(const long long n, const float* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
                                const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                                const float* RESTRICT vel /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
@@ -39,10 +41,10 @@ KERNEL void lbm_macro_pressure(const long long n, const float* RESTRICT f /* siz
 #undef LBM_SUM
         float divergence = 1.f - s0;
 #if CK_MIXTURE
-        float ux = 0.f, uy = 0.f, uz = 0.f;
-#define LBM_MOM(q) ux += CX27[q] * fj[q], uy += CY27[q] * fj[q], uz += CZ27[q] * fj[q];
-        LBM_FOR26(LBM_MOM)
-#undef LBM_MOM
+        // u: the fluid velocity of Eq. 13 (with its half-force shift) from the last collision, not sum f c:
+        // sum f c = u - a/2 puts -(a/2).grad eps / eps = (grad p - rho g).grad eps / (2 rho eps) into the
+        // update, which grows a grid-scale mode where eps changes next to a wall (reference docstring)
+        const float ux = vel[c], uy = vel[N + c], uz = vel[2 * N + c];
         float ge[3], gvx[3], gvy[3], gvz[3];
         lbm_gradient<0>(eps, flags, c, px, pxy, ge);
         lbm_gradient<0>(sand_v, flags, c, px, pxy, gvx);
@@ -50,7 +52,12 @@ KERNEL void lbm_macro_pressure(const long long n, const float* RESTRICT f /* siz
         lbm_gradient<0>(sand_v + 2 * N, flags, c, px, pxy, gvz);
         const float e = eps[c];
         const float div_v = gvx[0] + gvy[1] + gvz[2];
-        const float slip = (ux - sand_v[c]) * ge[0] + (uy - sand_v[N + c]) * ge[1] + (uz - sand_v[2 * N + c]) * ge[2];
+        // the slip term only away from walls (every neighbour a stencil cell): next to a wall the gradient's
+        // wall rule cannot see that no fluid crosses the wall, and with it a porosity step there grows a
+        // grid-scale mode (reference docstring)
+        const float slip = lbm_all_stencil(flags, c, px, pxy) ? (ux - sand_v[c]) * ge[0] + (uy - sand_v[N + c]) * ge[1] +
+                                                                    (uz - sand_v[2 * N + c]) * ge[2]
+                                                              : 0.f;
         divergence += ((1.f - e) * div_v + slip) / e;
 #endif
 #if CK_TWO_PHASE

@@ -209,7 +209,24 @@ class ReferenceOps:
         """Pressure update, Eq. 39, in place on the interior fluid cells of ``p``.
 
         p^{n+1} = p^n − c_s² ρ^{n+1} [(1 − Σ_j f_j) + (ε_s ∇·v + (u − v)·∇ε)/ε], with 1 − Σf ≈ ∇·u (Eq. 38),
-        ε_s = 1 − ε the sand fraction, u = Σ_j f_j c_j (the half-force shift is not known yet at this stage).
+        ε_s = 1 − ε the sand fraction, u the fluid velocity of Eq. 13 as the last collision wrote it
+        (``velocity``: this step's forces, hence its half-force shift, are not known yet at this stage).
+
+        Why not u = Σ_j f_j c_j of the current populations: that is u − a/2 with a = −∇p̄/ρ + g + …, so the
+        update would carry −(a/2)·∇ε/ε = (∇p̄ − ρg)·∇ε/(2ρε), a pressure-advection term that grows a
+        grid-scale mode (u_z alternating in sign from cell to cell) where ε changes next to a wall.  Measured
+        on a 16×6×6 walled column of water at rest with a frozen sand-bed porosity profile whose first cell
+        above the floor holds ε = 0.92 under 0.59 and 0.515 (the profile a settled bed has, the MPM's wall
+        layer keeping the grains one cell off the floor): with Σ f c the speed grew ×3.5 every 100 steps
+        from round-off to NaN by step 1100; with the Eq. 13 velocity it stays at 1.5e-5 (round-off); the
+        same profile away from walls was stable either way (tests/coupling/test_bed_wall_stability.py).
+
+        Why the slip term (u − v)·∇ε only in cells whose 26 neighbours are all stencil cells: next to a wall
+        the gradient's wall rule (a wall neighbour takes the centre value) cannot express that no fluid
+        crosses the wall, and with the Eq. 13 velocity the same column still grew (×2 per 200 steps from
+        step ~1000, a mode alternating in x at the floor), as did a porosity step next to the side walls'
+        edge; without the term in wall-adjacent cells both stay at round-off for 4000 steps.  The cost: the
+        pressure of a wall-adjacent cell does not see flow into a narrower pore there (its ∇·u still does).
         """
         fi = self.load(f, flags, velocity, parity)
         s0 = fi.sum(axis=0)
@@ -217,15 +234,24 @@ class ReferenceOps:
         divergence = 1.0 - s0
         if self.mixture:
             e = interior(eps).astype(np.float64)
-            u = np.einsum("jd,j...->d...", C27.astype(np.float64), fi)
+            u = interior(velocity).astype(np.float64)  # Eq. 13 velocity of the last collision (docstring)
             v = interior(sand_v).astype(np.float64)
             grad_e = isotropic_gradient(eps, flags)
             div_v = sum(isotropic_gradient(sand_v[d], flags)[d] for d in range(3))
             slip = sum((u[d] - v[d]) * grad_e[d] for d in range(3))
+            slip = np.where(self._away_from_walls(flags), slip, 0.0)  # docstring: wall-adjacent cells
             divergence = divergence + ((1.0 - e) * div_v + slip) / e
         fluid = interior(flags) == FLUID
         new = interior(p).astype(np.float64) - CS2 * rho * divergence
         interior(p)[fluid] = new[fluid]
+
+    @staticmethod
+    def _away_from_walls(flags: np.ndarray) -> np.ndarray:
+        """Interior cells whose 26 neighbours are all stencil cells (fluid or outflow ghosts)."""
+        ok = np.ones(interior(flags).shape, dtype=bool)
+        for j in range(1, 27):
+            ok &= stencil_cell(shifted(flags, C27[j]))
+        return ok
 
     def momentum(self, f, flags, velocity, out, parity: int) -> None:
         """out = Σ_j f_j c_j of the current populations (Eq. 13 without the force shift) on interior fluid
@@ -342,17 +368,15 @@ class ReferenceOps:
         """Fused collide + stream (Eqs. 8-10): forces, NOCM-MRT collision, AA store; writes u to ``velocity``.
         ``smagorinsky``: the Smagorinsky constant C of the subgrid viscosity (0 = off, the paper's model);
         ``odd_lambda``: the floor Λ of the odd-moment rate (:func:`odd_rate`; 0 = rate 1, the paper's), applied in
-        sand-free cells whose molecular viscosity is below ``odd_nu_max``."""
+        cells whose molecular viscosity is below ``odd_nu_max``."""
         check_closures(self, smagorinsky, odd_lambda)
         fi = self.load(f, flags, velocity, parity)
         a, u, r_s = self.forces(
             fi, flags, phi, mu, eps, force, pbar, rho_h, rho_l, nu_h, nu_l, (gx, gy, gz), smagorinsky
         )
         r_o = odd_rate(r_s, odd_lambda)
-        # the floor acts only in cells of molecular viscosity below odd_nu_max, and without sand (see odd_rate)
+        # the floor acts only in cells of molecular viscosity below odd_nu_max (see odd_rate), sand or not
         r_o = np.where(self._viscosity(phi, rho_h, rho_l, nu_h, nu_l) < odd_nu_max, r_o, 1.0)
-        if self.mixture:
-            r_o = np.where(interior(eps) < 1.0, 1.0, r_o)
         fstar = self.collide(fi, u, a, r_s, r_o)
         self.store(f, flags, velocity, parity, fstar)
         fluid = interior(flags) == FLUID
