@@ -23,28 +23,11 @@ import time
 from pathlib import Path
 
 from couplekit.backend import get_backend
-from couplekit.coupling.scenes import sand_ball_into_water, saturated_bed
-
-CASES = ("ball_600", "ball_950", "ball_1500", "ball_2500", "impact_3mps", "saturated_bed")
-
-
-def build(case: str, be, shape, nu: float, closures: dict | None = None):
-    common = {"nu_h": nu, "youngs_modulus": 1e5, "timing": True, **(closures or {})}
-    r = min(shape) / 6  # leaves room above the pool for the drop at 32³
-    if case.startswith("ball_"):
-        return sand_ball_into_water(be, shape, density=float(case.split("_")[1]), radius=r, **common)
-    if case == "impact_3mps":
-        depth = 0.45 * shape[0]
-        return sand_ball_into_water(be, shape, density=1500.0, radius=r, impact_speed=3.0,
-                                    centre_height=depth + r + 1.5, **common)  # fmt: skip
-    if case == "saturated_bed":
-        return saturated_bed(be, shape, density=2500.0, bed_height=0.3 * shape[0], water_depth=0.7 * shape[0],
-                             **common)  # fmt: skip
-    raise ValueError(f"unknown case {case!r}; choose from {', '.join(CASES)}")
+from couplekit.coupling.stability_cases import CASES, stability_case
 
 
 def run_case(case: str, be, shape, steps: int, nu: float, chunk: int = 250, closures: dict | None = None) -> dict:
-    sc = build(case, be, shape, nu, closures)
+    sc = stability_case(case, be, shape, nu, closures, timing=True)
     t0 = time.perf_counter()
     worst, done, finite = 0.0, 0, True
     while done < steps:
