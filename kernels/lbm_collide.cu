@@ -95,6 +95,18 @@ LBM_INLINE void lbm_central_moments(const float* RESTRICT fj, const float ux, co
 // host rows are processed in chunks of this many cells (the link masks of a chunk live on the stack)
 #define LBM_ROW_CHUNK 512
 
+// second central moments (xx, yy, zz, xy, xz, yz) about velocity (ux, uy, uz) from the raw moments m0, m_a, m_ab
+LBM_INLINE void lbm_central_second(const float m0, const float mx, const float my, const float mz, const float mxx,
+                                   const float myy, const float mzz, const float mxy, const float mxz, const float myz,
+                                   const float ux, const float uy, const float uz, float* RESTRICT k) {
+    k[0] = mxx - 2.f * ux * mx + ux * ux * m0;
+    k[1] = myy - 2.f * uy * my + uy * uy * m0;
+    k[2] = mzz - 2.f * uz * mz + uz * uz * m0;
+    k[3] = mxy - ux * my - uy * mx + ux * uy * m0;
+    k[4] = mxz - ux * mz - uz * mx + ux * uz * m0;
+    k[5] = myz - uy * mz - uz * my + uy * uz * m0;
+}
+
 // one fluid cell: load, forces, collision, store (ODD = parity & 1; MODE: how the stencils learn the kind of a
 // neighbour, see lbm_gradient; `mask` = lbm_link_mask of c for LBM_NB_MASK)
 template <int ODD, int MODE>
@@ -178,13 +190,9 @@ LBM_INLINE void lbm_collide_cell(const long long c, float* RESTRICT f, const uns
     az += force[2 * N + c] * inv_erho;
 #endif
     // pre-collision second central moments about the velocity shifted by the forces so far (all but F_mu)
-    const float vx = mx + 0.5f * ax, vy = my + 0.5f * ay, vz = mz + 0.5f * az;
-    const float vkxx = mxx - 2.f * vx * mx + vx * vx * m0;
-    const float vkyy = myy - 2.f * vy * my + vy * vy * m0;
-    const float vkzz = mzz - 2.f * vz * mz + vz * vz * m0;
-    const float vkxy = mxy - vx * my - vy * mx + vx * vy * m0;
-    const float vkxz = mxz - vx * mz - vz * mx + vx * vz * m0;
-    const float vkyz = myz - vy * mz - vz * my + vy * vz * m0;
+    float vk[6];
+    lbm_central_second(m0, mx, my, mz, mxx, myy, mzz, mxy, mxz, myz, mx + 0.5f * ax, my + 0.5f * ay, mz + 0.5f * az, vk);
+    const float vkxx = vk[0], vkyy = vk[1], vkzz = vk[2], vkxy = vk[3], vkxz = vk[4], vkyz = vk[5];
     const float vtr3 = (vkxx + vkyy + vkzz) * (1.f / 3.f);
     // Smagorinsky subgrid viscosity (Hou et al. 1996) from the deviatoric non-equilibrium stress
     // Q = |dev kappa_2| (its equilibrium is 0): tau = (tau0 + sqrt(tau0^2 + 18 sqrt(2) C^2 Q)) / 2, i.e.
@@ -233,12 +241,9 @@ LBM_INLINE void lbm_collide_cell(const long long c, float* RESTRICT f, const uns
     const float ux = mx + 0.5f * ax, uy = my + 0.5f * ay, uz = mz + 0.5f * az;
 
     // post-collision central moments (rates 1 except r_s on the deviatoric second order; Guo forcing)
-    const float kxx = mxx - 2.f * ux * mx + ux * ux * m0;
-    const float kyy = myy - 2.f * uy * my + uy * uy * m0;
-    const float kzz = mzz - 2.f * uz * mz + uz * uz * m0;
-    const float kxy = mxy - ux * my - uy * mx + ux * uy * m0;
-    const float kxz = mxz - ux * mz - uz * mx + ux * uz * m0;
-    const float kyz = myz - uy * mz - uz * my + uy * uz * m0;
+    float k2[6];
+    lbm_central_second(m0, mx, my, mz, mxx, myy, mzz, mxy, mxz, myz, ux, uy, uz, k2);
+    const float kxx = k2[0], kyy = k2[1], kzz = k2[2], kxy = k2[3], kxz = k2[4], kyz = k2[5];
     const float om = 1.f - rs;
     const float dxy = om * (kxx - kyy), dxz = om * (kxx - kzz);
     // post-collision central moments K_abc (a, b, c = orders in x, y, z; cube index a*9 + b*3 + c): rate 1
