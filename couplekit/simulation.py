@@ -13,8 +13,15 @@ obstacles as an SDF collider), and both, coupled by :class:`couplekit.coupling.c
 :class:`couplekit.schedulers.lockstep.LockstepScheduler` (paper Algorithm 1: one MPM step per LBM step, same
 Δt), which times every stage: :meth:`Simulation.stage_times`, :meth:`Simulation.cost_report`, a cost line at
 the end of :meth:`Simulation.run` and ``step_seconds`` in the diagnostics. Refused with
-:class:`CouplingUnavailableError`: what the coupler cannot do yet (a jet carrying sand, sand bodies with and
-without retention in one scene, drag or buoyancy switched off). Sand bodies may have different densities
+:class:`CouplingUnavailableError`: what the coupler cannot do yet (sand bodies with and without retention in
+one scene, drag or buoyancy switched off).
+
+Water jets carrying sand (``inflows[*].sand_fraction`` > 0, paper Fig. 1): :class:`couplekit.sand.emission.
+InflowEmitter` (:attr:`Simulation.emitter`) appends a layer of particles after every step in which a jet has
+advanced one particle spacing, so the sand flux is sand_fraction × area × normal speed and the jet's sand
+fraction is sand_fraction; a scene whose only sand comes from jets starts with an empty SandSolver and the
+coupled solvers from the first step. Its accumulators are part of the checkpoint (group ``emission``), and a
+resumed run grows the particle arrays to the checkpoint's count, so the restart stays bitwise. Sand bodies may have different densities
 (``bodies[*].density``, paper Fig. 8): each particle carries its body's.
 
 Seeding (as :mod:`couplekit.coupling.scenes` does): a sand body gets ``particles_per_cell`` particles per
@@ -86,11 +93,6 @@ class SimulationDiverged(FloatingPointError):
 def _refuse_unsupported(scene: Scene) -> None:
     """Refuse, before allocation, what the coupler cannot do yet (CouplingUnavailableError naming the key)."""
     problems = []
-    for i, inflow in enumerate(scene.inflows):
-        if inflow.sand_fraction > 0:
-            problems.append(
-                f"inflows[{i}].sand_fraction > 0: a jet carrying sand needs particle emission at the inflow"
-            )
     if scene.has_sand:
         sd = scene.sand
         bodies = [b for b in scene.bodies if b.kind == "sand"]
@@ -155,7 +157,9 @@ _SAND_FLOATS_PER_PARTICLE = 3 + 3 + 9 + 9 + 6 + 1 + 1 + 1 + 1 + 1  # x v C F tau
 def memory_estimate(scene: Scene) -> dict[str, float]:
     """Bytes the solvers will allocate for ``scene`` (an estimate from the array sizes, before allocation).
 
-    Particles are bounded by the sand bodies' bounding boxes × particles per cell (an upper bound)."""
+    Particles are bounded by the sand bodies' bounding boxes × particles per cell (an upper bound), plus the
+    particles the sand-carrying inflows emit over the scene's duration (``emitted_particles``,
+    :func:`couplekit.sand.emission.expected_particles`)."""
     nx, ny, nz = scene.domain.resolution
     padded = (nx + 2) * (ny + 2) * (nz + 2)
     out = {"fluid": 0.0, "sand_grid": 0.0, "particles": 0.0, "particle_count": 0.0}
@@ -169,6 +173,12 @@ def memory_estimate(scene: Scene) -> dict[str, float]:
             if b.kind == "sand":
                 lo, hi = b.geometry.bounds(scene.domain)
                 count += float(np.prod(np.maximum(hi - lo, 0.0))) / scene.domain.dx**3 * scene.sand.particles_per_cell
+        if scene.emits_sand:
+            from .sand.emission import InflowEmitter, expected_particles
+
+            duration = scene.time.frames * scene.time.steps_per_frame * scene.time.dt
+            out["emitted_particles"] = expected_particles(InflowEmitter.from_scene(scene), duration)
+            count += out["emitted_particles"]
         out["particle_count"] = count
         out["particles"] = 4.0 * _SAND_FLOATS_PER_PARTICLE * count
     if scene.fluid is not None and scene.has_sand:
@@ -249,8 +259,14 @@ class Simulation:
         self._log(sc.summary())
         est = memory_estimate(sc)
         avail, what = available_memory(self.backend)
-        parts = ", ".join(f"{k} {_gib(v)}" for k, v in est.items() if k not in ("total", "particle_count") and v)
+        counts = ("total", "particle_count", "emitted_particles")
+        parts = ", ".join(f"{k} {_gib(v)}" for k, v in est.items() if k not in counts and v)
         self._log(f"memory estimate: {_gib(est['total'])} ({parts}); {what}: {_gib(avail)}")
+        if est.get("emitted_particles"):
+            self._log(
+                f"sand jets: about {est['emitted_particles']:,.0f} particles emitted over {sc.time.frames} frames "
+                f"(of {est['particle_count']:,.0f} in all)"
+            )
         if check_memory and est["total"] > 0.9 * avail:
             raise InsufficientMemoryError(
                 f"scene {sc.name!r} needs about {_gib(est['total'])} but only {_gib(avail)} of {what} is free: "
@@ -260,7 +276,7 @@ class Simulation:
         self.units = sc.units()
         self.steps_per_frame = sc.time.steps_per_frame
         self.step_count = 0
-        self.fluid = self.sand = self.coupler = self.scheduler = None
+        self.fluid = self.sand = self.coupler = self.scheduler = self.emitter = None
         self._timing = bool(timing)
         self._rebuild()
 
@@ -412,6 +428,8 @@ class Simulation:
             vols.append(sd.packing_fraction * seeded.volume)  # grain volume: ε0 of the sub-cell (module doc)
             vels.append(np.repeat(np.asarray(b.velocity, np.float64)[:, None], seeded.count, axis=1))
             dens.append(np.full(seeded.count, b.density or sd.density))  # per-body grain density
+        if not xs:  # the sand only enters through inflows (couplekit.sand.emission)
+            xs, vols, vels, dens = [np.zeros((3, 0))], [np.zeros(0)], [np.zeros((3, 0))], [np.zeros(0)]
         walls = DomainWalls.from_dict({_SAND_FACE[f]: Wall("separate", sd.wall_friction) for f in dom.boundary})
         obstacles = [b for b in sc.bodies if b.kind == "obstacle"]
         collider = None
@@ -434,6 +452,7 @@ class Simulation:
             sdf_collider=collider,
             cfl=sd.cfl,
             elastic_cfl=sd.elastic_cfl,
+            allow_empty=sc.emits_sand,
         )
 
     # ------------------------------------------------------------------------------------ state
@@ -462,6 +481,7 @@ class Simulation:
             "inflows": bool(sc.inflows),
             "stirring": sc.stirring is not None,
             "sand": sand,
+            "sand_emission": self.emitter is not None,
             "cohesion": bool(sand and self.sand.params.cohesion_on),
             "hardening": bool(sand and self.sand.params.hardening),
             "coupling": self.coupler is not None,
@@ -474,8 +494,14 @@ class Simulation:
     def step(self, n: int = 1) -> None:
         """Advance ``n`` time steps (every solver in the scene) through :attr:`scheduler`."""
         n = int(n)
-        self.scheduler.step(n)
-        self.step_count += n
+        if self.emitter is None:
+            self.scheduler.step(n)
+            self.step_count += n
+            return
+        for _ in range(n):  # sand jets: the layers completed by this step enter after it (sand.emission)
+            self.scheduler.step(1)
+            self.step_count += 1
+            self.emitter.advance(self.sand, self.scene.time.dt)
 
     def stage_times(self) -> dict[str, float]:
         """Seconds spent in each stage of the last step, in execution order
@@ -585,6 +611,8 @@ class Simulation:
             out["sand"] = self.sand.state()
         if self.coupler is not None:
             out["coupler"] = self.coupler.state()
+        if self.emitter is not None:
+            out["emission"] = self.emitter.state()
         return out
 
     def _load_states(self, states: dict[str, dict[str, np.ndarray]], step: int) -> None:
@@ -592,7 +620,18 @@ class Simulation:
             if solver is not None:
                 if name not in states:
                     raise ValueError(f"the checkpoint has no {name} state, the scene needs one")
-                solver.load_state(states[name])
+                if name == "sand" and self.emitter is not None:
+                    solver.load_state(states[name], resize=True)  # the jets emitted particles since the start
+                else:
+                    solver.load_state(states[name])
+        if self.emitter is not None:
+            if "emission" not in states:
+                raise ValueError("the checkpoint has no emission state, the scene has sand-carrying inflows")
+            self.emitter.load_state(states["emission"])
+            if self.coupler is not None:
+                from .sand.emission import match_particle_count
+
+                match_particle_count(self.coupler, self.sand.n_particles)
         if self.coupler is not None:
             st = states.get("coupler")
             if st is None:
@@ -605,6 +644,9 @@ class Simulation:
         self.fluid = self._build_fluid() if self.scene.has_fluid else None
         self.sand = self._build_sand() if self.scene.has_sand else None
         self.coupler = self._build_coupler() if self.coupled else None
+        from .sand.emission import InflowEmitter
+
+        self.emitter = InflowEmitter.from_scene(self.scene, coupler=self.coupler) if self.scene.emits_sand else None
         from .schedulers.lockstep import LockstepScheduler
 
         self.scheduler = LockstepScheduler(

@@ -40,6 +40,9 @@ import numpy as np
 __all__ = ["JetSource", "InflowEmitter", "emission_sites", "expected_particles", "match_particle_count"]
 
 _AXIS = {"x": 0, "y": 1, "z": 2}
+_ROUND_OFF = 1e-9
+"""Relative slack of the layer test L >= h: a jet advancing exactly h in m steps (u_n Δt = h / m) emits on
+step m, not m + 1, although the float64 sum of m increments may fall an ulp short of h."""
 
 
 def emission_sites(
@@ -184,7 +187,7 @@ class InflowEmitter:
         for i, src in enumerate(self.sources):
             self.length[i] += src.normal_speed * dt
             depths = []
-            while self.length[i] >= src.spacing:
+            while self.length[i] >= src.spacing * (1.0 - _ROUND_OFF):
                 self.length[i] -= src.spacing
                 depths.append(self.length[i] + 0.5 * src.spacing)
                 self.layers[i] += 1

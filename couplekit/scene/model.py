@@ -322,7 +322,13 @@ class Scene:
 
     @property
     def has_sand(self) -> bool:
-        return any(b.kind == "sand" for b in self.bodies)
+        """Sand bodies, or a water jet carrying sand (``inflows[*].sand_fraction`` > 0: emitted particles)."""
+        return any(b.kind == "sand" for b in self.bodies) or self.emits_sand
+
+    @property
+    def emits_sand(self) -> bool:
+        """Some inflow carries sand (:mod:`couplekit.sand.emission` emits it as particles)."""
+        return any(i.sand_fraction > 0 for i in self.inflows)
 
     def units(self) -> Units:
         """The lattice unit system (dx, dt, ρ_ref = water density)."""
@@ -546,10 +552,17 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
             problems.append(
                 Problem(f"bodies[{i}].velocity", "obstacles are fixed", "remove velocity from the obstacle")
             )
-    if "sand" in data and not any(b.kind == "sand" for b in bodies):
+    raw_jets = data.get("inflows", []) if isinstance(data.get("inflows", []), list) else []
+    sand_jet = any(
+        isinstance(r, dict) and isinstance(r.get("sand_fraction"), (int, float)) and r["sand_fraction"] > 0
+        for r in raw_jets
+    )
+    if "sand" in data and not any(b.kind == "sand" for b in bodies) and not sand_jet:
         problems.append(
             Problem(
-                "sand", "a [sand] table but no sand body", "add a [[bodies]] entry with kind = 'sand', or remove [sand]"
+                "sand",
+                "a [sand] table but no sand body and no inflow carrying sand",
+                "add a [[bodies]] entry with kind = 'sand' (or an inflow with sand_fraction > 0), or remove [sand]",
             )
         )
     if fluid is None and not any(b.kind == "sand" for b in bodies):
@@ -605,7 +618,7 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
         out["diagnostics"],
     )
     effects = Effects(**eff)
-    has_sand = any(b.kind == "sand" for b in bodies)
+    has_sand = any(b.kind == "sand" for b in bodies) or any(i.sand_fraction > 0 for i in inflows)
     return Scene(
         name=sc["name"],
         description=sc["description"],
@@ -896,6 +909,7 @@ def _check_inflows(
             )
     if domain is not None:
         _check_outlets_on_grid(inflows, domain, problems)
+        _check_sand_jets(inflows, domain, problems)
 
 
 def _check_outlet_keys(inf: Inflow, key: str, problems: list[Problem]) -> None:
@@ -962,6 +976,43 @@ def _check_outlets_on_grid(inflows: list[Inflow], domain: Domain, problems: list
             continue
         prev = masks.get(inf.face)
         masks[inf.face] = (i if prev is None else prev[0], mask if prev is None else prev[1] | mask)
+
+
+def _check_sand_jets(inflows: list[Inflow], domain: Domain, problems: list[Problem]) -> None:
+    """An outlet carrying sand must keep its cells ``sand_wall_cells`` from the face's edges: its particles are
+    emitted over its whole area (couplekit.sand.emission), and the MPM walls occupy that rim."""
+    from ..fluid.grid import face_plane_shape
+    from ..fluid.inflow import PLANE_AXES, face_extent, region_bounds, region_mask
+
+    rim = LIMITS["sand_wall_cells"]
+    for i, inf in enumerate(inflows):
+        if inf.sand_fraction <= 0 or inf.shape == "face" or inf.center is None:
+            continue
+        if (inf.shape == "rect" and inf.size is None) or (inf.shape == "disc" and inf.radius is None):
+            continue
+        lo, hi = region_bounds(inf.shape, inf.center, inf.size, inf.radius)
+        extent = face_extent(domain.size, inf.face)
+        if np.any(lo < 0) or np.any(hi > np.asarray(extent)):
+            continue  # reported by _check_outlets_on_grid
+        face = {"x_min": "x-", "x_max": "x+", "y_min": "y-", "y_max": "y+", "z_min": "z-", "z_max": "z+"}[inf.face]
+        mask = region_mask(domain.shape, domain.dx, face, inf.shape, inf.center, inf.size, inf.radius)
+        rows, cols = face_plane_shape(domain.shape, face)
+        inner = np.zeros_like(mask)
+        inner[rim : rows - rim, rim : cols - rim] = True
+        if (mask & ~inner).any():
+            names = ["xyz"[a] for a in PLANE_AXES[face[0]]]
+            margin = rim * domain.dx
+            problems.append(
+                Problem(
+                    f"inflows[{i}].center",
+                    f"the outlet carries sand (sand_fraction = {inf.sand_fraction:g}) but reaches within {rim} cells "
+                    f"({margin:g} m) of the edge of face {inf.face}, where the MPM walls are: its sand would enter "
+                    "through part of it only",
+                    f"move or shrink it so that it lies within [{margin:g}, {extent[0] - margin:.6g}] m along "
+                    f"{names[0]} and [{margin:g}, {extent[1] - margin:.6g}] m along {names[1]}, or set "
+                    f"inflows[{i}].sand_fraction = 0",
+                )
+            )
 
 
 def _stirring(st: dict, domain: Domain | None, fluid: Fluid | None, problems: list[Problem]) -> Stirring | None:
@@ -1115,18 +1166,19 @@ def _check_time_step(
                         f"use dt <= {limit:.3g} s, or lower fluid.surface_tension",
                     )
                 )
-    if sand is not None and any(b.kind == "sand" for b in bodies):
-        for i, b in enumerate(bodies):
-            if b.kind != "sand":
-                continue
-            rho = b.density or sand.density
+    jets = [i for i, inf in enumerate(inflows) if inf.sand_fraction > 0]
+    if sand is not None and (any(b.kind == "sand" for b in bodies) or jets):
+        # bodies at their density, emitted jet sand (couplekit.sand.emission) at sand.density
+        carriers = [(f"bodies[{i}]", b.density or sand.density) for i, b in enumerate(bodies) if b.kind == "sand"]
+        carriers += [(f"the sand of inflows[{i}]", sand.density) for i in jets]
+        for what, rho in carriers:
             cp = sand.p_wave_speed(rho)
             elastic = sand.elastic_cfl * dx / cp
             if dt > elastic:
                 problems.append(
                     Problem(
                         "time.dt",
-                        f"dt = {dt:g} s breaks the MPM elastic limit of bodies[{i}]: C_e dx / c_p = {sand.elastic_cfl:g} x {dx:g} / {cp:.3g} m/s = {elastic:.3g} s",
+                        f"dt = {dt:g} s breaks the MPM elastic limit of {what}: C_e dx / c_p = {sand.elastic_cfl:g} x {dx:g} / {cp:.3g} m/s = {elastic:.3g} s",
                         f"use dt <= {elastic:.3g} s, or a softer sand (lower sand.youngs_modulus)",
                     )
                 )

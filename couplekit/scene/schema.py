@@ -516,7 +516,12 @@ INFLOW_KEYS: list[Key] = [
         "sand_fraction",
         "float",
         0.0,
-        "sand volume fraction carried by a water jet (coupled scenes)",
+        "sand volume fraction carried by a water jet: the sand enters as MPM particles of the [sand] material "
+        "(grain density sand.density), emitted in layers (dx/k apart, k³ = sand.particles_per_cell) 2 cells inside "
+        "the face, moving at the inflow velocity, each of volume sand_fraction × (dx/k)³, so the jet's sand "
+        "fraction is sand_fraction and the sand flux sand_fraction × area × normal speed (couplekit.sand.emission; "
+        "a whole-face inflow emits over the face less a 2-cell rim, an outlet carrying sand must keep 2 cells from "
+        "the face's edges). The memory estimate counts the particles emitted over time.frames",
         "",
         lo=0.0,
         hi=0.64,
