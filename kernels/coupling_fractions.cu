@@ -11,8 +11,11 @@
 //   eps_s  = min(eps_max, V_i / V_cell)                           (Eq. 25, V_i = sum_p V_p N_i(x_p))
 //   eps_f  = 1 - eps_s                                            (Eq. 33, no retention)
 // with retention (CK_RETENTION=1), R_i the bound water rasterised from the particles (Eq. 53):
+//   cap    = r_max eps_s, or with per-body retention (masked = 1) r_max min(eps_s, eps_r), eps_r the
+//            retentive sand's fraction sum_p [p retains] V_p N_i(x_p) / V_cell (Eq. 53 with r_p = 1 on retentive
+//            particles): only retentive sand has capacity; masked = 0 is bitwise the one-setting model
 //   free   = min(1 - eps_s - R_i, eps_prev)                       (Eq. 54 before the update, see below)
-//   dR     = min(max(free, 0) phi, min(R_a dt r_max eps_s, r_max eps_s - R_i))   (Eq. 55, dt = 1 lattice step)
+//   dR     = min(max(free, 0) phi, min(R_a dt cap phi, cap - R_i))   (Eq. 55, dt = 1 lattice step)
 //   R'     = R_i + dR                                             (Eq. 56)
 //   eps_f  = 1 - eps_s - R'                                       (Eq. 54 after the update: the porosity the
 //                                                                  fluid and the source term see)
@@ -22,6 +25,13 @@
 // (eps_prev = last step's porosity, the one the last source term conserved), while R_i re-rasterised from
 // the moved particles may differ from last step's R'; taking the smaller porosity keeps dR at most the free
 // water actually present, so phi never goes negative (with 1 - eps_s - R_i alone it can, by ~1e-4).
+// The uptake rate is Eq. 55's R_a dt r_max eps_s times the pores' water fraction phi (phi = 1: the paper's
+// rate).  With the paper's rate alone, the outer min is the only limit in a partly wet node, so every node of
+// the phase field's diffuse tail inside a dry plug's air-filled pores (phi ~ 1e-4 .. 0.1) lost ALL its water
+// in one step: phi undershot below 0 there, the density flipped between air and tail water every step under
+// the old hydrostatic pressure gradient, and the dry plug under water went NaN at step ~97 at R_a = 0.01.
+// With the rate proportional to phi a node loses at most R_a r_max eps_s / eps_f of its water per step.
+// Measurements and the ruled-out causes: couplekit/coupling/reference.py (module docstring).
 // eps_prev must not alias eps_fluid.
 // variants: CK_RETENTION=0,1 CK_TWO_PHASE=0,1
 #include "common.cuh"
@@ -41,17 +51,18 @@ DEVICE int coupling_source_index(const int X, const int n, const int periodic) {
 }
 
 // n = (nx + 2) * (ny + 2) * (nz + 2).  Arrays of switched-off effects (bound_in, eps_prev, d_bound, bound_out
-// without retention; phi single-phase) are not read or written: pass a 1-element array.
+// without retention; phi single-phase; retentive unless masked) are not read or written: pass a 1-element array.
 KERNEL void coupling_fractions(const long long n, const float* RESTRICT grid_vol /* size: nx * ny * nz */,
                                const float* RESTRICT phi /* size >= 1 */,
                                const float* RESTRICT bound_in /* size >= 1 */,
+                               const float* RESTRICT retentive /* size >= 1 */,
                                const float* RESTRICT eps_prev /* size >= 1 */,
                                float* RESTRICT eps_sand /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                                float* RESTRICT eps_fluid /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                                float* RESTRICT d_bound /* size >= 1 */, float* RESTRICT bound_out /* size >= 1 */,
                                float* RESTRICT water /* size: nx * ny * nz */, const int nx, const int ny,
                                const int nz, const int px, const int py, const int pz, const float inv_cell_volume,
-                               const float eps_max, const float r_max, const float absorption) {
+                               const float eps_max, const float r_max, const float absorption, const int masked) {
     const int PX = nx + 2;
     const long long PXY = (long long)PX * (ny + 2);
     FOR_EACH_CELL(X, Y, Z, nx + 2, ny + 2, nz + 2) {
@@ -69,9 +80,9 @@ KERNEL void coupling_fractions(const long long n, const float* RESTRICT grid_vol
 #endif
 #if CK_RETENTION
         const float R = bound_in[node];
-        const float cap = r_max * es;                                                   // retention capacity
+        const float cap = r_max * (masked ? fminf(es, retentive[node]) : es);           // retention capacity
         const float free_water = fmaxf(fminf(1.f - es - R, eps_prev[image]), 0.f) * ph;
-        const float dR = fminf(free_water, fminf(absorption * cap, cap - R));  // Eq. 55
+        const float dR = fminf(free_water, fminf(absorption * cap * ph, cap - R));  // Eq. 55, rate x phi
         const float Rn = R + dR;                                                        // Eq. 56
         const float ef = 1.f - es - Rn;                                                 // Eq. 54
         const float wet = Rn + ef * ph;                                                 // Eq. 59
@@ -100,6 +111,8 @@ KERNEL void coupling_fractions(const long long n, const float* RESTRICT grid_vol
     (void)bound_out;
     (void)r_max;
     (void)absorption;
+    (void)retentive;
+    (void)masked;
 #endif
 #if !CK_TWO_PHASE
     (void)phi;

@@ -39,8 +39,9 @@ from .params import CouplingParams
 
 __all__ = ["SandFluidCoupler"]
 
-_STATE = ("eps_sand", "fluid_u", "eps_prev", "water", "bound_in", "bound", "d_bound", "moisture_ratio")
-"""Arrays of :meth:`SandFluidCoupler.state` (the retention ones only when retention is on)."""
+_STATE = ("eps_sand", "fluid_u", "eps_prev", "water", "bound_in", "bound", "d_bound", "moisture_ratio", "retain")
+"""Arrays of :meth:`SandFluidCoupler.state` (the retention ones only when retention is on, ``retain`` only with
+per-body retention)."""
 
 
 class SandFluidCoupler:
@@ -48,8 +49,12 @@ class SandFluidCoupler:
 
     ``units``: the lattice unit system (``units.dx`` must be the sand's dx; ``units.dt`` the LBM step);
     ``params``: :class:`CouplingParams` (retention on/off, drag constants); ``moisture``: initial moisture
-    ratio r_p of the particles (retention only).  The fluid must be built with ``mixture=True`` and
-    ``external_force=True``; its phase field (if any) receives the source term.
+    ratio r_p of the particles (retention only).  ``retentive``: per-particle flags (P,) for retention on
+    some sand bodies only (paper Fig. 10), or None (every particle retains when ``params.retention``).  With
+    flags, only retentive sand has retention capacity (r_max times the retentive sand fraction, a P2G of the
+    flags) and only retentive particles gain bound water; flags all true are the one-setting model, bitwise.
+    The fluid must be built with ``mixture=True`` and ``external_force=True``; its phase field (if any)
+    receives the source term.
     """
 
     def __init__(
@@ -59,6 +64,7 @@ class SandFluidCoupler:
         units: Units,
         params: CouplingParams | None = None,
         moisture: np.ndarray | float = 0.0,
+        retentive: np.ndarray | None = None,
     ):
         if tuple(sand.shape) != tuple(fluid.shape):
             raise ValueError(f"sand grid {tuple(sand.shape)} and fluid grid {tuple(fluid.shape)} must be the same")
@@ -84,9 +90,19 @@ class SandFluidCoupler:
             self.bound = xp.zeros(shape, dtype=np.float32)
             self.d_bound = xp.zeros(shape, dtype=np.float32)
             r = np.broadcast_to(np.asarray(moisture, dtype=np.float64), (sand.n_particles,))
+            flags = None if retentive is None else np.asarray(retentive, dtype=bool).reshape(-1)
+            if flags is not None and flags.shape != (sand.n_particles,):
+                raise ValueError(f"retentive has {flags.size} flags for {sand.n_particles} particles")
+            if flags is not None and not flags.all():
+                r = np.where(flags, r, 0.0)  # non-retentive particles hold no bound water
+                self.retain = fluid.backend.asarray(flags.astype(np.float32), np.float32)
+                self.retentive = xp.zeros(shape, dtype=np.float32)
+            else:
+                self.retain = self.retentive = None
             self.moisture_ratio = fluid.backend.asarray(r, np.float32)
         else:
             self.bound_in = self.bound = self.d_bound = self.moisture_ratio = None
+            self.retain = self.retentive = None
         self._started = False
         self._scheduler = None  # built by step()
 
@@ -102,9 +118,11 @@ class SandFluidCoupler:
         s, f = self.sand, self.fluid
         if self.retention:
             self.ops.bound_water_p2g(s.x, self.moisture_ratio, s.volume, self.bound_in, s.dx)
+            if self.retain is not None:  # the retentive sand's fraction: Eq. 53's P2G with r_p = flag
+                self.ops.bound_water_p2g(s.x, self.retain, s.volume, self.retentive, s.dx)
         self.ops.fractions(
             s.grid_vol, f.phi, self.bound_in, self.eps_prev, self.eps_sand, f.fluid_fraction, self.d_bound,
-            self.bound, self.water, s.dx, self.periodic,
+            self.bound, self.water, s.dx, self.periodic, self.retentive,
         )  # fmt: skip
         if not self._started:
             # first step: no sand motion yet, so last step's porosity is this one (without absorption)
@@ -145,7 +163,10 @@ class SandFluidCoupler:
     def moisture(self) -> None:
         """Saturation of every particle (Eq. 59 or its no-retention form) and, with retention, r_p (Eq. 58)."""
         s = self.sand
-        self.ops.particle_moisture(s.x, self.moisture_ratio, s.saturation, self.water, self.d_bound, s.grid_vol, s.dx)
+        self.ops.particle_moisture(
+            s.x, self.moisture_ratio, s.saturation, self.water, self.d_bound, s.grid_vol, s.dx, self.retentive,
+            self.retain,
+        )  # fmt: skip
 
     def sand_velocity(self) -> None:
         """The sand grid velocity (after the grid update) into ``fluid.sand_velocity`` (lattice units)."""

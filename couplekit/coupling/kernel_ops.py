@@ -60,32 +60,23 @@ class KernelOps:
         water,
         dx: float,
         periodic: Sequence[bool] = (True, True, True),
+        retentive=None,
     ) -> None:
-        """Sand fraction ε and porosity (padded, ghosts filled), dR, R' and the water fraction (MPM grid).
-
-        With retention two passes: ``coupling_fractions`` (built without retention: Eq. 25, ghosts) then
-        ``coupling_absorption`` (kernels/coupling_moisture.cu: Eqs. 54–56 and 59 with the φ-scaled uptake
-        rate that keeps a dry plug under water stable; the CK_RETENTION=1 branch of coupling_fractions.cu
-        still has the unscaled rate and is not used)."""
+        """Sand fraction ε and porosity (padded, ghosts filled), dR, R' and the water fraction (MPM grid):
+        one pass of ``coupling_fractions`` (Eqs. 25, 33, 54–56, 59; the φ-scaled uptake rate of Eq. 55).
+        ``retentive``: the retentive sand's fraction for per-body retention (None: all sand retains)."""
         nz, ny, nx = grid_vol.shape
         p = self.params
         ret = self.retention
-        npad = (nx + 2) * (ny + 2) * (nz + 2)
-        phi_in = self._opt(phi, self.two_phase, "phi")
-        per = tuple(np.int32(bool(v)) for v in periodic)
-        self.backend.module("coupling_fractions.cu", {"CK_RETENTION": 0, "CK_TWO_PHASE": int(self.two_phase)}).function(
-            "coupling_fractions"
-        )(
-            npad, grid_vol, phi_in, self._none, self._none, eps_sand, eps_fluid, self._none, self._none, water,
-            np.int32(nx), np.int32(ny), np.int32(nz), *per, np.float32(1.0 / dx**3), np.float32(p.eps_max),
-            np.float32(p.r_max), np.float32(p.absorption_rate),
+        self._fn("coupling_fractions.cu", "coupling_fractions", "CK_RETENTION", "CK_TWO_PHASE")(
+            (nx + 2) * (ny + 2) * (nz + 2), grid_vol, self._opt(phi, self.two_phase, "phi"),
+            self._opt(bound_in, ret, "bound_in"), self._none if retentive is None else retentive,
+            self._opt(eps_prev, ret, "eps_prev"), eps_sand, eps_fluid,
+            self._opt(d_bound, ret, "d_bound"), self._opt(bound_out, ret, "bound_out"), water,
+            np.int32(nx), np.int32(ny), np.int32(nz), *(np.int32(bool(v)) for v in periodic),
+            np.float32(1.0 / dx**3), np.float32(p.eps_max), np.float32(p.r_max), np.float32(p.absorption_rate),
+            np.int32(retentive is not None and ret),
         )  # fmt: skip
-        if ret:
-            self._fn("coupling_moisture.cu", "coupling_absorption", "CK_RETENTION", "CK_TWO_PHASE")(
-                npad, eps_sand, phi_in, self._opt(bound_in, ret, "bound_in"), self._opt(eps_prev, ret, "eps_prev"),
-                eps_fluid, self._opt(d_bound, ret, "d_bound"), self._opt(bound_out, ret, "bound_out"), water,
-                np.int32(nx), np.int32(ny), np.int32(nz), *per, np.float32(p.r_max), np.float32(p.absorption_rate),
-            )  # fmt: skip
 
     def sand_velocity(self, grid_v, sand_v, units: Units, periodic: Sequence[bool] = (True, True, True)) -> None:
         """MPM grid velocity (SI) -> padded lattice ``sand_velocity`` input of Eq. 39, ghosts filled."""
@@ -150,11 +141,16 @@ class KernelOps:
             np.float32(dx),
         )  # fmt: skip
 
-    def particle_moisture(self, x, r, saturation, water, d_bound, grid_vol, dx: float) -> None:
-        """Saturation S_p (Eq. 59) and, with retention, the moisture update r_p (Eq. 58)."""
+    def particle_moisture(
+        self, x, r, saturation, water, d_bound, grid_vol, dx: float, retentive=None, retain=None
+    ) -> None:
+        """Saturation S_p (Eq. 59) and, with retention, the moisture update r_p (Eq. 58); per-body retention
+        with ``retentive`` (retentive sand fraction) and ``retain`` (1 on retentive particles, else 0)."""
         nz, ny, nx = water.shape
         ret = self.retention
         self._fn("coupling_moisture.cu", "coupling_particle_moisture", "CK_RETENTION")(
             x.shape[1], x, self._opt(r, ret, "r"), saturation, water, self._opt(d_bound, ret, "d_bound"),
-            self._opt(grid_vol, ret, "grid_vol"), np.int32(nx), np.int32(ny), np.int32(nz), np.float32(dx),
+            self._opt(grid_vol, ret, "grid_vol"), self._none if retentive is None else retentive,
+            self._none if retain is None else retain, np.int32(nx), np.int32(ny), np.int32(nz), np.float32(dx),
+            np.int32(retentive is not None and ret),
         )  # fmt: skip

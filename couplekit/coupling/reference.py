@@ -138,9 +138,14 @@ class ReferenceOps:
         water,
         dx: float,
         periodic: Sequence[bool] = (True, True, True),
+        retentive=None,
     ) -> None:
         """Sand fraction ε and porosity (padded, ghosts filled), and on the MPM grid: bound-water increment
         dR, bound water R' and the water fraction that drives cohesion (Eq. 59 summand).
+
+        ``retentive`` (per-body retention, else None): the retentive sand's fraction ε_r = Σ_p V_p N_i / V_cell
+        over retentive particles (:meth:`bound_water_p2g` with r_p = 1 on them); the capacity of Eqs. 55–56
+        is then r_max min(ε, ε_r): only retentive sand binds water.
 
         ``periodic`` = (x, y, z): a ghost on a periodic axis copies its periodic image, else its nearest
         interior node (zero normal gradient).  ``bound_in``: R from :meth:`bound_water_p2g` (retention).
@@ -156,7 +161,8 @@ class ReferenceOps:
         ph_node = self._phi_water(_interior(phi) if self.two_phase else None, grid_vol)
         if self.retention:
             R = bound_in.astype(np.float64)
-            cap = p.r_max * eps_node  # retention capacity r_max ε
+            retaining = eps_node if retentive is None else np.minimum(eps_node, retentive.astype(np.float64))
+            cap = p.r_max * retaining  # retention capacity r_max ε (of the retentive sand)
             free = np.maximum(np.minimum(1.0 - eps_node - R, _interior(eps_prev)), 0.0)  # Eq. 54 before the update
             # Eq. 55 (Δt = 1), uptake rate scaled by the pores' water fraction φ (module docstring)
             dR = np.minimum(free * ph_node, np.minimum(p.absorption_rate * cap * ph_node, cap - R))
@@ -270,12 +276,23 @@ class ReferenceOps:
         np.add.at(acc, index.ravel(), (w * q[:, None]).ravel())
         bound[...] = acc.reshape(bound.shape)
 
-    def particle_moisture(self, x, r, saturation, water, d_bound, grid_vol, dx: float) -> None:
+    def particle_moisture(
+        self, x, r, saturation, water, d_bound, grid_vol, dx: float, retentive=None, retain=None
+    ) -> None:
         """S_p = Σ_i water_i N_i(x_p) (Eq. 59); with retention r_p += Σ_i dR_i / ε̂_i N_i(x_p) (Eq. 58),
-        ε̂_i = V_i / V_cell unclamped (so that bound water is conserved; see kernels/coupling_moisture.cu)."""
+        ε̂_i = V_i / V_cell unclamped (so that bound water is conserved; see kernels/coupling_moisture.cu).
+
+        Per-body retention: ``retain`` (P,) is 1 on retentive particles, 0 elsewhere, ``retentive`` their
+        fraction ε_r (see :meth:`fractions`); then r_p += retain_p Σ_i dR_i / ε_r,i N_i(x_p): the bound water
+        goes to the retentive particles only, and Σ_p r_p V_p still grows by V_cell Σ_i dR_i."""
         index, w = bspline_stencil(x, dx, water.shape)
         saturation[...] = (w * water.astype(np.float64).ravel()[index]).sum(axis=1)
         if self.retention:
-            vol = grid_vol.astype(np.float64).ravel()
-            ratio = np.where(vol > 0, d_bound.astype(np.float64).ravel() * dx**3 / np.where(vol > 0, vol, 1.0), 0.0)
-            r[...] = r.astype(np.float64) + (w * ratio[index]).sum(axis=1)
+            if retentive is None:
+                vol = grid_vol.astype(np.float64).ravel() / dx**3
+                keep = 1.0
+            else:
+                vol = retentive.astype(np.float64).ravel()
+                keep = retain.astype(np.float64)
+            ratio = np.where(vol > 0, d_bound.astype(np.float64).ravel() / np.where(vol > 0, vol, 1.0), 0.0)
+            r[...] = r.astype(np.float64) + keep * (w * ratio[index]).sum(axis=1)

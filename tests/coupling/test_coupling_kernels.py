@@ -148,3 +148,67 @@ def test_sand_velocity_matches_reference(cpu):
     np.testing.assert_allclose(out[0], out[1], rtol=1e-6, atol=1e-9)
     np.testing.assert_array_equal(out[0][:, :, :, 0], out[0][:, :, :, -2])  # periodic x ghost = image
     np.testing.assert_array_equal(out[0][:, :, 0, :], out[0][:, :, 1, :])  # wall y ghost = nearest node
+
+
+# ------------------------------------------------------------------ per-body retention (masked capacity)
+def _retentive_state(rng, st):
+    """A retentive sand fraction between 0 and the node's unclamped sand fraction (some nodes all
+    retentive, some none), as the P2G of per-particle flags gives it."""
+    frac = st["grid_vol"].astype(np.float64) / UNITS.dx**3
+    share = rng.choice([0.0, 1.0, 0.3, 0.7], size=frac.shape)
+    return (frac * share).astype(np.float32)
+
+
+@pytest.mark.parametrize("two_phase", [True, False], ids=["two_phase", "single_phase"])
+def test_masked_fractions_match_reference(cpu, two_phase):
+    """Per-body retention: capacity r_max min(ε, ε_r); same tolerance as the unmasked fractions."""
+    kops, rops = _pair(cpu, True, two_phase)
+    rng = np.random.default_rng(11)
+    st = grid_state(rng, kops.params)
+    ret = _retentive_state(rng, st)
+    outs = []
+    for ops in (kops, rops):
+        out = _fraction_outputs()
+        ops.fractions(
+            st["grid_vol"], st["phi"], st["bound"], st["eps_prev"], out["eps_sand"], out["eps_fluid"],
+            out["d_bound"], out["bound_out"], out["water"], UNITS.dx, (True, True, False), ret,
+        )  # fmt: skip
+        outs.append(out)
+    for key in ("eps_sand", "eps_fluid", "water", "d_bound", "bound_out"):
+        np.testing.assert_allclose(outs[0][key], outs[1][key], rtol=1e-6, atol=1e-6, err_msg=key)
+    # nodes without retentive sand absorb nothing; elsewhere the bound water stays within the masked capacity
+    none = ret == 0
+    assert none.any() and (outs[0]["d_bound"][none] <= 0).all()
+    eps = np.minimum(kops.params.eps_max, st["grid_vol"].astype(np.float64) / UNITS.dx**3)
+    cap = kops.params.r_max * np.minimum(eps, ret)
+    grew = outs[0]["d_bound"] > 0
+    assert grew.any(), "state exercises no absorption"
+    assert (outs[0]["bound_out"][grew] <= cap[grew] * (1 + 1e-6) + 1e-7).all()
+
+
+def test_masked_particle_moisture_matches_reference(cpu):
+    """Only retentive particles gain bound water, and Σ_p r_p V_p grows by V_cell Σ dR over the retentive
+    sand (same tolerances as the unmasked gather)."""
+    kops, rops = _pair(cpu, True, True)
+    rng = np.random.default_rng(12)
+    pt = particles(rng, 2000)
+    retain = (rng.uniform(size=pt["r"].shape) < 0.5).astype(np.float32)
+    st = grid_state(rng, kops.params)
+    retentive = np.zeros(SHAPE, np.float32)
+    rops.bound_water_p2g(pt["x"], retain, pt["vol"], retentive, UNITS.dx)
+    fr = _run_fractions(rops, st, (True, True, True))
+    # only nodes holding retentive sand absorb (the masked capacity); increments as Eq. 55 gives them, >= 0
+    d_bound = np.where(retentive > 0, rng.uniform(0.0, 2e-3, SHAPE), 0.0).astype(np.float32)
+    res = []
+    for ops in (kops, rops):
+        r = pt["r"].copy()
+        sat = np.full(pt["r"].shape, -7.0, np.float32)
+        ops.particle_moisture(pt["x"], r, sat, fr["water"], d_bound, st["grid_vol"], UNITS.dx, retentive, retain)
+        res.append((r, sat))
+    np.testing.assert_allclose(res[0][1], res[1][1], rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(res[0][0], res[1][0], rtol=1e-5, atol=1e-6)
+    off = retain == 0
+    assert np.array_equal(res[0][0][off], pt["r"][off]), "non-retentive particles gained bound water"
+    gained = float(((res[1][0].astype(np.float64) - pt["r"]) * pt["vol"]).sum()) / UNITS.dx**3
+    absorbed = float(d_bound.astype(np.float64).sum())
+    assert absorbed > 0 and abs(gained - absorbed) <= 1e-5 * absorbed
