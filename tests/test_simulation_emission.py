@@ -10,6 +10,7 @@ import math
 import numpy as np
 import pytest
 
+from couplekit.sand.emission import InflowEmitter
 from couplekit.scene import Scene, SceneError
 from couplekit.simulation import Simulation, memory_estimate
 
@@ -70,6 +71,12 @@ def test_a_jet_carrying_sand_is_a_coupled_scene_with_emission():
     est = memory_estimate(sc)
     # 2 frames x 10 steps: 0.008 s of a 0.5 m/s jet, ceil(0.004 m / 0.005 m) = 1 layer of 48 sites
     assert est["emitted_particles"] == SITES and est["particle_count"] == SITES
+    src = sim.emitter.sources[0]
+    assert (src.start, src.ramp, src.sand_fraction) == (0.0, 0.0, 0.2)
+    d = jet_scene()
+    d["inflows"][0].update(sand_start=0.1, sand_ramp=0.3)
+    later = InflowEmitter.from_scene(Scene.from_dict(d)).sources[0]
+    assert (later.start, later.ramp, later.fraction_at(0.25)) == (0.1, 0.3, pytest.approx(0.1))
     sim.step(LAYER_STEPS - 1)
     assert sim.sand.n_particles == 0
     sim.step(1)
@@ -158,6 +165,13 @@ def test_malformed_sand_jets_are_refused_naming_the_key():
     d["inflows"][0]["kind"] = "wind"
     d["fluid"]["phases"] = 2
     assert "wind carries no sand" in _problems(d)
+    d = jet_scene(sand_fraction=0.0)
+    d["inflows"][0]["sand_ramp"] = 0.5
+    msg = _problems(d)
+    assert "inflows[0].sand_ramp" in msg and "carries no sand" in msg
+    d = jet_scene()
+    d["inflows"][0]["sand_start"] = -1.0
+    assert "inflows[0].sand_start" in _problems(d)
     d = jet_scene(sand_fraction=0.0)  # a [sand] table with neither a sand body nor a sand jet
     assert "no inflow carrying sand" in _problems(d)
     ok = copy.deepcopy(jet_scene())

@@ -24,6 +24,10 @@ particles on a regular sub-lattice, deterministically:
   flux but sheets of sand ε0 / s sub-cells apart, not a jet of fraction s. A new particle moves with the
   inflow velocity (all three components), in its reference state (F = I, C = 0, no hardening,
   :meth:`couplekit.sand.solver.SandSolver.append_particles`).
+* **Over time** a jet may start clean and carry sand from ``sand_start`` on, its fraction rising linearly to
+  s over ``sand_ramp`` (paper Fig. 1: clean water first, then a jet whose sand ratio increases): a layer takes
+  the fraction s(t) at the end of the step that completes it (volume s(t) h³ per particle), and no particle
+  is emitted while s(t) = 0, though the accumulator runs from t = 0 so the layers keep their spacing.
 
 The accumulators are the emitter's whole state (:meth:`InflowEmitter.state`), so a run resumed from a
 checkpoint emits exactly the layers an uninterrupted run does, at the same float64 positions.
@@ -79,7 +83,9 @@ class JetSource:
     ``face``: ``x-, x+, y-, y+, z-, z+``; ``sites``: in-plane positions (2, N) (:func:`emission_sites`);
     ``velocity``: inflow velocity (3,) m/s, its normal component pointing into the domain; ``sand_fraction``:
     s; ``spacing``: h = dx / k; ``offset``: distance of the emission plane from the face (bound · dx), m;
-    ``density``: grain density ϱ, kg/m³; ``extent``: the domain's size along the face normal, m.
+    ``density``: grain density ϱ, kg/m³; ``extent``: the domain's size along the face normal, m; ``start``,
+    ``ramp``: the jet carries no sand before ``start`` (s), then a fraction rising linearly to ``sand_fraction``
+    over ``ramp`` seconds (:meth:`fraction_at`).
     """
 
     face: str
@@ -90,6 +96,16 @@ class JetSource:
     offset: float
     density: float
     extent: float
+    start: float = 0.0
+    ramp: float = 0.0
+
+    def fraction_at(self, t: float) -> float:
+        """The jet's sand fraction at time ``t``: 0 before ``start``, then rising linearly over ``ramp``."""
+        if t < self.start:
+            return 0.0
+        if self.ramp <= 0.0 or t >= self.start + self.ramp:
+            return self.sand_fraction
+        return self.sand_fraction * (t - self.start) / self.ramp
 
     @property
     def axis(self) -> int:
@@ -109,7 +125,7 @@ class JetSource:
 
     @property
     def particle_volume(self) -> float:
-        """Grain volume of one emitted particle, s h³ (module docstring), m³."""
+        """Grain volume of one emitted particle at the full sand fraction, s h³ (module docstring), m³."""
         return self.sand_fraction * self.spacing**3
 
     @property
@@ -146,7 +162,11 @@ class InflowEmitter:
         self.length = np.zeros(len(self.sources))
         """Per source: how far (m) the jet has advanced since its last emitted layer (float64)."""
         self.layers = np.zeros(len(self.sources), np.int64)
-        """Per source: layers emitted so far."""
+        """Per source: layers emitted so far (layers due while a jet carries no sand yet are skipped)."""
+        self.volume = np.zeros(len(self.sources))
+        """Per source: sand volume emitted so far, m³ (float64)."""
+        self.steps = 0
+        """Steps advanced: the time of :meth:`advance`'s layers is ``steps × Δt``."""
 
     @classmethod
     def from_scene(cls, scene, bound: int = 2, coupler=None) -> InflowEmitter | None:
@@ -177,12 +197,19 @@ class InflowEmitter:
                     bound * dom.dx,
                     float(sd.density),
                     float(dom.size[_AXIS[face[0]]]),
+                    float(inf.sand_start),
+                    float(inf.sand_ramp),
                 )
             )
         return cls(sources, coupler) if sources else None
 
     def advance(self, sand, dt: float) -> int:
-        """Advance every jet by Δt and append the completed layers to ``sand``; returns particles added."""
+        """Advance every jet by Δt and append the completed layers to ``sand``; returns particles added.
+
+        A layer completed at time t = steps × Δt (after this step) carries the fraction s(t) of
+        :meth:`JetSource.fraction_at`: particle volume s(t) h³; none while s(t) = 0."""
+        self.steps += 1
+        t = self.steps * dt
         added = 0
         for i, src in enumerate(self.sources):
             self.length[i] += src.normal_speed * dt
@@ -190,12 +217,15 @@ class InflowEmitter:
             while self.length[i] >= src.spacing * (1.0 - _ROUND_OFF):
                 self.length[i] -= src.spacing
                 depths.append(self.length[i] + 0.5 * src.spacing)
-                self.layers[i] += 1
-            if not depths:
+            s = src.fraction_at(t)
+            if not depths or s <= 0.0:
                 continue
             x = np.concatenate([src.layer(d) for d in reversed(depths)], axis=1)  # oldest layer first
             n = x.shape[1]
-            sand.append_particles(x, src.particle_volume, np.asarray(src.velocity), src.density, 0.0)
+            volume = s * src.spacing**3
+            sand.append_particles(x, volume, np.asarray(src.velocity), src.density, 0.0)
+            self.layers[i] += len(depths)
+            self.volume[i] += n * volume
             added += n
         if added and self.coupler is not None:
             match_particle_count(self.coupler, sand.n_particles)
@@ -203,9 +233,7 @@ class InflowEmitter:
 
     def emitted_volume(self) -> float:
         """Sand volume emitted so far, m³ (float64)."""
-        return float(
-            sum(n * s.sites.shape[1] * s.particle_volume for n, s in zip(self.layers, self.sources, strict=True))
-        )
+        return float(self.volume.sum())
 
     def emitted_particles(self) -> int:
         """Particles emitted so far."""
@@ -213,8 +241,13 @@ class InflowEmitter:
 
     # ------------------------------------------------------------------ checkpoint
     def state(self) -> dict[str, np.ndarray]:
-        """The accumulators and layer counts (a bitwise restart needs nothing else)."""
-        return {"length": self.length.copy(), "layers": self.layers.copy()}
+        """The accumulators, layer counts, emitted volumes and steps (a bitwise restart needs nothing else)."""
+        return {
+            "length": self.length.copy(),
+            "layers": self.layers.copy(),
+            "volume": self.volume.copy(),
+            "steps": np.array(self.steps),
+        }
 
     def load_state(self, st: dict) -> None:
         """Restore a :meth:`state` dict (same number of sources)."""
@@ -223,6 +256,8 @@ class InflowEmitter:
             raise ValueError(f"emission state has {length.size} sources, this scene {self.length.size}")
         self.length = length.copy()
         self.layers = np.asarray(st["layers"], np.int64).copy()
+        self.volume = np.asarray(st["volume"], np.float64).copy()
+        self.steps = int(st["steps"])
 
     def __repr__(self) -> str:
         parts = ", ".join(f"{s.face}: {s.sites.shape[1]} sites, {s.volume_flux:.3g} m³/s" for s in self.sources)
@@ -230,10 +265,16 @@ class InflowEmitter:
 
 
 def expected_particles(emitter: InflowEmitter | None, duration: float) -> float:
-    """Particles the emitter adds over ``duration`` seconds: Σ sites × ceil(u_n t / h) (an upper bound)."""
+    """Particles the emitter adds over ``duration`` seconds: Σ sites × ceil(u_n (t − start) / h) (an upper
+    bound)."""
     if emitter is None:
         return 0.0
-    return float(sum(s.sites.shape[1] * math.ceil(s.normal_speed * duration / s.spacing) for s in emitter.sources))
+    return float(
+        sum(
+            s.sites.shape[1] * math.ceil(max(0.0, s.normal_speed * (duration - s.start)) / s.spacing)
+            for s in emitter.sources
+        )
+    )
 
 
 def match_particle_count(coupler, n: int) -> None:

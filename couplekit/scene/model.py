@@ -224,6 +224,10 @@ class Inflow:
     center: tuple[float, float] | None = None
     size: tuple[float, float] | None = None
     radius: float | None = None
+    sand_start: float = 0.0
+    """Time (s) at which the jet starts carrying sand (couplekit.sand.emission)."""
+    sand_ramp: float = 0.0
+    """Time (s) over which its sand fraction rises from 0 to ``sand_fraction`` after ``sand_start``."""
 
 
 @dataclass(frozen=True)
@@ -504,6 +508,8 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
                 None if v["center"] is None else tuple(v["center"]),
                 None if v["size"] is None else tuple(v["size"]),
                 v["radius"],
+                v["sand_start"] if v["sand_start"] is not None else 0.0,
+                v["sand_ramp"] if v["sand_ramp"] is not None else 0.0,
             )
         )
     _check_inflows(inflows, bnd, fluid, problems, domain)
@@ -888,6 +894,15 @@ def _check_inflows(
                     f"{key}.velocity",
                     f"the {inf.face[0]} component {inf.velocity[axis]:g} m/s does not point into the domain through {inf.face}",
                     f"make velocity[{axis}] {'positive' if side > 0 else 'negative'}",
+                )
+            )
+        if inf.sand_fraction == 0 and (inf.sand_start > 0 or inf.sand_ramp > 0):
+            which = "sand_start" if inf.sand_start > 0 else "sand_ramp"
+            problems.append(
+                Problem(
+                    f"{key}.{which}",
+                    "is set but the inflow carries no sand (sand_fraction = 0)",
+                    f"set {key}.sand_fraction > 0, or remove {which}",
                 )
             )
         if inf.kind == "wind" and inf.sand_fraction > 0:

@@ -564,6 +564,25 @@ INFLOW_KEYS: list[Key] = [
         lo=0.0,
         lo_open=True,
     ),
+    Key(
+        "sand_start",
+        "float",
+        0.0,
+        "time at which a jet with sand_fraction > 0 starts carrying sand: clean water before it (paper Fig. 1's "
+        "first stage)",
+        "s",
+        lo=0.0,
+    ),
+    Key(
+        "sand_ramp",
+        "float",
+        0.0,
+        "after sand_start the jet's sand fraction rises linearly from 0 to sand_fraction over this time (0: at "
+        "once), as the sand ratio of paper Fig. 1's jet increases; each emitted layer takes the fraction of its "
+        "step (its particles' volume sand fraction × (dx/k)³)",
+        "s",
+        lo=0.0,
+    ),
 ]
 """Keys of one ``[[inflows]]`` entry."""
 

@@ -4,6 +4,7 @@ particles move with the inflow, the layers form a regular sub-lattice and the je
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -176,6 +177,31 @@ def test_a_jet_is_a_regular_lattice_of_sand_fraction_s(cpu):
     np.testing.assert_allclose(core, s, rtol=1e-5)
 
 
+def test_a_jet_that_starts_clean_and_ramps_up_its_sand():
+    """sand_start / sand_ramp: no particle before the start; each layer's particles carry s(t) h³ with
+    s(t) = s (t − start) / ramp at the step that completed the layer, then s; the volume emitted is
+    ∫ s(t) A_e u_n dt to within one full layer (s A_e h), since each layer's s is that of its last step."""
+    start, ramp, s, u = 0.01, 0.02, 0.3, 0.8
+    src = dataclasses.replace(_source("x-", (u, 0.0, 0.0), s), start=start, ramp=ramp)
+    sol = _solver(get_backend("numpy"))
+    em = InflowEmitter([src])
+    n_start = int(start / DT)
+    for _ in range(n_start - 1):
+        em.advance(sol, DT)
+    assert sol.n_particles == 0 and em.length[0] > 0
+    n = 300  # t = 0.06 s: the ramp ends at 0.03 s
+    for _ in range(n - n_start + 1):
+        em.advance(sol, DT)
+    t = n * DT
+    integral = s * ((t - start) - 0.5 * ramp)  # ∫ s(t) dt
+    expected = src.area * u * integral
+    assert abs(em.emitted_volume() - expected) <= s * src.area * src.spacing
+    vol = sol.particles()["volume"].astype(np.float64).reshape(-1, src.sites.shape[1])[:, 0]
+    assert np.all(np.diff(vol) >= -1e-12 * vol.max()) and vol[0] < 0.2 * s * src.spacing**3
+    np.testing.assert_allclose(vol[-1], s * src.spacing**3, rtol=1e-6)
+    np.testing.assert_allclose(vol.sum() * src.sites.shape[1], em.emitted_volume(), rtol=1e-6)
+
+
 def test_emitter_state_restores_the_accumulators():
     src = _source()
     em = InflowEmitter([src])
@@ -185,5 +211,6 @@ def test_emitter_state_restores_the_accumulators():
     other = InflowEmitter([src])
     other.load_state(em.state())
     assert other.length.tobytes() == em.length.tobytes() and (other.layers == em.layers).all()
+    assert other.volume.tobytes() == em.volume.tobytes() and other.steps == em.steps == 7
     with pytest.raises(ValueError, match="sources"):
         InflowEmitter([src, src]).load_state(em.state())
