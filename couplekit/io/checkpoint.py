@@ -1,8 +1,10 @@
 """HDF5 checkpoints: the scene, the solver states and the run counters, for an exact restart.
 
 Layout: attribute ``format`` = "couplekit-checkpoint", ``version`` = 1, ``scene`` (the scene dict as JSON),
-``meta`` (JSON: step, frame, time, backend, ...); one group per solver (``fluid``, ``sand``) holding its
-:meth:`state` arrays as datasets, stored without compression or conversion so a restart is bitwise. The file
+``meta`` (JSON: step, frame, time, backend, ...); one group per solver (``fluid``, ``sand``, ``coupler``, and
+``emission`` for the accumulators of sand-carrying inflows, :mod:`couplekit.sand.emission`) holding its
+:meth:`state` arrays as datasets, stored without compression or conversion so a restart is bitwise. The sand
+group's particle count is the one at the checkpoint (jets add particles as a run goes on). The file
 is written to a temporary name and renamed, so a crash never leaves a half-written checkpoint in place.
 """
 
