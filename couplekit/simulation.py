@@ -13,8 +13,9 @@ obstacles as an SDF collider), and both, coupled by :class:`couplekit.coupling.c
 :class:`couplekit.schedulers.lockstep.LockstepScheduler` (paper Algorithm 1: one MPM step per LBM step, same
 Δt), which times every stage: :meth:`Simulation.stage_times`, :meth:`Simulation.cost_report`, a cost line at
 the end of :meth:`Simulation.run` and ``step_seconds`` in the diagnostics. Refused with
-:class:`CouplingUnavailableError`: what the coupler cannot do yet (sand bodies with and without retention in
-one scene, drag or buoyancy switched off).
+:class:`CouplingUnavailableError`: what the coupler cannot do yet (drag or buoyancy switched off).  Sand
+bodies with and without retention in one scene (``bodies[*].retention``, paper Fig. 10) pass per-particle
+flags to the coupler: only the retentive sand has retention capacity and gains bound water.
 
 Water jets carrying sand (``inflows[*].sand_fraction`` > 0, paper Fig. 1): :class:`couplekit.sand.emission.
 InflowEmitter` (:attr:`Simulation.emitter`) appends a layer of particles after every step in which a jet has
@@ -94,12 +95,7 @@ def _refuse_unsupported(scene: Scene) -> None:
     """Refuse, before allocation, what the coupler cannot do yet (CouplingUnavailableError naming the key)."""
     problems = []
     if scene.has_sand:
-        sd = scene.sand
-        bodies = [b for b in scene.bodies if b.kind == "sand"]
         if scene.has_fluid:
-            ret = {b.retention if b.retention is not None else sd.retention for b in bodies}
-            if len(ret) > 1:
-                problems.append("bodies[*].retention: retention on some sand bodies and off on others")
             for key in ("drag", "buoyancy"):
                 if not getattr(scene.effects, key):
                     problems.append(f"effects.{key} = false: the coupler has no switch for it")
@@ -183,9 +179,11 @@ def memory_estimate(scene: Scene) -> dict[str, float]:
         out["particles"] = 4.0 * _SAND_FLOATS_PER_PARTICLE * count
     if scene.fluid is not None and scene.has_sand:
         # fluid mixture inputs (fluid_fraction, sand_velocity, force) and the coupler's fields
-        retention = any(b.retention if b.retention is not None else scene.sand.retention for b in scene.bodies)
-        out["coupling"] = padded * 4.0 * (7 + 1 + 3 + 1) + nx * ny * nz * 4.0 * (1 + (3 if retention else 0))
-        out["particles"] += 4.0 * count * (1 if retention else 0)
+        flags = {b.retention if b.retention is not None else scene.sand.retention for b in scene.bodies
+                 if b.kind == "sand"}  # fmt: skip
+        retention, mixed = True in flags, len(flags) > 1  # mixed: + retentive fraction grid and flags
+        out["coupling"] = padded * 4.0 * (7 + 1 + 3 + 1) + nx * ny * nz * 4.0 * (1 + (3 + mixed if retention else 0))
+        out["particles"] += 4.0 * count * ((1 + mixed) if retention else 0)
     if scene.fluid is not None and getattr(scene, "stirring", None) is not None:
         # the stirring force's buffer, plus the force input a fluid-only scene would not have
         out["stirring"] = padded * 4.0 * (3 if scene.has_sand else 6)
@@ -415,7 +413,7 @@ class Simulation:
             cohesion_s3=s3,
             hardening=eff.hardening,
         )
-        xs, vols, vels, dens = [], [], [], []
+        xs, vols, vels, dens, retains = [], [], [], [], []
         size = np.asarray(dom.size)
         for i, b in enumerate(bodies):
             shape = b.geometry.shape(dom, 0.25 * dom.dx)
@@ -428,6 +426,9 @@ class Simulation:
             vols.append(sd.packing_fraction * seeded.volume)  # grain volume: ε0 of the sub-cell (module doc)
             vels.append(np.repeat(np.asarray(b.velocity, np.float64)[:, None], seeded.count, axis=1))
             dens.append(np.full(seeded.count, b.density or sd.density))  # per-body grain density
+            retains.append(np.full(seeded.count, b.retention if b.retention is not None else sd.retention))
+        # per-particle water retention (bodies[*].retention, paper Fig. 10): the coupler's retentive flags
+        self._sand_retentive = np.concatenate(retains) if retains else np.zeros(0, bool)
         if not xs:  # the sand only enters through inflows (couplekit.sand.emission)
             xs, vols, vels, dens = [np.zeros((3, 0))], [np.zeros(0)], [np.zeros((3, 0))], [np.zeros(0)]
         walls = DomainWalls.from_dict({_SAND_FACE[f]: Wall("separate", sd.wall_friction) for f in dom.boundary})
@@ -667,7 +668,10 @@ class Simulation:
             b.retention if b.retention is not None else sd.retention for b in self.scene.bodies if b.kind == "sand"
         )
         params = CouplingParams(retention=retention, r_max=sd.max_moisture, absorption_rate=sd.absorption_rate)
-        return SandFluidCoupler(self.sand, self.fluid, self.units, params)
+        # retention on some bodies only: per-particle flags (all flags true = the one-setting model, bitwise)
+        flags = getattr(self, "_sand_retentive", None)
+        retentive = flags if retention and flags is not None and flags.size == self.sand.n_particles else None
+        return SandFluidCoupler(self.sand, self.fluid, self.units, params, retentive=retentive)
 
     def _locate_divergence(self, good: dict, good_step: int, exc: SimulationDiverged) -> SimulationDiverged:
         """Replay from the last good state one step at a time to find the first non-finite step."""

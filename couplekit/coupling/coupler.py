@@ -119,6 +119,8 @@ class SandFluidCoupler:
         if self.retention:
             self.ops.bound_water_p2g(s.x, self.moisture_ratio, s.volume, self.bound_in, s.dx)
             if self.retain is not None:  # the retentive sand's fraction: Eq. 53's P2G with r_p = flag
+                if self.retain.shape[0] != s.n_particles:  # particles emitted since (couplekit.sand.emission)
+                    self.retain = _resized(self.fluid.backend.xp, self.retain, s.n_particles)
                 self.ops.bound_water_p2g(s.x, self.retain, s.volume, self.retentive, s.dx)
         self.ops.fractions(
             s.grid_vol, f.phi, self.bound_in, self.eps_prev, self.eps_sand, f.fluid_fraction, self.d_bound,
@@ -223,6 +225,15 @@ class SandFluidCoupler:
         if self.retention:
             out["bound_water"] = be.to_host(self.bound)
         return out
+
+
+def _resized(xp, a, n: int):
+    """``a`` cut or grown to ``n`` entries, new entries 0: particles appended after construction (emitted at
+    inflows) are not retentive."""
+    out = xp.zeros(n, dtype=a.dtype)
+    keep = min(n, a.shape[0])
+    out[:keep] = a[:keep]
+    return out
 
 
 def _pad(xp, a, like):
