@@ -610,6 +610,7 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
     # ---- time-step limits
     if domain is not None and time is not None:
         _check_time_step(domain, time, fluid, sand, bodies, inflows, problems)
+        _check_water_outlets(domain, time, fluid, inflows, problems)
 
     if problems:
         return None
@@ -1096,6 +1097,70 @@ def _check_inside(body: Body, i: int, domain: Domain, problems: list[Problem]) -
                 f"move or shrink it so that it lies within [{margin:g}, {size[axis] - margin:.6g}] m along {'xyz'[axis]}",
             )
         )
+
+
+def water_outlet_speed_limit(interface_width: float, across_cells: int) -> float:
+    """Largest lattice speed (|velocity| dt/dx) at which a water jet from an outlet (``shape`` = 'rect' or
+    'disc') into air at 800:1 was measured to stay finite, by interface width ξ (cells) and the outlet's
+    narrower extent (cells); ``inf`` where no failure was measured up to 0.08.
+
+    Measured on a 12 × 12 × 24 box, square outlets in the z- wall, ν = 0.01, σ = 1e-4, M = 0.02, 400 steps
+    (tests/fluid/test_inflow_region.py, ``test_narrow_outlet_jet_diverges``):
+
+    * ξ ≥ 6: finite at 0.08 for 4, 6 and 8 cells across;
+    * 4 ≤ ξ < 6: finite up to 0.07 for 2-4 cells across, NaN at 0.08; 5 and 6 cells across finite at 0.08;
+    * 3 ≤ ξ < 4: finite at 0.02 (4 cells), NaN at 0.08 for 4 and 6 cells;
+    * ξ < 3: NaN at every speed tried, down to 0.01 (4 cells; 6 and 8 cells at 0.02).
+
+    A whole-face inflow is not limited (an 8 × 8 duct runs at ξ = 2, u = 0.02 and at ξ = 4, u = 0.08): what
+    fails is the outlet's rim, the sharp lateral step of φ and velocity between the inflow and wall ghosts.
+    """
+    if interface_width >= 6.0:
+        return math.inf
+    if interface_width >= 4.0:
+        return math.inf if across_cells >= 5 else 0.07
+    if interface_width >= 3.0:
+        return 0.02
+    return 0.0
+
+
+def _check_water_outlets(domain: Domain, time: Time, fluid: Fluid | None, inflows, problems: list[Problem]) -> None:
+    """Water outlets into air within the measured stable range (:func:`water_outlet_speed_limit`), refused
+    before any allocation with the key and the fix."""
+    from ..fluid.inflow import region_mask
+
+    if fluid is None or fluid.phases != 2:
+        return
+    faces = {"x_min": "x-", "x_max": "x+", "y_min": "y-", "y_max": "y+", "z_min": "z-", "z_max": "z+"}
+    xi = float(fluid.interface_width)
+    for i, inf in enumerate(inflows):
+        if inf.kind != "water" or inf.shape == "face" or inf.center is None or inf.face not in faces:
+            continue
+        if (inf.shape == "rect" and inf.size is None) or (inf.shape == "disc" and inf.radius is None):
+            continue
+        mask = region_mask(domain.shape, domain.dx, faces[inf.face], inf.shape, inf.center, inf.size, inf.radius)
+        if not mask.any():
+            continue  # reported by _check_outlets_on_grid
+        across = int(min(np.count_nonzero(mask.any(axis=0)), np.count_nonzero(mask.any(axis=1))))
+        speed = math.sqrt(sum(v * v for v in inf.velocity))
+        lattice = speed * time.dt / domain.dx
+        limit = water_outlet_speed_limit(xi, across)
+        if lattice <= limit * (1.0 + 1e-9):
+            continue
+        if xi < 3.0:
+            what = f"a water outlet at fluid.interface_width = {xi:g} diverges at any measured speed (down to 0.01 lattice)"
+            fix = "set fluid.interface_width >= 4 (an outlet at least 5 cells across then runs at lattice speeds up to 0.08)"
+        else:
+            fix = f"lower the speed to <= {limit * domain.dx / time.dt:.3g} m/s (lattice {limit:g})"
+            if xi >= 4.0:
+                fix = f"widen the outlet to >= 5 cells ({5 * domain.dx:g} m) across, {fix}, or set fluid.interface_width >= 6"
+            else:
+                fix = f"{fix}, or set fluid.interface_width >= 4"
+            what = (
+                f"a water jet at lattice speed {lattice:.3g} (|velocity| dt/dx) from an outlet {across} cells across "
+                f"diverges at fluid.interface_width = {xi:g} (measured stable up to {limit:g})"
+            )
+        problems.append(Problem(f"inflows[{i}].velocity", what, fix))
 
 
 def _speed_estimate(domain: Domain, time: Time | dict, bodies, inflows, _cache) -> tuple[float, str]:
