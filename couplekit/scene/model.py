@@ -1114,6 +1114,11 @@ def water_outlet_speed_limit(interface_width: float, across_cells: int) -> float
 
     A whole-face inflow is not limited (an 8 × 8 duct runs at ξ = 2, u = 0.02 and at ξ = 4, u = 0.08): what
     fails is the outlet's rim, the sharp lateral step of φ and velocity between the inflow and wall ghosts.
+
+    Not covered: the range depends on the viscosities. At Fig. 1's ν_h = 5e-4, ν_l = 0.1 (same box, ξ = 4,
+    u = 0.04) a 4-cell outlet gives NaN by step 140 (finite at 0.02), 6 cells stay finite but reach 0.46, 8 cells
+    and ξ = 6 with 6 cells run cleanly; examples/fig01_outlet_jet_small.toml (6 × 4 cells, u = 0.04) lies
+    there and diverges near step 190. Only the ν = 0.01 map is enforced here.
     """
     if interface_width >= 6.0:
         return math.inf
