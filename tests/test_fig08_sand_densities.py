@@ -1,0 +1,139 @@
+"""Paper 000 Fig. 8 at test scale: sand balls of different grain densities dropped into water (couplekit issue 6).
+
+The paper: the 600 kg/m³ ball ends floating, the 1500 kg/m³ ball on the bottom. Here two balls of radius 1.74
+cells (dx = 5 cm, the small variant's grid and lattice numbers: dt = 1.6e-4 s, ν_h = 1e-4, ν_l = 1e-2) are
+thrown into a pool and both enter the water; the light one ends above the heavy one. (The submerged balls of
+tests/test_seeding_buoyancy.py check the rise/sink direction from rest under water, without an interface.)
+
+The second test pins a known defect of the coupled fluid (not of the scene): fluid inside a sand ball that
+overlaps the air-side tail of the diffuse interface is driven upward, far faster than anything the ball's
+fall can displace, and carries the ball with it. It is why, at ξ = 4, the small variant's balls bounced off
+the water surface; the scene and the first test use ξ = 8, where that flow is about 7× weaker (measured on
+a ball at rest above the water after 0.05 s: 13.6, 3.4, 0.9, 0.5, 0.3 m/s at ξ = 2, 4, 6, 8, 10; no flow
+without gravity; unchanged with surface tension, the volume controller or the phase-field source term off,
+with the Smagorinsky or odd-moment closures off, or with ten times lower air or higher water viscosity).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from couplekit.scene import Scene
+from couplekit.simulation import Simulation
+
+DX = 0.05
+DEPTH = 0.6  # undisturbed water surface, m
+RADIUS = 0.087  # m: the paper's balls (17 cells at its dx = 5 mm), 1.74 cells here
+
+SCENE = """
+[scene]
+name = "fig08_two_balls"
+
+[domain]
+size = [{lx}, 0.5, {lz}]
+dx = {dx}
+
+[time]
+dt = 0.00016
+frame_duration = 0.05
+frames = 1
+
+[fluid]
+phases = 2
+water_lattice_viscosity = 0.0001
+air_lattice_viscosity = 0.01
+surface_tension = 0.073
+controller_eta = 2.0
+interface_width = {xi}
+
+[sand]
+density = 1200.0
+youngs_modulus = 350000.0
+
+[[bodies]]
+kind = "water"
+[bodies.geometry]
+type = "box"
+min = [0.0, 0.0, 0.0]
+max = [{lx}, 0.5, {depth}]
+{balls}
+[outputs]
+preview = false
+"""
+
+BALL = """
+[[bodies]]
+kind = "sand"
+density = {density}
+velocity = [0.0, 0.0, {vz}]
+[bodies.geometry]
+type = "sphere"
+center = [{x}, 0.25, {z}]
+radius = {r}
+"""
+
+
+def _scene(tmp_path, balls: list[tuple[float, float, float, float]], xi: float, lx: float, lz: float) -> Simulation:
+    """balls: (density kg/m³, x m, centre height m, vertical velocity m/s)."""
+    text = SCENE.format(
+        dx=DX,
+        lx=lx,
+        lz=lz,
+        depth=DEPTH,
+        xi=xi,
+        balls="".join(BALL.format(density=d, x=x, z=z, vz=vz, r=RADIUS) for d, x, z, vz in balls),
+    )
+    path = tmp_path / "scene.toml"
+    path.write_text(text)
+    return Simulation(Scene.load(path), backend="cpu", log=None)
+
+
+def _by_density(sim: Simulation) -> dict[int, dict[str, np.ndarray]]:
+    """Each ball's particles, told apart by their grain density (mass / volume, the body's density)."""
+    p = sim.particles()
+    rho = np.rint(p["mass"] / p["volume"]).astype(int)
+    return {int(d): {"x": p["x"][:, rho == d], "v": p["v"][:, rho == d]} for d in np.unique(rho)}
+
+
+def test_light_ball_ends_above_heavy_ball_after_both_enter_the_water(tmp_path):
+    """A 600 and a 1500 kg/m³ ball thrown down at 4.5 m/s with their bottoms 0.41 m above the surface (impact
+    ≈ 5.3 m/s; thrown at 3 m/s the 600 ball's lowest particle only just reached the surface, 0.600 m, at rest
+    it stopped 3 cells above it). Every 0.05 s for 0.3 s: both balls' lowest particles reach below the
+    undisturbed surface (they enter the water), and at the end the 1500 ball is fully under water and its
+    centre at least two radii below the 600 ball's. Measured: lowest 0.547 and 0.252 m; at 0.3 s the centres
+    at 0.624 and 0.281 m, the 1500 top at 0.323 m.
+
+    Why these bounds and not the paper's end state: 0.3 s is what the CI budget allows, not enough for the
+    1500 ball to settle on the bottom or the 600 ball to come to rest; and the 600 ball's rise after entry
+    (0.2 m/s at 0.3 s, 0.8 m/s at 0.5 s) is sped up by the defect pinned below, so its height is not checked
+    against a floating equilibrium."""
+    sim = _scene(tmp_path, [(600.0, 0.333, 1.1, -4.5), (1500.0, 0.667, 1.1, -4.5)], xi=8.0, lx=1.0, lz=1.6)
+    lowest = {600: np.inf, 1500: np.inf}
+    for _ in range(6):
+        sim.step(312)
+        for d, b in _by_density(sim).items():
+            lowest[d] = min(lowest[d], float(b["x"][2].min()))
+    end = _by_density(sim)
+    light, heavy = end[600]["x"][2], end[1500]["x"][2]
+    assert lowest[600] < DEPTH and lowest[1500] < DEPTH, f"lowest particle heights {lowest} vs surface {DEPTH}"
+    assert heavy.max() < DEPTH, f"1500 ball top at {heavy.max():.3f} m, surface at {DEPTH} m"
+    assert light.mean() - heavy.mean() > 2 * RADIUS, (light.mean(), heavy.mean())
+
+
+@pytest.mark.xfail(strict=True, reason="known defect: upward fluid jet in sand overlapping the interface tail")
+def test_fluid_in_a_falling_ball_above_the_water_does_not_rise_faster_than_it_is_displaced(tmp_path):
+    """KNOWN DEFECT, pinned (ξ = 4, the default): a 1500 kg/m³ ball released at rest with its bottom 2.3 cells
+    above the water surface (inside the air-side tail of the interface, φ ≈ 0.01-0.2 in its cells). After
+    208 steps (0.033 s) it falls at ≈ 0.31 m/s. The fluid in its cells can at most be pushed up by the volume
+    it sweeps: if all the displaced fluid went through the ball, u_up = v ε_s / (1 − ε_s) = 1.5 v (ε_s = 0.6);
+    measured: 1.2 m/s upward, 4 × the ball's speed, and growing (2.9 m/s at step 312). Without gravity the
+    same ball leaves the fluid at rest (≤ 0.1 m/s)."""
+    sim = _scene(tmp_path, [(1500.0, 0.3, DEPTH + 0.2, 0.0)], xi=4.0, lx=0.6, lz=1.2)
+    sim.step(208)
+    f = sim.fields()
+    in_ball = f["sand_fraction"] > 0.3
+    up = float(f["velocity"][2][in_ball].max())
+    ball = float(-sim.particles()["v"][2].mean())
+    assert ball > 0.25, f"ball falls at {ball:.3f} m/s"
+    assert up < 1.5 * ball, f"fluid in the ball rises at {up:.3f} m/s, the ball falls at {ball:.3f} m/s"
