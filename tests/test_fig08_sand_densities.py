@@ -12,6 +12,11 @@ the water surface; the scene and the first test use ξ = 8, where that flow is a
 a ball at rest above the water after 0.05 s: 13.6, 3.4, 0.9, 0.5, 0.3 m/s at ξ = 2, 4, 6, 8, 10; no flow
 without gravity; unchanged with surface tension, the volume controller or the phase-field source term off,
 with the Smagorinsky or odd-moment closures off, or with ten times lower air or higher water viscosity).
+Its source: the slip term (u − v)·∇ε/ε of the mixture pressure update (Eq. 39). The NumPy reference
+reproduces the xfail case (fluid in the ball +1.18 m/s at step 208; +1.75 with the Σ f c velocity of the
+earlier update) and, with that term dropped, the fluid moves down with the ball (−0.02 m/s): the pressure
+it raises at the ball's lower edge, in tail cells of ρ ≈ 0.03-0.08, accelerates the lighter cells above
+(ρ ≈ 0.01) upward, which raises the slip and the pressure again (×4 every ~40 steps).
 """
 
 from __future__ import annotations
