@@ -1,10 +1,34 @@
-"""Wetting front through a dry sand plug with and without water retention (paper 000 Fig. 10, issue 5),
-written to benchmarks/results/wetting_front.json.
+"""Wetting front through dry sand with and without water retention (paper 000 Fig. 10, issue 5), written to
+benchmarks/results/wetting_front.json.
 
-    python benchmarks/wetting_front.py [--shape 32,12,12] [--steps 3000] [--every 100] [--ra 0.01 0.001]
-                                       [--nu 1e-3] [--threads N] [--out ...]
+    python benchmarks/wetting_front.py [--scene partition|plug] [--shape nz,ny,nx] [--steps N] [--every N]
+                                       [--ra 0.01 0.001] [--nu 1e-3] [--eta 2] [--jobs 2] [--out ...]
 
-Scene: couplekit.coupling.scenes.dry_plug_under_water — a dry plug (ε = 0.55, 1500 kg/m³, no cohesion)
+``--scene partition`` (default; the paper's geometry, where the displaced air can leave):
+couplekit.coupling.scenes.bed_under_partition — a dry bed (ε = 0.55, 1500 kg/m³, no cohesion) on the
+floor, a partition wall over it from x = 0.2 nx to 0.8 nx, from the bed up to 0.8 nz, water on the left up
+to 0.75 nz, air above and on the right (the air displaced from the pores rises on the right and returns
+over the wall).  Front: x (cells right of the wall's left face) where the mean φ over the bed's layers
+(z = 1 … bed − 1) and the fluid rows first drops below 0.5; ``arrival_steps``: the step at which it first
+reaches 2, 4, 6, … cells.  ν_h = 1e-3 (closed tank; see below).  Measured (20 × 8 × 48: bed 5 cells, wall
+x = 10–38, top 16, water 15; 8000 steps; one thread per run, two at a time, 74–97 s each;
+results/wetting_front.json), front (cells under the wall) at steps 2000 / 4000 / 8000 and arrival at 4 / 6:
+
+    η = 2, no retention      2.75   5.90  10.20   2727 / 4082   max |u| 0.013, water drift +1.0e-3
+    η = 2, R_a = 0.001       2.06   4.45   7.65   3576 / 5694   max |u| 0.047, drift +1.0e-3
+    η = 2, R_a = 0.01        wrong: γ flips between ±2 from step to step, water +2.7 %, front meaningless
+    η = 0, no retention      2.82   6.00  10.39   2673 / 3999   drift +3.3 %
+    η = 0, R_a = 0.01        1.66   4.28   7.56   3744 / 5866   drift +4.3 %
+    η = 0, R_a = 0.001       2.12   4.46   7.68   3558 / 5676   drift +4.2 %
+
+With retention the front reaches 6 cells ~1.4× later and is 25–27 % behind at step 8000.  The η = 2,
+R_a = 0.01 failure: the controller's lever Σ ε̃ S_φ drops to ~1e-5 cell volumes (the absorption sink and
+the transport part of S_φ cancel) while V0 − V is ~0.3, so γ = clamp((V0 − V)/Σ ε̃ S_φ) saturates with a
+sign that flips each step, and the phase field's response to γ S_φ is then not γ Σ ε̃ S_φ (measured
+~5e-3 cell volumes of water created per step on a 16 × 6 × 28 variant).  The CI version
+(tests/coupling/test_retention_front_partition.py, 16 × 6 × 28, bed 5) is not affected.
+
+``--scene plug`` (the former closed-tank measurement): couplekit.coupling.scenes.dry_plug_under_water — a dry plug (ε = 0.55, 1500 kg/m³, no cohesion)
 filling the cross-section from cell 1 to ``plug_top`` with air in its pores, a water layer above it, air
 above the water, closed tank.  One run without retention and one per absorption rate R_a.
 
@@ -42,7 +66,7 @@ from pathlib import Path
 import numpy as np
 
 from couplekit.backend import get_backend
-from couplekit.coupling.scenes import dry_plug_under_water
+from couplekit.coupling.scenes import bed_under_partition, dry_plug_under_water
 
 LEVELS = (0.5, 0.2, 0.1)
 
@@ -107,18 +131,110 @@ def run_case(
     return rec
 
 
+def partition_front(phi: np.ndarray, bed: int, wall_x: float, level: float = 0.5) -> float:
+    """x (cells right of ``wall_x``) where the mean φ over the bed layers z = 1 … bed − 1 and the fluid rows
+    (y = 1 … ny − 2) first drops below ``level`` going right from the wall's left face."""
+    prof = phi[1:bed, 1:-1].astype(np.float64).mean(axis=(0, 1))
+    xc = np.arange(prof.size) + 0.5
+    k = int(np.floor(wall_x - 0.5))
+    while k + 1 < prof.size and prof[k + 1] >= level:
+        k += 1
+    if k + 1 >= prof.size:
+        return float(prof.size) - wall_x
+    return float(xc[k] + (prof[k] - level) / (prof[k] - prof[k + 1]) - wall_x)
+
+
+def partition_geometry(shape) -> dict:
+    """bed_under_partition's geometry for a grid ``shape`` (cells)."""
+    nz, ny, nx = shape
+    return {"bed": round(0.25 * nz), "partition": (round(0.2 * nx), round(0.8 * nx)),
+            "partition_top": round(0.8 * nz), "water_top": round(0.75 * nz)}  # fmt: skip
+
+
+def run_partition(shape, steps: int, every: int, ra: float, nu: float, eta: float, threads: int | None) -> dict:
+    """One bed_under_partition run; ``ra`` = 0: retention off."""
+    be = get_backend("cpu", threads=threads)
+    geo = partition_geometry(shape)
+    sc = bed_under_partition(be, shape, retention=ra > 0, absorption_rate=max(ra, 0.0), nu_h=nu, eta=eta,
+                             youngs_modulus=1e5, sand_params={"cohesion_max": 0.0}, bed=float(geo["bed"]),
+                             partition=tuple(float(v) for v in geo["partition"]),
+                             partition_top=float(geo["partition_top"]), water_top=float(geo["water_top"]))  # fmt: skip
+    sc.step(1)
+    w0 = sc.water_volume()
+    rec: dict = {"absorption_rate": ra, "retention": ra > 0, "steps": [], "front": [], "max_lattice_speed": [],
+                 "water_drift": [], "bound_water": []}  # fmt: skip
+    t0 = time.perf_counter()
+    finite = True
+    for s in range(every, steps + 1, every):
+        sc.step(every)
+        if not sc.finite():
+            finite = False
+            rec["first_non_finite_by_step"] = s
+            break
+        phi = be.to_host(sc.fluid.phi)[1:-1, 1:-1, 1:-1]
+        rec["steps"].append(s)
+        rec["front"].append(partition_front(phi, geo["bed"], float(geo["partition"][0])))
+        rec["max_lattice_speed"].append(sc.max_lattice_speed())
+        rec["water_drift"].append(sc.water_volume() / w0 - 1)
+        rec["bound_water"].append(float(sc.coupler.bound.sum(dtype=np.float64)) if ra > 0 else 0.0)
+    rec["finite"] = finite
+    rec["seconds"] = time.perf_counter() - t0
+    rec["arrival_steps"] = {}
+    for depth in range(2, int(geo["partition"][1] - geo["partition"][0]) + 1, 2):
+        fr, st = rec["front"], rec["steps"]
+        hit = next((i for i in range(1, len(fr)) if fr[i - 1] < depth <= fr[i]), None)
+        if hit is not None:
+            f0, f1 = fr[hit - 1], fr[hit]
+            rec["arrival_steps"][str(depth)] = st[hit - 1] + (depth - f0) / (f1 - f0) * (st[hit] - st[hit - 1])
+    return rec
+
+
+def main_partition(a) -> None:
+    """The partition scene: one run without retention and one per R_a, ``--jobs`` at a time."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    shape = tuple(int(v) for v in (a.shape or "20,8,48").split(","))
+    etas = [2.0, 0.0] if a.eta is None else a.eta
+    runs = [(eta, ra) for eta in etas for ra in (0.0, *a.ra)]
+    with ProcessPoolExecutor(max_workers=a.jobs) as pool:
+        futures = [pool.submit(run_partition, shape, a.steps, a.every, ra, a.nu, eta, 1) for eta, ra in runs]
+        recs = [f.result() for f in futures]
+    cases = {f"eta_{eta:g}/" + ("no_retention" if ra == 0 else f"retention_Ra_{ra:g}"): r
+             for (eta, ra), r in zip(runs, recs, strict=True)}  # fmt: skip
+    geo = partition_geometry(shape)
+    result = {"scene": "bed_under_partition", "shape_nz_ny_nx": list(shape), **geo, "nu_h_lattice": a.nu,
+              "etas": etas, "front_level": 0.5, "cases": cases,
+              "machine": {"platform": platform.platform(), "threads_per_run": 1, "jobs": a.jobs}}  # fmt: skip
+    Path(a.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(a.out).write_text(json.dumps(result, indent=1))
+    for name, rec in cases.items():
+        print(f"{name}: finite {rec['finite']}, front at steps {rec['steps'][999 // a.every :: 1000 // a.every]}: "
+              f"{np.round(rec['front'][999 // a.every :: 1000 // a.every], 2).tolist()}, arrival {rec['arrival_steps']}, "
+              f"max speed {max(rec['max_lattice_speed']):.3g}, drift {rec['water_drift'][-1]:.1e}, "
+              f"{rec['seconds']:.0f} s")  # fmt: skip
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--shape", default="32,12,12", help="nz,ny,nx cells")
-    ap.add_argument("--steps", type=int, default=3000)
-    ap.add_argument("--every", type=int, default=100)
+    ap.add_argument("--scene", choices=["partition", "plug"], default="partition")
+    ap.add_argument("--shape", default=None, help="nz,ny,nx cells (partition 20,8,48; plug 32,12,12)")
+    ap.add_argument("--steps", type=int, default=None, help="partition 8000, plug 3000")
+    ap.add_argument("--every", type=int, default=None, help="partition 250, plug 100")
+    ap.add_argument("--jobs", type=int, default=2, help="partition: runs at a time (one thread each)")
     ap.add_argument("--ra", type=float, nargs="+", default=[0.01, 0.001], help="absorption rates R_a (retention on)")
     ap.add_argument("--nu", type=float, default=1e-3, help="water lattice viscosity nu_h")
-    ap.add_argument("--eta", type=float, default=0.0, help="volume controller strength (0 = off)")
+    ap.add_argument("--eta", type=float, nargs="+", default=None,
+                    help="volume controller strength(s) (partition: 2 and 0; plug: 0 = off, the first value)")  # fmt: skip
     ap.add_argument("--threads", type=int, default=None)
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "wetting_front.json"))
     a = ap.parse_args()
-    shape = tuple(int(v) for v in a.shape.split(","))
+    if a.scene == "partition":
+        a.steps, a.every = a.steps or 8000, a.every or 250
+        main_partition(a)
+        return
+    a.steps, a.every = a.steps or 3000, a.every or 100
+    a.eta = 0.0 if a.eta is None else a.eta[0]
+    shape = tuple(int(v) for v in (a.shape or "32,12,12").split(","))
     nz = shape[0]
     plug_top, water_top = round(nz / 2), round(nz / 2) + round(nz / 3)
     be = get_backend("cpu", threads=a.threads)
