@@ -207,6 +207,9 @@ class SandFluidCoupler:
             if k not in st:
                 raise ValueError(f"coupler state has no {k!r} (retention {'on' if self.retention else 'off'} here)")
             a = np.asarray(st[k])
+            if k == "retain" and a.ndim == 1:  # per-particle flags: the checkpoint's count (emitted particles)
+                self.retain = be.asarray(a.astype(np.float32), np.float32)
+                continue
             if a.shape != tuple(mine.shape):
                 raise ValueError(f"coupler state {k!r} has shape {a.shape}, this coupler {tuple(mine.shape)}")
             mine[...] = be.asarray(a, np.float32)
