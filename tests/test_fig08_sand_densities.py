@@ -16,7 +16,11 @@ Its source: the slip term (u − v)·∇ε/ε of the mixture pressure update (Eq
 reproduces the xfail case (fluid in the ball +1.18 m/s at step 208; +1.75 with the Σ f c velocity of the
 earlier update) and, with that term dropped, the fluid moves down with the ball (−0.02 m/s): the pressure
 it raises at the ball's lower edge, in tail cells of ρ ≈ 0.03-0.08, accelerates the lighter cells above
-(ρ ≈ 0.01) upward, which raises the slip and the pressure again (×4 every ~40 steps).
+(ρ ≈ 0.01) upward, which raises the slip and the pressure again (×4 every ~40 steps). With the term zeroed
+in a patched copy of kernels/lbm_pressure.cu, the small variant at ξ = 4 shows the paper's Fig. 8 in 1 s
+(148 s on one core): all three balls enter the water, at 1 s the 1500 ball rests on the bottom (0.13 m), the
+950 ball has stopped at 0.29 m and turns up, the 600 ball rises at 0.77 m/s from its lowest point, 0.45 m.
+The term is part of Eq. 39's mixture continuity, so dropping it is evidence, not the fix.
 """
 
 from __future__ import annotations
