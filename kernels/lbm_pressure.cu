@@ -16,7 +16,7 @@
 
 // p <- p - cs2 rho [(1 - sum f) + (eps_s div v + (u - v).grad eps) / eps]   (Eq. 39, 1 - sum f ~ div u, Eq. 38;
 // u the velocity of Eq. 13 written by the last collision; the slip term (u - v).grad eps only in cells
-// whose neighbours are all fluid)
+// whose neighbours are all fluid, and weighted by the water fraction phi in two-phase flow)
 KERNEL void lbm_macro_pressure(const long long n, const float* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
                                const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                                const float* RESTRICT vel /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
@@ -58,7 +58,13 @@ KERNEL void lbm_macro_pressure(const long long n, const float* RESTRICT f /* siz
         const float slip = lbm_all_stencil(flags, c, px, pxy) ? (ux - sand_v[c]) * ge[0] + (uy - sand_v[N + c]) * ge[1] +
                                                                     (uz - sand_v[2 * N + c]) * ge[2]
                                                               : 0.f;
+#if CK_TWO_PHASE
+        // weighted by the water fraction: in the light phase the slip's pressure, accelerated by 1/rho, pumped
+        // the air through a sand ball at the interface upward (reference docstring)
+        divergence += ((1.f - e) * div_v + lbm_clamp01(phi[c]) * slip) / e;
+#else
         divergence += ((1.f - e) * div_v + slip) / e;
+#endif
 #endif
 #if CK_TWO_PHASE
         const float ph = lbm_clamp01(phi[c]);

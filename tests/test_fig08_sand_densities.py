@@ -5,28 +5,23 @@ cells (dx = 5 cm, the small variant's grid and lattice numbers: dt = 1.6e-4 s, �
 thrown into a pool and both enter the water; the light one ends above the heavy one. (The submerged balls of
 tests/test_seeding_buoyancy.py check the rise/sink direction from rest under water, without an interface.)
 
-The second test pins a known defect of the coupled fluid (not of the scene): fluid inside a sand ball that
-overlaps the air-side tail of the diffuse interface is driven upward, far faster than anything the ball's
-fall can displace, and carries the ball with it. It is why, at ξ = 4, the small variant's balls bounced off
-the water surface; the scene and the first test use ξ = 8, where that flow is about 7× weaker (measured on
-a ball at rest above the water after 0.05 s: 13.6, 3.4, 0.9, 0.5, 0.3 m/s at ξ = 2, 4, 6, 8, 10; no flow
-without gravity; unchanged with surface tension, the volume controller or the phase-field source term off,
-with the Smagorinsky or odd-moment closures off, or with ten times lower air or higher water viscosity).
-Its source: the slip term (u − v)·∇ε/ε of the mixture pressure update (Eq. 39). The NumPy reference
-reproduces the xfail case (fluid in the ball +1.18 m/s at step 208; +1.75 with the Σ f c velocity of the
-earlier update) and, with that term dropped, the fluid moves down with the ball (−0.02 m/s): the pressure
-it raises at the ball's lower edge, in tail cells of ρ ≈ 0.03-0.08, accelerates the lighter cells above
-(ρ ≈ 0.01) upward, which raises the slip and the pressure again (×4 every ~40 steps). With the term zeroed
-in a patched copy of kernels/lbm_pressure.cu, the small variant at ξ = 4 shows the paper's Fig. 8 in 1 s
-(148 s on one core): all three balls enter the water, at 1 s the 1500 ball rests on the bottom (0.13 m), the
-950 ball has stopped at 0.29 m and turns up, the 600 ball rises at 0.77 m/s from its lowest point, 0.45 m.
-The term is part of Eq. 39's mixture continuity, so dropping it is evidence, not the fix.
+The second test checks what was a defect of the coupled fluid (not of the scene): fluid inside a sand ball
+that overlaps the air-side tail of the diffuse interface was driven upward, far faster than anything the
+ball's fall can displace, and carried the ball with it; at ξ = 4 the small variant's balls bounced off the
+water surface (measured on a ball at rest above the water after 0.05 s: 13.6, 3.4, 0.9, 0.5, 0.3 m/s at
+ξ = 2, 4, 6, 8, 10; no flow without gravity; unchanged with surface tension, the volume controller or the
+phase-field source term off, with the Smagorinsky or odd-moment closures off, or with ten times lower air or
+higher water viscosity). Its source: the slip term (u − v)·∇ε/ε of the mixture pressure update (Eq. 39):
+the pressure it raised at the ball's lower edge, in tail cells of ρ ≈ 0.03-0.08, accelerated the lighter
+cells above (ρ ≈ 0.01) upward, which raised the slip and the pressure again (×4 every ~40 steps). With the
+term zeroed the small variant showed the paper's Fig. 8. The fix weights the term by the water fraction φ
+(couplekit/fluid/reference.py ReferenceOps.macro_pressure, kernels/lbm_pressure.cu): the fluid in the
+falling ball now rises at 0.03 m/s (1.2 m/s before).
 """
 
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from couplekit.scene import Scene
 from couplekit.simulation import Simulation
@@ -107,17 +102,16 @@ def _by_density(sim: Simulation) -> dict[int, dict[str, np.ndarray]]:
 
 def test_light_ball_ends_above_heavy_ball_after_both_enter_the_water(tmp_path):
     """A 600 and a 1500 kg/m³ ball thrown down at 4.5 m/s with their bottoms 0.41 m above the surface (impact
-    ≈ 5.3 m/s; thrown at 3 m/s the 600 ball's lowest particle only just reached the surface, 0.600 m, at rest
-    it stopped 3 cells above it). Every 0.05 s for 0.3 s: both balls' lowest particles reach below the
-    undisturbed surface (they enter the water), and at the end the 1500 ball is fully under water and its
-    centre at least two radii below the 600 ball's. Measured: lowest 0.547 and 0.252 m; at 0.3 s the centres
-    at 0.624 and 0.281 m, the 1500 top at 0.323 m.
+    ≈ 5.3 m/s), at the default interface width ξ = 4. Every 0.05 s for 0.3 s: both balls' lowest particles
+    reach below the undisturbed surface (they enter the water), and at the end the 1500 ball is fully under
+    water and its centre at least two radii below the 600 ball's. Measured: lowest 0.448 and 0.204 m; at
+    0.3 s the centres at 0.487 and 0.240 m (the 600 ball fully submerged and turning, top at 0.542 m), the
+    1500 top at 0.308 m. (Before the φ weight of Eq. 39's slip term this needed ξ = 8, and the 600 ball's
+    lowest particle reached only 0.547 m.)
 
     Why these bounds and not the paper's end state: 0.3 s is what the CI budget allows, not enough for the
-    1500 ball to settle on the bottom or the 600 ball to come to rest; and the 600 ball's rise after entry
-    (0.2 m/s at 0.3 s, 0.8 m/s at 0.5 s) is sped up by the defect pinned below, so its height is not checked
-    against a floating equilibrium."""
-    sim = _scene(tmp_path, [(600.0, 0.333, 1.1, -4.5), (1500.0, 0.667, 1.1, -4.5)], xi=8.0, lx=1.0, lz=1.6)
+    1500 ball to settle on the bottom or the 600 ball to float back up."""
+    sim = _scene(tmp_path, [(600.0, 0.333, 1.1, -4.5), (1500.0, 0.667, 1.1, -4.5)], xi=4.0, lx=1.0, lz=1.6)
     lowest = {600: np.inf, 1500: np.inf}
     for _ in range(6):
         sim.step(312)
@@ -130,14 +124,13 @@ def test_light_ball_ends_above_heavy_ball_after_both_enter_the_water(tmp_path):
     assert light.mean() - heavy.mean() > 2 * RADIUS, (light.mean(), heavy.mean())
 
 
-@pytest.mark.xfail(strict=True, reason="known defect: upward fluid jet in sand overlapping the interface tail")
 def test_fluid_in_a_falling_ball_above_the_water_does_not_rise_faster_than_it_is_displaced(tmp_path):
-    """KNOWN DEFECT, pinned (ξ = 4, the default): a 1500 kg/m³ ball released at rest with its bottom 2.3 cells
-    above the water surface (inside the air-side tail of the interface, φ ≈ 0.01-0.2 in its cells). After
-    208 steps (0.033 s) it falls at ≈ 0.31 m/s. The fluid in its cells can at most be pushed up by the volume
-    it sweeps: if all the displaced fluid went through the ball, u_up = v ε_s / (1 − ε_s) = 1.5 v (ε_s = 0.6);
-    measured: 1.2 m/s upward, 4 × the ball's speed, and growing (2.9 m/s at step 312). Without gravity the
-    same ball leaves the fluid at rest (≤ 0.1 m/s)."""
+    """ξ = 4, the default: a 1500 kg/m³ ball released at rest with its bottom 2.3 cells above the water surface
+    (inside the air-side tail of the interface, φ ≈ 0.01-0.2 in its cells). After 208 steps (0.033 s) it falls
+    at ≈ 0.31 m/s. The fluid in its cells can at most be pushed up by the volume it sweeps: if all the
+    displaced fluid went through the ball, u_up = v ε_s / (1 − ε_s) = 1.5 v (ε_s = 0.6). Measured: 0.03 m/s
+    (0.1 v); before the φ weight of Eq. 39's slip term, 1.2 m/s upward, 4 × the ball's speed, and growing
+    (2.9 m/s at step 312)."""
     sim = _scene(tmp_path, [(1500.0, 0.3, DEPTH + 0.2, 0.0)], xi=4.0, lx=0.6, lz=1.2)
     sim.step(208)
     f = sim.fields()
