@@ -26,10 +26,10 @@ the MPM (paper 000 Table 1 lists one resolution). Paper 000's figures have y up:
 
 What runs: fluid-only scenes (one or two phases, water bodies, obstacles, inflows, outflows), sand-only
 scenes (sand bodies, obstacles), and both together, coupled in lockstep as in the paper's Algorithm 1 (drag,
-buoyancy, the phase-field source term, water retention). These validate but `run` refuses them for now,
-naming the key: a water jet carrying sand (`inflows[i].sand_fraction > 0`), sand bodies of different
-densities or with different `retention` in one scene, and `effects.drag` or `effects.buoyancy` = false with
-sand and a fluid.
+buoyancy, the phase-field source term, water retention), with a density and a `retention` setting per sand
+body, and water jets carrying sand (MPM particles emitted at the inflow: `inflows[i].sand_fraction`,
+`sand_start`, `sand_ramp`). These validate but `run` refuses them for now, naming the key:
+`effects.drag` or `effects.buoyancy` = false with sand and a fluid.
 
 Example (the demo, `examples/sand_drop_small.toml`):
 

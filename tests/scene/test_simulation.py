@@ -116,11 +116,10 @@ def test_coupled_scene_wiring():
 @pytest.mark.parametrize(
     ("change", "words"),
     [
-        (lambda d: d["bodies"].append({**d["bodies"][3], "retention": False}), "retention on some"),
         (lambda d: d.update(effects={"drag": False}), "effects.drag"),
-        (lambda d: d["inflows"][0].update(kind="water", sand_fraction=0.3), "inflows[0].sand_fraction"),
+        (lambda d: d.update(effects={"buoyancy": False}), "effects.buoyancy"),
     ],
-    ids=["retention", "drag-off", "sand-jet"],
+    ids=["drag-off", "buoyancy-off"],
 )
 def test_what_the_coupler_cannot_do_is_refused(change, words):
     d = tiny_coupled()
