@@ -4,12 +4,15 @@ without water retention (couplekit.coupling.scenes.dry_plug_under_water, 24 × 8
 tests/coupling/test_coupled_validation.py).  The larger version: benchmarks/wetting_front.py.
 
 What it shows, measured (2000 steps, R_a = 0.01): the free-water front (depth below the plug top where the
-horizontal mean of φ over the interior columns falls below 0.2) lies 0.22 cells shallower with retention
-(2.13 vs 2.35 cells) and the plug holds 13 % less free water (60.5 vs 69.8 cell volumes), the difference
-being water turned into bound moisture (21.8).  What it does not show: a slower ADVANCE — between steps
-300 and 1900 both fronts advance by 1.07–1.09 cells.  In this closed tank the air in the plug's pores can
-only leave by bubbling up through the water, which limits the infiltration in both runs; the paper's
-pipes (Fig. 10) let the displaced air escape on the far side of a partition.
+horizontal mean of φ over the interior columns falls below 0.2) lies 0.38 cells shallower with retention
+(0.96 vs 1.34 cells) and the plug holds 22 % less free water (29.1 vs 37.3 cell volumes), the difference
+being water turned into bound moisture (18.7).  What it does not show: a slower ADVANCE — in this closed
+tank the air in the plug's pores can only leave by bubbling up through the water, and neither front
+advances after the first 250 steps (1.43 → 1.34 and 1.14 → 0.96 cells).  Before the wall-adjacent fix of
+Eq. 39's slip term (docs/fluid-stability.md) both fronts advanced ~1.1 cells and the plug took in twice the
+water, through the sand-poor wall columns where that term drove a spurious flow (max lattice speed 0.035
+then, 0.006 now).  The paper's pipes (Fig. 10) let the displaced air escape on the far side of a
+partition: tests/coupling/test_retention_front_partition.py measures the slower advance there.
 
 Volume controller off (η = 0) in both runs: it scales the whole S_φ by γ ∈ [−η, η], retention's
 free → bound conversion included, and on this scene γ swings between −2 and 2 (for hundreds of steps at
@@ -68,20 +71,21 @@ def runs(cpu1):
 
 
 def test_both_plug_runs_stay_finite_and_slow(runs):
-    """Both runs finite for 2000 steps with max lattice speed < 0.05 (measured 0.035 and 0.034)."""
+    """Both runs finite for 2000 steps with max lattice speed < 0.05 (measured 0.035 and 0.034 before the
+    wall-adjacent fix of Eq. 39, 0.006 after)."""
     for r in runs.values():
         assert r["worst"] < 0.05, r["worst"]
 
 
 def test_free_water_front_lags_with_retention(runs):
-    """At step 2000 the φ = 0.2 front with retention is > 0.1 cell shallower than without (measured 0.22;
-    0.1 = about twice the change of the no-retention front between the last samples, 0.05–0.06 per
-    250 steps), and the plug holds > 8 % less free water (measured 13 %) while it binds > 10 cell volumes
-    (measured 21.8).  The lag is the water the sand bound, not a slower advance (module docstring)."""
+    """At step 2000 the φ = 0.2 front with retention is > 0.1 cell shallower than without (measured 0.38;
+    0.1 = about four times the change of the no-retention front between the last samples, ≤ 0.03 per
+    250 steps), and the plug holds > 8 % less free water (measured 22 %) while it binds > 10 cell volumes
+    (measured 18.7).  The lag is the water the sand bound, not a slower advance (module docstring)."""
     off, on = runs[False], runs[True]
     print(f"fronts without {np.round(off['fronts'], 2)}, with {np.round(on['fronts'], 2)}; free {off['free']:.1f} vs "
           f"{on['free']:.1f}, bound {on['bound']:.1f}")  # fmt: skip
     assert off["fronts"][-1] - on["fronts"][-1] > 0.1
     assert on["free"] < 0.92 * off["free"]
     assert on["bound"] > 10.0
-    assert off["fronts"][-1] > off["fronts"][0], "the front must actually advance"
+    assert off["fronts"][-1] > 0.5, "the water must have entered the plug"
