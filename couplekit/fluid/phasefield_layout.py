@@ -107,26 +107,12 @@ def chemical_potential_coefficients(sigma: float, width: float) -> tuple[float, 
     return 12.0 * sigma / width, 1.5 * sigma * width
 
 
-CONTROLLER_MIN_LEVER = 0.02
-"""The controller acts only when |Σ S_φ| ≥ this × Σ |S_φ| (see :func:`volume_controller_gamma`)."""
-
-
-def volume_controller_gamma(
-    v0: float, volume: float, source_sum: float, eta: float, source_abs_sum: float | None = None
-) -> float:
+def volume_controller_gamma(v0: float, volume: float, source_sum: float, eta: float) -> float:
     """Correction factor gamma(t) of the global volume controller, Eq. 52.
 
     gamma = clamp((V0 - V) / sum_x S_phi, [-eta, eta]); the corrected source is gamma * S_phi, so one step
     changes the volume by gamma * sum_x S_phi.  ``eta = 0`` switches the controller off (returns 1: the
     source is applied as it is).  With sum_x S_phi = 0 there is nothing to scale and gamma = 0.
-
-    ``source_abs_sum`` = sum_x |S_phi| (same weights): when the signed sum is below
-    :data:`CONTROLLER_MIN_LEVER` of it, sources and sinks nearly cancel and gamma = 1 (the source as it is).
-    Why: gamma scales every cell's source alike, so a small net lever asks for |gamma| at the clamp, and
-    gamma < 0 turns each sink into a source.  Measured with water retention (the absorption sink of Eq. 57
-    and the seepage source in one scene; 20 x 8 x 48 partition bed, R_a = 0.01, eta = 2): the lever fell to
-    ~1e-5 against V0 - V ~ 0.3, gamma flipped between -2 and 2 every step and the water grew 2.7 %; with
-    the rule 0.095 % over 8000 steps (0.1 let the 24 x 8 x 8 dry plug drift to -1 % first).
     """
     if eta < 0:
         raise ValueError(f"eta must be >= 0 (0 = controller off), got {eta}")
@@ -134,8 +120,6 @@ def volume_controller_gamma(
         return 1.0
     if source_sum == 0.0:
         return 0.0
-    if source_abs_sum is not None and abs(source_sum) < CONTROLLER_MIN_LEVER * source_abs_sum:
-        return 1.0
     return float(np.clip((v0 - volume) / source_sum, -eta, eta))
 
 

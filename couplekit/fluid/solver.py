@@ -209,7 +209,6 @@ class FluidSolver:
         # water held outside the phase field that V of Eq. 52 counts (the sand's bound water, Eq. 53; set by
         # the coupler every step, 0 otherwise)
         self.held_volume = 0.0
-        self._abs_source = None  # |S_φ| for the controller's lever check (allocated on first use)
         self.phi = self.h = self.grad = self.mu = self.source_term = None
         if self.two_phase:
             from . import phasefield as pf  # only two-phase scenes need (and load) the phase field
@@ -347,8 +346,8 @@ class FluidSolver:
                 if prm.eta > 0:
                     if self._open_in is not None or self._open_out is not None:
                         self.volume0 += self._open_face_volume()
-                    volume, source_sum, source_abs = self._controller_sums()
-                    self.gamma = self._pf.volume_controller_gamma(self.volume0, volume, source_sum, prm.eta, source_abs)
+                    volume, source_sum = self._controller_sums()
+                    self.gamma = self._pf.volume_controller_gamma(self.volume0, volume, source_sum, prm.eta)
                 self._set_inflow_front()
                 self.pf_ops.collide_stream(
                     self.h, self.phi, self.grad, self.velocity, self.source_term, self.flags, self.step_count,
@@ -392,20 +391,14 @@ class FluidSolver:
         Σ ε φ from one step to the next) and corrects only the transport and rounding error.  With the
         plain sums (Σφ, ΣS) the controller fights the source: the mixture's Σφ must change as sand enters
         the water, so γ drives S towards 0 (measured: the drift returned to the no-source −2.5 % at η = 2).
-        Σ ε S is the first sum of ``volume_sums`` with S in place of φ.  Third: Σ ε |S| (same weights), with
-        which the controller leaves the source alone when its sources and sinks nearly cancel
-        (phasefield_layout.volume_controller_gamma).
+        Σ ε S is the first sum of ``volume_sums`` with S in place of φ.
         """
         if not self.mixture:
-            return (*self.pf_ops.volume_sums(self.phi, self.source_term, self.flags), None)
+            return self.pf_ops.volume_sums(self.phi, self.source_term, self.flags)
         eps = self.fluid_fraction
         volume = self.pf_ops.volume_sums(self.phi, self.source_term, self.flags, eps)[0] + self.held_volume
         weighted_source = self.pf_ops.volume_sums(self.source_term, self.source_term, self.flags, eps)[0]
-        if self._abs_source is None:
-            self._abs_source = self.xp.empty_like(self.source_term)
-        self.xp.abs(self.source_term, out=self._abs_source)
-        weighted_abs = self.pf_ops.volume_sums(self._abs_source, self._abs_source, self.flags, eps)[0]
-        return volume, weighted_source, weighted_abs
+        return volume, weighted_source
 
     def reset_volume_reference(self, volume: float | None = None) -> None:
         """Set V0 of Eq. 52 (and of ``fluid_volume_drift``) to ``volume``, or to the current :meth:`_volume`.
