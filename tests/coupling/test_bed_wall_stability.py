@@ -8,7 +8,7 @@ with u = Σ f c, the fluid alone (no drag, no sand motion) grew a grid-scale mod
 round-off (1.5e-5) to NaN by step 1100; with the Eq. 13 velocity it still grew ×2 every 200 steps from
 step ~1000; the slip term only in cells away from walls keeps it at round-off (reference.macro_pressure
 docstring).  In the coupled saturated bed the first version ended at lattice speed 0.035 after 1000 steps
-with φ up to 1.18 and the fluid volume drifting 19 % over 1 s (benchmarks/results/coupled_stability.json).
+with φ up to 1.18 and the fluid volume drifting 19 % over 1 s (benchmark run before the fix, docs/fluid-stability.md).
 
 Bound: 5e-5 lattice speed after 1500 steps, 3× the round-off level of the still column without sand
 (1.5e-5 measured, the float32 hydrostatic balance); the two rejected forms were at ~1.2e-4 (growing ×2 per 200 steps) and NaN by then.
