@@ -30,6 +30,7 @@ import numpy as np
 
 from ..backend import Backend
 from ..fluid.grid import Boundaries
+from ..fluid.phasefield_layout import tanh_profile
 from ..fluid.solver import FluidParams, FluidSolver
 from ..sand import SandParams
 from ..sand.boundaries import DomainWalls
@@ -168,7 +169,7 @@ def build_scene(
     phi = None
     if two_phase:
         width = 4.0
-        prof = 0.5 * (1.0 - np.tanh(2.0 * (zc - water_depth) / dx / width))
+        prof = tanh_profile((water_depth - zc) / dx, width)
         phi = np.broadcast_to(prof[:, None, None], shape).astype(np.float32).copy()
         pressure = _hydrostatic(phi, rho_l, g_lat)
     else:
@@ -307,7 +308,7 @@ def dry_plug_under_water(
                         coupling=coupling, **kw)  # fmt: skip
     # only the layer above the plug is water at the start: the plug's pores hold air
     zc = np.arange(nz) + 0.5
-    prof = 0.5 * (1.0 - np.tanh(2.0 * (zc - water[1]) / 4.0)) * 0.5 * (1.0 + np.tanh(2.0 * (zc - water[0]) / 4.0))
+    prof = tanh_profile(water[1] - zc, 4.0) * tanh_profile(zc - water[0], 4.0)
     _set_phase(scene.fluid, np.broadcast_to(prof[:, None, None], shape).astype(np.float32))
     scene.info.update(scene="dry_plug_under_water", plug_cells=list(plug), water_cells=list(water), retention=retention)
     return scene
@@ -355,8 +356,8 @@ def bed_under_partition(
     scene = build_scene(backend, shape, units, seeded, density=density, water_depth=water_top * dx,
                         coupling=coupling, solid=solid, **kw)  # fmt: skip
     # water only left of the wall and above the bed: the bed's pores hold air at the start
-    ramp_z = 0.5 * (1.0 - np.tanh(2.0 * (zc - water_top) / 4.0)) * 0.5 * (1.0 + np.tanh(2.0 * (zc - bed) / 4.0))
-    ramp_x = 0.5 * (1.0 - np.tanh(2.0 * (xc - partition[0]) / 4.0))
+    ramp_z = tanh_profile(water_top - zc, 4.0) * tanh_profile(zc - bed, 4.0)
+    ramp_x = tanh_profile(partition[0] - xc, 4.0)
     prof = ramp_z[:, None, None] * ramp_x[None, None, :] * np.ones((1, ny, 1))
     _set_phase(scene.fluid, prof.astype(np.float32))
     scene.info.update(scene="bed_under_partition", bed_cells=bed, partition_cells=list(partition),
