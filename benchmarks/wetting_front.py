@@ -110,14 +110,8 @@ def run_case(
     rec: dict = {"absorption_rate": ra, "retention": ra > 0, "steps": [], "max_lattice_speed": [],
                  "fluid_volume_drift": [], "free_water_in_plug": [], "bound_water": [],
                  "front_depth": {str(v): [] for v in LEVELS}}  # fmt: skip
-    t0 = time.perf_counter()
-    finite = True
-    for s in range(every, steps + 1, every):
-        sc.step(every)
-        if not sc.finite():
-            finite = False
-            rec["first_non_finite_by_step"] = s
-            break
+
+    def sample(s: int) -> None:
         profile, free, bound = plug_profile(sc, plug_top)
         rec["steps"].append(s)
         rec["max_lattice_speed"].append(sc.max_lattice_speed())
@@ -126,6 +120,22 @@ def run_case(
         rec["bound_water"].append(bound)
         for v in LEVELS:
             rec["front_depth"][str(v)].append(front_depth(profile, plug_top, v))
+
+    return _sampled_run(sc, steps, every, rec, sample)
+
+
+def _sampled_run(sc, steps: int, every: int, rec: dict, sample) -> dict:
+    """Step ``sc`` in chunks of ``every`` up to ``steps``, calling ``sample(step)`` after each chunk, and stop at
+    the first non-finite value; adds ``finite``, ``first_non_finite_by_step`` and ``seconds`` to ``rec``."""
+    t0 = time.perf_counter()
+    finite = True
+    for s in range(every, steps + 1, every):
+        sc.step(every)
+        if not sc.finite():
+            finite = False
+            rec["first_non_finite_by_step"] = s
+            break
+        sample(s)
     rec["finite"] = finite
     rec["seconds"] = time.perf_counter() - t0
     return rec
@@ -163,22 +173,16 @@ def run_partition(shape, steps: int, every: int, ra: float, nu: float, eta: floa
     w0 = sc.water_volume()
     rec: dict = {"absorption_rate": ra, "retention": ra > 0, "steps": [], "front": [], "max_lattice_speed": [],
                  "water_drift": [], "bound_water": []}  # fmt: skip
-    t0 = time.perf_counter()
-    finite = True
-    for s in range(every, steps + 1, every):
-        sc.step(every)
-        if not sc.finite():
-            finite = False
-            rec["first_non_finite_by_step"] = s
-            break
+
+    def sample(s: int) -> None:
         phi = be.to_host(sc.fluid.phi)[1:-1, 1:-1, 1:-1]
         rec["steps"].append(s)
         rec["front"].append(partition_front(phi, geo["bed"], float(geo["partition"][0])))
         rec["max_lattice_speed"].append(sc.max_lattice_speed())
         rec["water_drift"].append(sc.water_volume() / w0 - 1)
         rec["bound_water"].append(float(sc.coupler.bound.sum(dtype=np.float64)) if ra > 0 else 0.0)
-    rec["finite"] = finite
-    rec["seconds"] = time.perf_counter() - t0
+
+    _sampled_run(sc, steps, every, rec, sample)
     rec["arrival_steps"] = {}
     for depth in range(2, int(geo["partition"][1] - geo["partition"][0]) + 1, 2):
         fr, st = rec["front"], rec["steps"]
