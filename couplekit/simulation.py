@@ -288,9 +288,11 @@ class Simulation:
         return Union(shapes) if shapes else None
 
     def _water_shape(self) -> Union | None:
-        """Water bodies for the initial φ. A box face lying on the domain boundary is pushed out by 10 cells,
-        so water that fills a box up to a wall has no interface (a tanh drop) along that wall."""
+        """Water bodies for the initial φ. A box face, or a height field's side or base, lying on the domain
+        boundary is pushed out by 10 cells, so water that fills the shape up to a wall has no interface (a
+        tanh drop) along that wall."""
         from .scene.geometry import Box
+        from .scene.mesh import HeightField, load_heights
 
         dom = self.scene.domain
         size, pad = np.asarray(dom.size), 10 * dom.dx
@@ -306,6 +308,33 @@ class Simulation:
                 lo = np.where(lo <= tol, lo - pad, lo)
                 hi = np.where(hi >= size - tol, hi + pad, hi)
                 shapes.append(Box(lo, hi))
+            elif (
+                g.type == "heightfield"
+                and g.scale == 1.0
+                and not any(g.rotate)
+                and not any(g.translate)
+                and not g.invert
+            ):
+                p = g.params
+                h = np.asarray(p["heights"], float) if p.get("heights") is not None else load_heights(p["file"])
+                (x0, x1), (y0, y1) = p["x_range"], p["y_range"]
+                base = p.get("base")
+                tol = 1e-9 * size.max()
+                base = -pad if base is None or base <= tol else base
+                # the edge heights repeated beyond each side on the boundary, at the grid's own spacing (the
+                # height field's samples are evenly spaced), for at least `pad`
+                sx, sy = (x1 - x0) / (h.shape[1] - 1), (y1 - y0) / (h.shape[0] - 1)
+                nx_pad, ny_pad = int(np.ceil(pad / sx)), int(np.ceil(pad / sy))
+                if x0 <= tol:
+                    h, x0 = np.concatenate([np.repeat(h[:, :1], nx_pad, axis=1), h], axis=1), x0 - nx_pad * sx
+                if x1 >= size[0] - tol:
+                    h, x1 = np.concatenate([h, np.repeat(h[:, -1:], nx_pad, axis=1)], axis=1), x1 + nx_pad * sx
+                if y0 <= tol:
+                    h, y0 = np.concatenate([np.repeat(h[:1], ny_pad, axis=0), h], axis=0), y0 - ny_pad * sy
+                if y1 >= size[1] - tol:
+                    h, y1 = np.concatenate([h, np.repeat(h[-1:], ny_pad, axis=0)], axis=0), y1 + ny_pad * sy
+                shape = HeightField(h, (x0, x1), (y0, y1), base, 0.25 * dom.dx)
+                shapes.append(shape)
             else:
                 shapes.append(g.shape(dom, 0.25 * dom.dx))
         return Union(shapes) if shapes else None
