@@ -271,8 +271,16 @@ LBM_INLINE void lbm_collide_cell(const long long c, float* RESTRICT f, const uns
         // (1/r_o - 1/2) is kept >= lambda_odd.  At r_o = 1 and nu_h = 1e-4 (Lambda = 1.5e-4) the no-slip walls'
         // edges and corners are linearly unstable (docs/fluid-stability.md).  The populations are read again
         // (same addresses, nothing stored yet) rather than kept live through the force computation.
-        float ro = 1.f / (0.5f + lambda_odd / (tau - 0.5f));
-        ro = (ro < 1.f && nu < odd_nu_max) ? ro : 1.f;  // only where nu < odd_nu_max (see reference.odd_rate)
+        // One rate for the whole fluid, set by its lowest molecular viscosity nu_ref (reference.uniform_odd_rate):
+        // a rate that varies from cell to cell (with nu across an interface, or only near walls) feeds energy
+        // into the flow (a standing wave gained 2.4x its energy in a quarter period, docs/fluid-stability.md).
+#if CK_TWO_PHASE
+        const float nu_ref = fminf(nu_h, nu_l);
+#else
+        const float nu_ref = nu_h;
+#endif
+        float ro = 1.f / (0.5f + lambda_odd / (3.f * nu_ref));
+        ro = (ro < 1.f && nu_ref < odd_nu_max) ? ro : 1.f;
         const float co = 0.125f * (1.f - ro), rf = ro;  // k* = (1 - r_o) k + r_o k^F / 2
         float kc[27];
         {

@@ -111,6 +111,22 @@ def odd_rate(r_s, odd_lambda: float):
     return np.minimum(1.0, 1.0 / (0.5 + odd_lambda / (1.0 / np.asarray(r_s, np.float64) - 0.5)))
 
 
+def uniform_odd_rate(nu_ref: float, odd_lambda: float, odd_nu_max: float) -> float:
+    """The one odd-moment rate of a whole fluid: :func:`odd_rate` at the shear rate of ``nu_ref``, its lowest
+    molecular viscosity (ν_h, or min(ν_h, ν_l) with two phases), or 1 when ``nu_ref`` ≥ ``odd_nu_max``.
+
+    Every cell relaxes its odd moments at this rate, whatever its own viscosity (air, interface, sand, subgrid
+    viscosity). A rate varying in space feeds energy into the flow: with r_o following each cell's viscosity
+    across an 800:1 interface a standing gravity wave held 2.4× its energy a quarter period in and kept gaining;
+    with one rate it oscillates at the linear-theory period and decays (docs/fluid-stability.md, "Energy of a
+    standing wave"). Linearised at rest, a floor applied only within 1–2 cells of the walls leaves the step
+    unstable (spectral radius 1.0004–1.006 on a 7 × 7 walled box).
+    """
+    if nu_ref >= odd_nu_max:
+        return 1.0
+    return float(odd_rate(1.0 / (3.0 * nu_ref + 0.5), odd_lambda))
+
+
 def equilibrium(u: np.ndarray) -> np.ndarray:
     """Density-normalised D3Q27 equilibrium (27, ...) for velocity u (3, ...): sixth-order Hermite, product form.
 
@@ -385,9 +401,7 @@ class ReferenceOps:
         a, u, r_s = self.forces(
             fi, flags, phi, mu, eps, force, pbar, rho_h, rho_l, nu_h, nu_l, (gx, gy, gz), smagorinsky
         )
-        r_o = odd_rate(r_s, odd_lambda)
-        # the floor acts only in cells of molecular viscosity below odd_nu_max (see odd_rate), sand or not
-        r_o = np.where(self._viscosity(phi, rho_h, rho_l, nu_h, nu_l) < odd_nu_max, r_o, 1.0)
+        r_o = uniform_odd_rate(min(nu_h, nu_l) if self.two_phase else nu_h, odd_lambda, odd_nu_max)
         fstar = self.collide(fi, u, a, r_s, r_o)
         self.store(f, flags, velocity, parity, fstar)
         fluid = interior(flags) == FLUID

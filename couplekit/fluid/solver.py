@@ -76,10 +76,11 @@ class FluidParams:
     inside the window measured stable (linear ≥ 0.01, non-linear noise tests ≤ 0.02; 0.03 diverges in a
     closed box), together with ``smagorinsky`` = 0.1: alone, the floor makes violent flows at ν = 1e-4 fail
     sooner (an 800:1 column collapse at 32³ diverged near step 750 instead of running). Default 0 here (the
-    paper's collision, which the validations test). It acts only in cells whose viscosity is below
-    ``odd_nu_max`` (default 5e-4: ν = 1e-3 is stable at rate 1, and there the floor was measured to disturb
-    the coupled validations: a floating ball 0.8 cell high), with or without sand (kept out of sand it let the
-    wall-edge mode grow in a bed's sand-poor wall cells: docs/fluid-stability.md). 0 = the paper's collision
+    paper's collision, which the validations test). The rate is one number for the whole fluid, from its
+    lowest molecular viscosity (:func:`~couplekit.fluid.reference.uniform_odd_rate`: a rate varying with each
+    cell's viscosity fed energy into an 800:1 interface, docs/fluid-stability.md), and the floor is off when
+    that viscosity is at least ``odd_nu_max`` (default 5e-4: ν = 1e-3 is stable at rate 1, and there the floor
+    was measured to disturb the coupled validations: a floating ball 0.8 cell high). 0 = the paper's collision
     exactly.
     ``smagorinsky``: Smagorinsky constant C of a subgrid viscosity ν_t = (C Δx)² |S̄| added to ν (0 = off, the
     default and the paper's model); 0.1–0.17 is usual for under-resolved turbulent flows.
