@@ -275,7 +275,7 @@ LBM_INLINE void lbm_collide_cell(const long long c, float* RESTRICT f, const uns
         // a rate that varies from cell to cell (with nu across an interface, or only near walls) feeds energy
         // into the flow (a standing wave gained 2.4x its energy in a quarter period, docs/fluid-stability.md).
 #if CK_TWO_PHASE
-        const float nu_ref = fminf(nu_h, nu_l);
+        const float nu_ref = nu_h < nu_l ? nu_h : nu_l;  // not fminf: it stops g++ vectorising (README)
 #else
         const float nu_ref = nu_h;
 #endif
