@@ -22,14 +22,11 @@ and it advances more slowly at every stage, not only by a lag: 2.82 vs 3.55 cell
 3000 (0.79×), 1.39 vs 1.70 between 4000 and 6000 (0.82×): the water entering the bed is partly bound
 (Eqs. 55–56), so less of it is left to push the front, and the bound water narrows the pores (Eq. 54).
 
-Known limit (benchmarks/wetting_front.py, 20 × 8 × 48): there the R_a = 0.01 run with η = 2 is wrong —
-the volume controller's lever Σ ε̃ S_φ falls to ~1e-5 cell volumes (the absorption sink and the transport
-part of S_φ cancel) while V0 − V is ~0.3, so γ flips between −2 and +2 from step to step and the water
-grows (+2.7 % by step 8000, the front meaningless).  Seen on a 16 × 6 × 28 variant with a 4-cell bed too
-(+1.1 % in 500 steps, ~5e-3 cell volumes per step, γ at ±2 from step ~300; with η = 0: −0.2 %).  This
-scene's run is not affected (drift 1.3e-3, smooth fronts), and R_a = 0.001 with η = 2, or η = 0, at
-20 × 8 × 48 give a clean, slower front (results/wetting_front.json).  The fix belongs in the fluid's
-volume controller (couplekit/fluid/solver.py, not this module's).
+Formerly a known limit (benchmarks/wetting_front.py, 20 × 8 × 48): the R_a = 0.01 run with η = 2 created
+water (+2.7 % by step 8000; the volume controller's lever Σ ε̃ S_φ fell to ~1e-5 cell volumes while V0 − V was
+~0.3, so γ flipped between −2 and +2). Re-measured after session 3's fixes of Eq. 39's slip term: +9.6e-4,
+front 24 % behind the run without retention at step 8000 (results/wetting_front.json;
+test_retention_controller.py runs that scene for 3000 steps).
 """
 
 from __future__ import annotations
