@@ -32,7 +32,9 @@ LIMIT_SECONDS = 300.0
 def small_scenes() -> list[Path]:
     """The demo first, then every ``*_small.toml`` in ``examples/`` by name."""
     ex = ROOT / "examples"
-    return [ex / "sand_drop_small.toml"] + sorted(p for p in ex.glob("*_small.toml") if p.name != "sand_drop_small.toml")
+    return [ex / "sand_drop_small.toml"] + sorted(
+        p for p in ex.glob("*_small.toml") if p.name != "sand_drop_small.toml"
+    )
 
 
 def _diagnostics(path: Path) -> list[dict]:
@@ -70,12 +72,17 @@ def time_scene(scene: Path, out_dir: Path, threads: int) -> dict:
 
 
 def markdown(rows: list[dict]) -> str:
-    lines = ["| file | frames | steps | wall time | max lattice speed | fluid volume drift |", "|---|---|---|---|---|---|"]
+    lines = [
+        "| file | frames | steps | wall time | max lattice speed | fluid volume drift |",
+        "|---|---|---|---|---|---|",
+    ]
     for r in rows:
         speed = "–" if r["max_lattice_speed"] is None else f"{r['max_lattice_speed']:.3f}"
         drift = "–" if r["final_fluid_volume_drift"] is None else f"{r['final_fluid_volume_drift']:+.2%}"
         status = "" if r["returncode"] == 0 else f" (exit {r['returncode']})"
-        lines.append(f"| `{r['scene']}` | {r['frames']} | {r['steps']} | {r['seconds']:.0f} s{status} | {speed} | {drift} |")
+        lines.append(
+            f"| `{r['scene']}` | {r['frames']} | {r['steps']} | {r['seconds']:.0f} s{status} | {speed} | {drift} |"
+        )
     return "\n".join(lines)
 
 
