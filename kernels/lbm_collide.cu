@@ -264,24 +264,28 @@ LBM_INLINE void lbm_collide_cell(const long long c, float* RESTRICT f, const uns
 #if CK_ODD_RATE
     {
         // odd central moments (orders 3 and 5: K120, K102, K210, K012, K201, K021, K111, K122, K212, K221)
-        // relax at r_o = min(1, 1 / (1/2 + Lambda / (tau - 1/2))) instead of 1, towards their forced value k^F / 2
-        // (the rate-1 value above, k*_1): k* = k - r_o (k - k^F / 2) = r_o k*_1 + (1 - r_o) k.  (Guo's (1 - r/2) k^F
-        // would make the steady odd moments (1 - r_o/2) k^F / r_o, 50x the paper's at r_o = 0.02: measured to lift
-        // a saturated sand bed by 3 cells.)  The two-relaxation-time "magic" product Lambda = (1/r_s - 1/2)
-        // (1/r_o - 1/2) is kept >= lambda_odd.  At r_o = 1 and nu_h = 1e-4 (Lambda = 1.5e-4) the no-slip walls'
-        // edges and corners are linearly unstable (docs/fluid-stability.md).  The populations are read again
-        // (same addresses, nothing stored yet) rather than kept live through the force computation.
-        // One rate for the whole fluid, set by its lowest molecular viscosity nu_ref (reference.uniform_odd_rate):
-        // a rate that varies from cell to cell (with nu across an interface, or only near walls) feeds energy
-        // into the flow (a standing wave gained 2.4x its energy in a quarter period, docs/fluid-stability.md).
+        // relax at r_o instead of 1, with Guo's forcing like every other moment (reference.collide):
+        //   k* = k - r_o k + (1 - r_o/2) k^F = (1 - r_o) k + (2 - r_o) (k^F / 2)
+        // (k^F / 2 is the rate-1 value above).  Under a steady acceleration a the central moments about the
+        // next step's velocity start at k*_prev - a/3, and this keeps k* = a/6, the rate-1 value; the former
+        // r_o k^F / 2 let them pile up to -(1 - r_o) a / (3 r_o), 16x larger at r_o = 0.02, which broke a 3 m/s
+        // impact once the air relaxed slowly too (docs/fluid-stability.md, "Energy of a standing wave").
+        // The two-relaxation-time "magic" product Lambda = (1/r_s - 1/2)(1/r_o - 1/2) is kept >= lambda_odd
+        // (at r_o = 1 and nu_h = 1e-4, Lambda = 1.5e-4, the no-slip walls' edges and corners are linearly
+        // unstable), with 1/r_s - 1/2 taken at the fluid's lowest molecular viscosity nu_ref plus this cell's
+        // subgrid viscosity (reference.odd_rates): one rate wherever the flow is resolved, whatever the phase,
+        // because a rate that follows each cell's viscosity across an interface fed energy into surface waves.
+        // The populations are read again (same addresses, nothing stored yet) rather than kept live through the
+        // force computation.
 #if CK_TWO_PHASE
         const float nu_ref = nu_h < nu_l ? nu_h : nu_l;  // not fminf: it stops g++ vectorising (README)
 #else
         const float nu_ref = nu_h;
 #endif
-        float ro = 1.f / (0.5f + lambda_odd / (3.f * nu_ref));
+        const float odd_tau = (tau - 0.5f) - 3.f * nu + 3.f * nu_ref;  // 3 (nu_ref + nu_t)
+        float ro = 1.f / (0.5f + lambda_odd / odd_tau);
         ro = (ro < 1.f && nu_ref < odd_nu_max) ? ro : 1.f;
-        const float co = 0.125f * (1.f - ro), rf = ro;  // k* = (1 - r_o) k + r_o k^F / 2
+        const float co = 0.125f * (1.f - ro), rf = 2.f - ro;  // k* = (1 - r_o) k + (2 - r_o) k^F / 2
         float kc[27];
         {
             float fr[27];

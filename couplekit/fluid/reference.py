@@ -111,20 +111,23 @@ def odd_rate(r_s, odd_lambda: float):
     return np.minimum(1.0, 1.0 / (0.5 + odd_lambda / (1.0 / np.asarray(r_s, np.float64) - 0.5)))
 
 
-def uniform_odd_rate(nu_ref: float, odd_lambda: float, odd_nu_max: float) -> float:
-    """The one odd-moment rate of a whole fluid: :func:`odd_rate` at the shear rate of ``nu_ref``, its lowest
-    molecular viscosity (ν_h, or min(ν_h, ν_l) with two phases), or 1 when ``nu_ref`` ≥ ``odd_nu_max``.
+def odd_rates(r_s, nu, nu_ref: float, odd_lambda: float, odd_nu_max: float):
+    """Odd-moment rate of every cell: :func:`odd_rate` at the shear rate of ``nu_ref`` (the fluid's lowest
+    molecular viscosity: ν_h, or min(ν_h, ν_l) with two phases) plus the cell's subgrid viscosity
+    ν_t = (1/r_s − ½)/3 − ν (0 without Smagorinsky); 1 everywhere when ``nu_ref`` ≥ ``odd_nu_max``.
 
-    Every cell relaxes its odd moments at this rate, whatever its own viscosity (air, interface, sand, subgrid
-    viscosity). A rate varying in space feeds energy into the flow: with r_o following each cell's viscosity
-    across an 800:1 interface a standing gravity wave held 2.4× its energy a quarter period in and kept gaining;
-    with one rate it oscillates at the linear-theory period and decays (docs/fluid-stability.md, "Energy of a
-    standing wave"). Linearised at rest, a floor applied only within 1–2 cells of the walls leaves the step
-    unstable (spectral radius 1.0004–1.006 on a 7 × 7 walled box).
+    So the rate is one number wherever the flow is resolved, whatever the phase: a rate that follows each
+    cell's own viscosity (0.02 in water, 1 in air at ν_l = 0.01, varying across the interface) fed energy into
+    surface waves (a standing wave held 2.4× its energy a quarter period in and kept gaining; with one rate it
+    oscillates at the linear-theory period and decays: docs/fluid-stability.md, "Energy of a standing wave").
+    Linearised at rest, a floor applied only within 1–2 cells of the walls leaves the step unstable (spectral
+    radius 1.0004–1.006 on a 7 × 7 walled box). Subgrid viscosity raises the rate where the flow is not
+    resolved, which keeps Λ there at ``odd_lambda``.
     """
     if nu_ref >= odd_nu_max:
         return 1.0
-    return float(odd_rate(1.0 / (3.0 * nu_ref + 0.5), odd_lambda))
+    odd_tau = (1.0 / np.asarray(r_s, np.float64) - 0.5) - 3.0 * np.asarray(nu, np.float64) + 3.0 * nu_ref
+    return odd_rate(1.0 / (odd_tau + 0.5), odd_lambda)
 
 
 def equilibrium(u: np.ndarray) -> np.ndarray:
@@ -363,11 +366,9 @@ class ReferenceOps:
         rates = np.ones((27,) + fi.shape[1:])
         for row in moments.SHEAR_ROWS:
             rates[row] = r_s
+        for row in moments.ODD_ROWS:
+            rates[row] = r_o
         k_star = k - rates * (k - k_eq) + (1.0 - rates / 2.0) * k_f
-        # odd rows relax towards their forced value k^F / 2 (the paper's rate-1 result):
-        # k* = k − r_o (k − k^F / 2); Guo's (1 − r_o/2) k^F would pile the odd moments up to k^F / r_o
-        odd = list(moments.ODD_ROWS)
-        k_star[odd] = k[odd] - r_o * (k[odd] - 0.5 * k_f[odd])
         return moments.from_central(np.einsum("ab,b...->a...", moments.BASIS_INV, k_star), u)
 
     def collide_stream(
@@ -401,7 +402,8 @@ class ReferenceOps:
         a, u, r_s = self.forces(
             fi, flags, phi, mu, eps, force, pbar, rho_h, rho_l, nu_h, nu_l, (gx, gy, gz), smagorinsky
         )
-        r_o = uniform_odd_rate(min(nu_h, nu_l) if self.two_phase else nu_h, odd_lambda, odd_nu_max)
+        nu = self._viscosity(phi, rho_h, rho_l, nu_h, nu_l)
+        r_o = odd_rates(r_s, nu, min(nu_h, nu_l) if self.two_phase else nu_h, odd_lambda, odd_nu_max)
         fstar = self.collide(fi, u, a, r_s, r_o)
         self.store(f, flags, velocity, parity, fstar)
         fluid = interior(flags) == FLUID

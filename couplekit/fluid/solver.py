@@ -77,7 +77,7 @@ class FluidParams:
     closed box), together with ``smagorinsky`` = 0.1: alone, the floor makes violent flows at ν = 1e-4 fail
     sooner (an 800:1 column collapse at 32³ diverged near step 750 instead of running). Default 0 here (the
     paper's collision, which the validations test). The rate is one number for the whole fluid, from its
-    lowest molecular viscosity (:func:`~couplekit.fluid.reference.uniform_odd_rate`: a rate varying with each
+    lowest molecular viscosity (:func:`~couplekit.fluid.reference.odd_rates`: a rate varying with each
     cell's viscosity fed energy into an 800:1 interface, docs/fluid-stability.md), and the floor is off when
     that viscosity is at least ``odd_nu_max`` (default 5e-4: ν = 1e-3 is stable at rate 1, and there the floor
     was measured to disturb the coupled validations: a floating ball 0.8 cell high). 0 = the paper's collision

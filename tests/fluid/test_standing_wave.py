@@ -3,7 +3,7 @@
 Found on the Fig. 8 small variant (docs/fluid-stability.md, "Energy of a standing wave"): with the odd-moment
 rate following each cell's viscosity (0.02 in water, 1 in air, a jump inside the interface) a standing wave
 held 2.4× its own energy a quarter period in and kept gaining; with one rate for the whole fluid
-(:func:`couplekit.fluid.reference.uniform_odd_rate`) it oscillates and decays.
+(:func:`couplekit.fluid.reference.odd_rates`) it oscillates and decays.
 
 Here, in lattice units, the Fig. 8 small variant's pool in a slice: a 30 × 4 × 40 tank (walls on x and z,
 periodic y), water 16 cells deep with the surface z = 16 + cos(2π x / 30) (the tank's second sloshing mode,

@@ -6,7 +6,7 @@ two-relaxation-time product Λ = (1/r_s − ½)(1/r_o − ½) of the shear rate 
 −1.007 at rest: an oscillation of period 2 steps travelling along the edge grows ×e every ~150 steps until the
 run dies. Flat walls and periodic boxes are stable; ν = 1e-3 is stable. The remedy: the odd central moments
 (orders 3 and 5) relax at r_o = min(1, 1/(½ + Λ/(1/r_s − ½))) with Λ ≥ FluidParams.odd_lambda
-(:func:`couplekit.fluid.reference.odd_rate`), one rate for the whole fluid (:func:`~couplekit.fluid.reference.uniform_odd_rate`).
+(:func:`couplekit.fluid.reference.odd_rate`), one rate for the whole fluid (:func:`~couplekit.fluid.reference.odd_rates`).
 
 1. Linear: the spectral radius of one collide + bounce-back + stream step, linearised at rest on a 5 × 5 × 4
    box with walls on x and y (periodic z), from the reference collision itself. Without the floor it must
