@@ -3,7 +3,7 @@
 Found on the Fig. 8 small variant (docs/fluid-stability.md, "Energy of a standing wave"): with the odd-moment
 rate following each cell's viscosity (0.02 in water, 1 in air, a jump inside the interface) a standing wave
 held 2.4× its own energy a quarter period in and kept gaining; with one rate for the whole fluid
-(:func:`couplekit.fluid.reference.odd_rates`) it oscillates and decays.
+(:func:`couplekit.fluid.reference.odd_rates`, one rate wherever the flow is resolved) it oscillates and decays.
 
 Here, in lattice units, the Fig. 8 small variant's pool in a slice: a 30 × 4 × 40 tank (walls on x and z,
 periodic y), water 16 cells deep with the surface z = 16 + cos(2π x / 30) (the tank's second sloshing mode,
@@ -11,7 +11,8 @@ amplitude 1 cell), interface width 4, gravity 5e-6 (Fig. 8 small: 9.81 m/s² × 
 2π / sqrt(g k tanh(k h)) = 6148 steps. The wave's energy is its potential energy ½ ρ_h g ∫ η² dx dy
 = ½ g · ½ · 30 · 4. Asserted: over the first half period the kinetic energy peaks below 1.2× that, and over the
 second half period no higher than over the first. Measured, as multiples of the wave's energy, the peaks of
-four half periods: 0.81, 0.48, 0.26, 0.15 (one rate); 3.8, 16.5, 43, 158 with the former per-cell rate.
+four half periods: 0.84, 0.54, 0.32, 0.19 (one rate, Guo forcing of the odd moments); 0.81, 0.48, 0.26, 0.15
+with one rate and the former forcing; 3.8, 16.5, 43, 158 with the former per-cell rate.
 """
 
 from __future__ import annotations
