@@ -111,6 +111,7 @@ def hydrostatic_pressure(
     phi: np.ndarray | None = None,
     rho_l: float = 1.0,
     boundary: dict[str, str] | None = None,
+    interface_width: float = 4.0,
 ) -> np.ndarray | None:
     """The hydrostatic pressure (nz, ny, nx) of a fluid at rest in FluidSolver's lattice units (water ρ = 1,
     ``gravity`` the lattice acceleration), or None when there is none to set: no gravity, gravity not along
@@ -123,6 +124,13 @@ def hydrostatic_pressure(
     through it (the water falls by g Δt in the first step, the floor stops it, and it rings with a speed of
     order |g| H / c_s). Obstacles are integrated through with the φ they were given (the water's SDF ignores
     them): right under a submerged obstacle, irrelevant inside one.
+
+    Only water that rests on the floor is carried: per column, the water's excess weight (ρ − ρ_l) g counts up
+    to the top of the segment of cells with φ ≥ ½ that starts at the floor, plus ``tail`` cells of the
+    interface above it (default 2 ``interface_width`` + 1). Water that hangs in the air (a drop, a poured block)
+    adds nothing, so the air under and beside it keeps its own hydrostatic pressure: integrated straight
+    through, the weight of a hanging block sat on the floor under it, and the step in pressure at the edge of
+    its column blew the air out sideways (Fig. 17's poured block: 5.75 m/s in the first step, NaN by step 7).
     """
     g = np.asarray(gravity, np.float64)
     axes = np.flatnonzero(g)
@@ -136,11 +144,17 @@ def hydrostatic_pressure(
     else:
         rho = rho_l + (1.0 - rho_l) * np.clip(np.asarray(phi, np.float64), 0.0, 1.0)
     r = np.moveaxis(rho, 2 - a, 0)  # array axes are (z, y, x)
-    if g[a] < 0:  # gravity towards the low end: integrate down from the high end
-        above = np.cumsum(r[::-1], axis=0)[::-1] - 0.5 * r
-    else:
-        above = np.cumsum(r, axis=0) - 0.5 * r
-    return np.moveaxis(abs(g[a]) * above, 0, 2 - a).astype(np.float32)
+    down = slice(None, None, -1) if g[a] < 0 else slice(None)  # from the face gravity points away from
+    rd = r[down]
+    n = rd.shape[0]
+    # height (cells from the floor) of the water segment resting on the floor, plus the interface's tail
+    water_up = (rd >= 0.5 * (1.0 + rho_l))[::-1]  # from the floor up
+    resting = np.cumprod(water_up, axis=0).sum(axis=0)
+    top = resting + int(np.ceil(2.0 * interface_width)) + 1
+    level = np.arange(n)[::-1].reshape((n,) + (1,) * (rd.ndim - 1))  # height of each cell of rd above the floor
+    carried = np.where(level < top, rd - rho_l, 0.0)
+    above = np.cumsum(rho_l + carried, axis=0) - 0.5 * (rho_l + carried)
+    return np.moveaxis((abs(g[a]) * above)[down], 0, 2 - a).astype(np.float32)
 
 
 # ---------------------------------------------------------------------------------------------- memory
@@ -393,7 +407,9 @@ class Simulation:
                     inside = sdf_on_grid(b.geometry.shape(dom, 0.25 * dom.dx), dom.resolution, dom.dx) < 0
                     for c in range(3):
                         velocity[c][inside] = u.to_lattice(b.velocity[c], "velocity")
-        pressure = hydrostatic_pressure(dom.shape, prm.gravity, phi if two else None, prm.rho_l, dom.boundary)
+        pressure = hydrostatic_pressure(
+            dom.shape, prm.gravity, phi if two else None, prm.rho_l, dom.boundary, fl.interface_width
+        )
         if pressure is None and any(prm.gravity):
             self._log("note: no hydrostatic start (gravity not along one non-periodic axis): the fluid starts at p = 0")
         self._fluid_params = prm

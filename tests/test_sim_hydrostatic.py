@@ -35,6 +35,26 @@ def test_profile_is_the_cell_centred_integral_of_rho_g():
     assert hydrostatic_pressure(shape, (0.0, 0.0, 0.0)) is None
 
 
+def test_hanging_water_is_not_carried_by_the_air_under_it():
+    """A block of water in the air (Fig. 17's poured water) adds nothing to the pressure under or beside it:
+    the air keeps its own hydrostatic profile in every column, so no pressure step at the edge of the block's
+    column (integrated straight through, the floor under it carried its weight and Fig. 17's small variant blew
+    the air out sideways at 5.75 m/s in the first step, NaN by step 7). A pool under the same block is still
+    carried in full."""
+    nz, rho_l = 30, 1 / 800
+    phi = np.zeros((nz, 8, 8), np.float32)
+    phi[18:24, 2:6, 2:6] = 1.0  # the hanging block
+    p = hydrostatic_pressure(phi.shape, (0.0, 0.0, -G_LAT), phi, rho_l=rho_l).astype(np.float64)
+    air = G_LAT * rho_l * (nz - np.arange(nz) - 0.5)
+    for y, x in ((3, 3), (0, 0), (3, 0)):
+        np.testing.assert_allclose(p[:18, y, x], air[:18], rtol=1e-5)
+    phi[:6] = 1.0  # a pool 6 cells deep under it: its weight is carried, the block's is not
+    p = hydrostatic_pressure(phi.shape, (0.0, 0.0, -G_LAT), phi, rho_l=rho_l).astype(np.float64)
+    pool = air + G_LAT * (1 - rho_l) * np.clip(6 - np.arange(nz) - 0.5, 0, None)
+    np.testing.assert_allclose(p[:6, 3, 3], pool[:6], rtol=1e-5)
+    np.testing.assert_allclose(p[:6, 3, 3], p[:6, 0, 0], rtol=1e-6)
+
+
 def _tank(phases: int) -> dict:
     """A closed 12 x 12 x 24 tank (dx = 5 mm, Δt = 1e-4 s): single-phase water, or water to 14 cells under
     air (800:1, σ = 0.073 N/m)."""
