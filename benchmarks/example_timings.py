@@ -25,6 +25,8 @@ import sys
 import time
 from pathlib import Path
 
+from couplekit.io import read_diagnostics
+
 ROOT = Path(__file__).resolve().parent.parent
 LIMIT_SECONDS = 300.0
 
@@ -37,12 +39,6 @@ def small_scenes() -> list[Path]:
     )
 
 
-def _diagnostics(path: Path) -> list[dict]:
-    if not path.exists():
-        return []
-    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
-
-
 def time_scene(scene: Path, out_dir: Path, threads: int) -> dict:
     """Run one scene file to the end in a subprocess and summarise what it did."""
     out = out_dir / scene.stem
@@ -52,7 +48,8 @@ def time_scene(scene: Path, out_dir: Path, threads: int) -> dict:
     t0 = time.perf_counter()
     proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
     wall = time.perf_counter() - t0
-    diag = _diagnostics(out / "diagnostics.jsonl")
+    log = out / "diagnostics.jsonl"
+    diag = read_diagnostics(log) if log.exists() else []
     last = diag[-1] if diag else {}
     speeds = [d["max_lattice_speed"] for d in diag if "max_lattice_speed" in d]
     return {

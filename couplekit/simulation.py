@@ -126,8 +126,8 @@ def hydrostatic_pressure(
     them): right under a submerged obstacle, irrelevant inside one.
 
     Only water that rests on the floor is carried: per column, the water's excess weight (ρ − ρ_l) g counts up
-    to the top of the segment of cells with φ ≥ ½ that starts at the floor, plus ``tail`` cells of the
-    interface above it (default 2 ``interface_width`` + 1). Water that hangs in the air (a drop, a poured block)
+    to the top of the segment of cells with φ ≥ ½ that starts at the floor, plus 2 ``interface_width`` + 1
+    cells of the interface above it. Water that hangs in the air (a drop, a poured block)
     adds nothing, so the air under and beside it keeps its own hydrostatic pressure: integrated straight
     through, the weight of a hanging block sat on the floor under it, and the step in pressure at the edge of
     its column blew the air out sideways (Fig. 17's poured block: 5.75 m/s in the first step, NaN by step 7).

@@ -24,6 +24,7 @@ from couplekit.backend import get_backend
 from couplekit.fluid.grid import Boundaries
 from couplekit.fluid.phasefield_layout import tanh_profile
 from couplekit.fluid.solver import FluidParams, FluidSolver
+from couplekit.simulation import hydrostatic_pressure
 
 G, NX, NY, NZ, DEPTH, MODE = 5e-6, 30, 4, 40, 16.0, 2
 WAVE_ENERGY = 0.5 * G * 0.5 * NX * NY  # ½ ρ_h g a² A / 2 with a = 1 cell, ρ_h = 1
@@ -43,8 +44,7 @@ def _kinetic_energy_history(cpu, steps: int, every: int) -> np.ndarray:
     surface = DEPTH + np.cos(K * x)
     phi = tanh_profile(surface[None, :] - z[:, None], 4.0)  # (z, x): signed distance ≈ vertical (slope ≤ 0.07)
     phi = np.broadcast_to(phi[:, None, :], (NZ, NY, NX)).astype(np.float32).copy()
-    rho = rho_l + (rho_h - rho_l) * phi
-    p = (np.cumsum((rho * G)[::-1], axis=0)[::-1] - 0.5 * rho * G).astype(np.float32)  # weight of the column above
+    p = hydrostatic_pressure(phi.shape, (0.0, 0.0, -G), phi, rho_l=rho_l, interface_width=4.0)
     params = FluidParams(
         rho_h=rho_h, rho_l=rho_l, nu_h=1e-4, nu_l=1e-2, gravity=(0.0, 0.0, -G), width=4.0,
         odd_lambda=0.015, smagorinsky=0.1,
