@@ -33,8 +33,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..faces import FACE_NAMES, face_plane_shape
+
 FLUID, WALL, INFLOW, OUTFLOW = 0, 1, 2, 3
-FACE_NAMES = ("x-", "x+", "y-", "y+", "z-", "z+")
 _KINDS = {"periodic": None, "wall": WALL, "inflow": INFLOW, "outflow": OUTFLOW}
 _PRIORITY = {WALL: 3, INFLOW: 2, OUTFLOW: 1}
 
@@ -146,13 +147,6 @@ def padded_shape(shape: tuple[int, int, int]) -> tuple[int, int, int]:
 
 INTERIOR = (slice(1, -1), slice(1, -1), slice(1, -1))
 """Index of the interior cells inside a padded spatial array."""
-
-
-def face_plane_shape(shape: tuple[int, int, int], face: str) -> tuple[int, int]:
-    """Shape of the ghost plane of ``face`` without its edges, in array order: ``(ny, nx)`` for ``z±``,
-    ``(nz, nx)`` for ``y±``, ``(nz, ny)`` for ``x±`` (the shape of an :class:`InflowRegion` mask)."""
-    nz, ny, nx = (int(s) for s in shape)
-    return {"x": (nz, ny), "y": (nz, nx), "z": (ny, nx)}[face[0]]
 
 
 def face_plane_index(shape: tuple[int, int, int], face: str) -> tuple[slice | int, ...]:

@@ -7,7 +7,7 @@ particles on a regular sub-lattice, deterministically:
 * **In the face plane** the sites are the sub-lattice of the MPM grid that seeds bodies
   (:mod:`couplekit.sand.seeding`): spacing h = dx / k with k = particles per cell per axis, k² sites per open
   face cell, at the sub-cell centres. The open cells are the inflow's own cells (the outlet's mask,
-  :func:`couplekit.fluid.inflow.region_mask`, or the whole face), less the cells within ``bound`` cells of the
+  :func:`couplekit.faces.region_mask`, or the whole face), less the cells within ``bound`` cells of the
   face's edges, where the MPM domain walls are and where the quadratic stencil would leave the grid (a
   whole-face inflow loses that rim; a scene refuses an outlet carrying sand that reaches into it). The
   emission area A_e = sites × h² is what the flux uses.
@@ -41,6 +41,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..faces import PLANE_AXES, face_plane_shape, region_mask, solver_face
+
 __all__ = ["JetSource", "InflowEmitter", "emission_sites", "expected_particles", "match_particle_count"]
 
 _AXIS = {"x": 0, "y": 1, "z": 2}
@@ -55,12 +57,10 @@ def emission_sites(
     """In-plane sub-lattice sites (2, N) in metres of an inflow, in the face's in-plane axes (x, y, z order).
 
     ``grid``: interior shape (nz, ny, nx); ``face``: ``x-, x+, y-, y+, z-, z+``; ``mask``: the open cells of the
-    face plane (:func:`couplekit.fluid.grid.face_plane_shape`; None: the whole face); ``per_axis``: k
+    face plane (:func:`couplekit.faces.face_plane_shape`; None: the whole face); ``per_axis``: k
     particles per cell per axis; ``bound``: cells along the face's edges left out (the MPM walls).
     Sites are ordered cell by cell (the face's cells row-major), then by sub-cell: a fixed particle order.
     """
-    from ..fluid.grid import face_plane_shape
-
     rows, cols = face_plane_shape(grid, face)  # rows: second in-plane axis, cols: first
     open_cells = np.ones((rows, cols), bool) if mask is None else np.asarray(mask, bool).copy()
     if open_cells.shape != (rows, cols):
@@ -135,8 +135,6 @@ class JetSource:
 
     def layer(self, depth: float) -> np.ndarray:
         """Positions (3, N) of a layer whose centre lies ``depth`` beyond the emission plane."""
-        from ..fluid.inflow import PLANE_AXES
-
         a0, a1 = PLANE_AXES[self.face[0]]
         d = self.offset + depth
         normal = d if self.face[1] == "-" else self.extent - d
@@ -169,19 +167,17 @@ class InflowEmitter:
         """Steps advanced: the time of :meth:`advance`'s layers is ``steps × Δt``."""
 
     @classmethod
-    def from_scene(cls, scene, bound: int = 2, coupler=None) -> InflowEmitter | None:
+    def from_scene(cls, scene, bound: int | None = None, coupler=None) -> InflowEmitter | None:
         """The emitter of a :class:`~couplekit.scene.Scene`'s inflows with ``sand_fraction`` > 0 (None if none):
-        outlets rasterised as the fluid does (:func:`couplekit.fluid.inflow.region_mask`), k =
-        ``sand.particles_per_axis``, ϱ = ``sand.density``."""
-        from ..fluid.inflow import region_mask
-
+        outlets rasterised as the fluid does (:func:`couplekit.faces.region_mask`), k =
+        ``sand.particles_per_axis``, ϱ = ``sand.density``, the rim ``bound`` (default ``sand.wall_layers``)."""
         dom, sd = scene.domain, scene.sand
-        face_name = {"x_min": "x-", "x_max": "x+", "y_min": "y-", "y_max": "y+", "z_min": "z-", "z_max": "z+"}
+        bound = sd.wall_layers if bound is None else int(bound)
         sources = []
         for inf in scene.inflows:
             if inf.sand_fraction <= 0:
                 continue
-            face = face_name[inf.face]
+            face = solver_face(inf.face)
             mask = None
             if inf.shape != "face":
                 mask = region_mask(dom.shape, dom.dx, face, inf.shape, inf.center, inf.size, inf.radius)

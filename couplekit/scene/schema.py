@@ -17,6 +17,8 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+from ..faces import SCENE_FACES
+
 __all__ = [
     "REQUIRED",
     "Key",
@@ -42,7 +44,7 @@ class _Required:
 REQUIRED: Any = _Required()
 """Marker default of a key that must be given."""
 
-FACES = ("x_min", "x_max", "y_min", "y_max", "z_min", "z_max")
+FACES = SCENE_FACES
 BOUNDARY_KINDS = ("wall", "periodic", "inflow", "outflow")
 FIELD_NAMES = ("phi", "velocity", "pressure", "density", "solid", "sand_fraction", "sand_velocity")
 """Grid fields an output can ask for (a field that the scene's physics does not produce is skipped)."""
@@ -52,7 +54,8 @@ FIELD_NAMES = ("phi", "velocity", "pressure", "density", "solid", "sand_fraction
 class Key:
     """One scene key.
 
-    kind: ``float``, ``int``, ``bool``, ``str``, ``choice`` (one of ``choices``), ``vec3`` (3 floats),
+    kind: ``float``, ``int``, ``int_or_auto`` (an integer or the string "auto"), ``bool``, ``str``, ``choice`` (one
+    of ``choices``), ``vec3`` (3 floats),
     ``ivec3`` (3 ints), ``floats`` (a list of ``length`` floats, any length when 0), ``strs`` (list of
     strings from ``choices``), ``grid`` (a 2-D list of floats). ``lo``/``hi`` bound numbers (and every
     component of vectors); ``lo_open``/``hi_open`` make the bound strict.
@@ -141,7 +144,16 @@ SECTIONS: dict[str, list[Key]] = {
     ],
     "domain.boundary": [Key(f, "choice", "wall", _FACE_DOC.format(face=f), choices=BOUNDARY_KINDS) for f in FACES],
     "time": [
-        Key("dt", "float", REQUIRED, "time step of both solvers (Table 1 'Time Step')", "s", lo=0.0, lo_open=True),
+        Key(
+            "dt",
+            "float",
+            REQUIRED,
+            "time step of the fluid, the coupling step (Table 1 'Time Step'); the sand steps dt too with the default "
+            "[scheduler] (lockstep), dt / substeps when sub-cycled, sand_every × dt when multi-rate",
+            "s",
+            lo=0.0,
+            lo_open=True,
+        ),
         Key(
             "frame_duration",
             "float",
@@ -247,6 +259,26 @@ SECTIONS: dict[str, list[Key]] = {
             hi=0.1,
         ),
         Key(
+            "gravity",
+            "vec3",
+            None,
+            "acceleration the fluid feels; default domain.gravity. A periodic column whose floor carries a "
+            "suspension's weight replaces it by the mean pressure gradient (couplekit.coupling.scenes."
+            "uniform_suspension); the sand always feels domain.gravity",
+            "m/s²",
+        ),
+        Key(
+            "initial_pressure",
+            "choice",
+            "resting",
+            "the pressure the fluid starts from: 'resting', hydrostatic for the water resting on the floor (water "
+            "hanging in the air, e.g. a poured block, adds nothing, so the air beside it stays at rest); 'column', "
+            "every column integrated straight through (a water layer spanning the domain over trapped air, e.g. a "
+            "dry sand bed in a closed tank); 'zero', p = 0 (the water then falls by g dt in the first step and "
+            "rings)",
+            choices=("resting", "column", "zero"),
+        ),
+        Key(
             "smagorinsky",
             "float",
             0.1,
@@ -319,6 +351,25 @@ SECTIONS: dict[str, list[Key]] = {
         ),
         Key("seed", "int", 0, "random seed of the jitter", "", lo=0),
         Key("wall_friction", "float", 0.5, "Coulomb friction of sand on domain walls and obstacles", "", lo=0.0),
+        Key(
+            "wall_layers",
+            "int",
+            2,
+            "node layers the MPM domain walls take at every face; sand bodies and sand-carrying outlets must keep "
+            "this many cells from each face (1 lets a bed reach the first cell, so that water cannot bypass it "
+            "along the walls)",
+            "",
+            lo=1,
+            hi=4,
+        ),
+        Key(
+            "periodic_walls",
+            "bool",
+            False,
+            "allow periodic domain faces in a scene with sand: the fluid wraps around, the sand meets a wall there "
+            "(the MPM grid has no periodic wrap; keep the sand wall_layers cells away). false refuses periodic "
+            "faces with sand",
+        ),
         Key("cfl", "float", 0.5, "particle CFL number C_v: Δt ≤ C_v Δx / max speed", "", lo=0.0, lo_open=True, hi=1.0),
         Key(
             "elastic_cfl",
@@ -379,6 +430,58 @@ SECTIONS: dict[str, list[Key]] = {
         Key("buoyancy", "bool", True, "false switches buoyancy off (coupled scenes)"),
         Key("cohesion", "bool", True, "false makes the sand cohesionless"),
         Key("hardening", "bool", True, "false keeps the friction angle at h0"),
+    ],
+    "scheduler": [
+        Key(
+            "kind",
+            "choice",
+            "lockstep",
+            "how the fluid and the sand are stepped (couplekit.schedulers): 'lockstep', paper 000's Algorithm 1, one "
+            "MPM step per LBM step of time.dt; 'subcycle', `substeps` MPM steps of time.dt / substeps inside each LBM "
+            "step (the fluid may then take a step the sand alone could not); 'multirate', one MPM step of "
+            "sand_every × time.dt per sand_every LBM steps (sand that moves slowly, e.g. a settled bed under "
+            "flowing water). Needs sand (a fluid-only scene has one rate)",
+            choices=("lockstep", "subcycle", "multirate"),
+        ),
+        Key(
+            "substeps",
+            "int_or_auto",
+            "auto",
+            "kind = 'subcycle': MPM substeps per LBM step, an integer k >= 1 (the sand steps time.dt / k; k = 1 is "
+            "lockstep bit for bit) or 'auto': each step the smallest k whose substep meets the MPM elastic and "
+            "particle CFL limits at the particles' current speed",
+            lo=1,
+            hi=4096,
+        ),
+        Key(
+            "max_substeps",
+            "int",
+            64,
+            "kind = 'subcycle' with substeps = 'auto': the most substeps one LBM step may take; a run whose sand "
+            "needs more stops with an error naming this key, and validation refuses a time.dt that needs more for "
+            "the expected speed (ignored with a fixed substeps)",
+            lo=1,
+            hi=4096,
+        ),
+        Key(
+            "interpolation",
+            "choice",
+            "hold",
+            "kind = 'subcycle': the fluid velocity the sand exchanges momentum with across the substeps: 'hold' (the "
+            "LBM step's start, as the Granule-In-Cell paper holds its fluid) or 'linear' (linear in time through the "
+            "last two LBM steps, extrapolated to each substep's start); either way plus the velocity the fluid gains "
+            "from the drag the earlier substeps exchanged",
+            choices=("hold", "linear"),
+        ),
+        Key(
+            "sand_every",
+            "int",
+            None,
+            "kind = 'multirate' (required there): LBM steps per MPM step m; the sand steps m × time.dt and "
+            "exchanges drag over that step, handed to the fluid as m equal forces",
+            lo=1,
+            hi=100000,
+        ),
     ],
     "stirring": [
         Key(
@@ -586,7 +689,19 @@ INFLOW_KEYS: list[Key] = [
 ]
 """Keys of one ``[[inflows]]`` entry."""
 
-TOP_LEVEL = ("scene", "domain", "time", "fluid", "sand", "bodies", "inflows", "stirring", "outputs", "effects")
+TOP_LEVEL = (
+    "scene",
+    "domain",
+    "time",
+    "scheduler",
+    "fluid",
+    "sand",
+    "bodies",
+    "inflows",
+    "stirring",
+    "outputs",
+    "effects",
+)
 """Top-level tables of a scene file."""
 
 
@@ -623,6 +738,19 @@ def _check_value(key: Key, value: Any, path: str) -> tuple[Any, list[Problem]]:
         "vec3": "[0.0, 0.0, 1.0]",
         "ivec3": "[64, 64, 64]",
     }
+    if k == "int_or_auto":
+        if value == "auto":
+            return value, []
+        if not isinstance(value, int) or isinstance(value, bool):
+            return None, [
+                Problem(
+                    path,
+                    f'must be an integer or "auto", got {_type_name(value)} ({value!r})',
+                    f'write e.g. {path.rsplit(".", 1)[-1]} = 4, or {path.rsplit(".", 1)[-1]} = "auto"',
+                )
+            ]
+        p = _check_range(key, float(value), path)
+        return int(value), [p] if p else []
     if k in ("float", "int"):
         ok = _is_number(value) if k == "float" else isinstance(value, int) and not isinstance(value, bool)
         if not ok:
