@@ -5,9 +5,10 @@ CuPy/GPU status, kernel cache; ``--selfcheck`` also builds and runs the self-che
 
 ``couplekit validate SCENE``: check a scene file (nothing is allocated); exit 0 when valid, 2 when not.
 
-``couplekit run SCENE [--frames N] [--out DIR] [--backend B] [--resume CKPT]``: run a scene with a progress
-bar, writing ParaView/PLY/PNG outputs, diagnostics and checkpoints. Exit codes: 0 done, 1 NaN/Inf (the
-report names step, field and cell; ``last_good.h5`` is kept), 2 invalid scene, 3 refused (coupled scene,
+``couplekit run SCENE [--frames N] [--out DIR] [--backend B] [--resume CKPT] [--scheduler SPEC]``: run a scene
+with a progress bar, writing ParaView/PLY/PNG outputs, diagnostics and checkpoints (``--scheduler`` replaces
+the scene's ``[scheduler]`` table, e.g. ``subcycle:8``). Exit codes: 0 done, 1 NaN/Inf (the report names
+step, field and cell; ``last_good.h5`` is kept), 2 invalid scene, 3 refused (coupled scene,
 not enough memory), 130 interrupted by Ctrl-C (``interrupted.h5`` written; resume with ``--resume``).
 """
 
@@ -57,8 +58,9 @@ def _cmd_info(args: argparse.Namespace) -> int:
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
+    from .assembly import CouplingUnavailableError, memory_estimate, refuse_unsupported
     from .scene import Scene, SceneError
-    from .simulation import CouplingUnavailableError, _gib, _refuse_unsupported, memory_estimate
+    from .simulation import _gib
 
     try:
         scene = Scene.load(args.scene)
@@ -77,7 +79,7 @@ def _cmd_validate(args: argparse.Namespace) -> int:
         + (f", about {est['particle_count']:,.0f} particles at most" if est["particle_count"] else "")
     )
     try:
-        _refuse_unsupported(scene)
+        refuse_unsupported(scene)
     except CouplingUnavailableError as exc:
         print(f"note: `run` refuses this scene: {exc}")
     return 0
@@ -85,10 +87,16 @@ def _cmd_validate(args: argparse.Namespace) -> int:
 
 def _cmd_run(args: argparse.Namespace) -> int:
     from .scene import Scene, SceneError
-    from .simulation import CouplingUnavailableError, InsufficientMemoryError, Simulation
+    from .simulation import CouplingUnavailableError, InsufficientMemoryError, Simulation, with_scheduler
 
     try:
         scene = Scene.load(args.scene)
+        if args.scheduler is not None:
+            if args.resume:
+                print("error: --scheduler cannot change the scheduler of a resumed run (the checkpoint keeps its own)",
+                      file=sys.stderr)  # fmt: skip
+                return 2
+            scene = with_scheduler(scene, args.scheduler)
         if args.resume:
             sim = Simulation.load(args.resume, backend=args.backend, threads=args.threads)
             if sim.scene.to_dict() != scene.to_dict():
@@ -142,6 +150,12 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--backend", default="auto", help="auto (default), cuda, cpu or numpy")
     run.add_argument("--threads", type=int, default=None, help="OpenMP threads of the cpu backend")
     run.add_argument("--resume", default=None, metavar="CKPT", help="continue from an HDF5 checkpoint")
+    run.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="SPEC",
+        help="replace the scene's [scheduler]: lockstep, subcycle[:K|auto][:hold|linear] or multirate:M",
+    )
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
     run.set_defaults(func=_cmd_run)
     return parser

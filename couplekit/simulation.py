@@ -6,16 +6,17 @@
 >>> sim.fields(), sim.particles(), sim.diagnostics()
 >>> sim.save("x.h5"); sim2 = ck.Simulation.load("x.h5")   # bitwise restart on the cpu backend
 
-Scenes: fluid-only (:class:`couplekit.fluid.solver.FluidSolver`, one or two phases, obstacles as
-bounce-back cells, whole-face inflows and outflows), sand-only (:class:`couplekit.sand.solver.SandSolver`,
-obstacles as an SDF collider), and both, coupled by :class:`couplekit.coupling.coupler.SandFluidCoupler`
-(drag, buoyancy, the phase-field source term, water retention). Every scene is stepped by
-:class:`couplekit.schedulers.lockstep.LockstepScheduler` (paper Algorithm 1: one MPM step per LBM step, same
-Δt), which times every stage: :meth:`Simulation.stage_times`, :meth:`Simulation.cost_report`, a cost line at
-the end of :meth:`Simulation.run` and ``step_seconds`` in the diagnostics. Refused with
-:class:`CouplingUnavailableError`: what the coupler cannot do yet (drag or buoyancy switched off).  Sand
-bodies with and without retention in one scene (``bodies[*].retention``, paper Fig. 10) pass per-particle
-flags to the coupler: only the retentive sand has retention capacity and gains bound water.
+The solvers come from :func:`couplekit.assembly.assemble`, the one path from a scene to running solvers
+(seeding, initial pressure, boundaries, the scheduler: its docstring): fluid-only
+(:class:`couplekit.fluid.solver.FluidSolver`), sand-only (:class:`couplekit.sand.solver.SandSolver`) and
+coupled scenes (:class:`couplekit.coupling.coupler.SandFluidCoupler`: drag, buoyancy, the phase-field source
+term, water retention). ``Simulation`` holds their state and runs them: stepping, the run loop, outputs and
+checkpoints. The scene's ``[scheduler]`` table (or ``Simulation(..., scheduler=...)``) chooses how they are
+stepped (:mod:`couplekit.schedulers`: lockstep, paper Algorithm 1, by default; sub-cycled or multi-rate sand),
+and the scheduler times every stage: :meth:`Simulation.stage_times`, :meth:`Simulation.cost_report`, a cost
+line at the end of :meth:`Simulation.run`, ``step_seconds`` and the sand steps per step in the diagnostics.
+Refused with :class:`CouplingUnavailableError`: what the coupler cannot do yet (drag or buoyancy switched
+off).
 
 Water jets carrying sand (``inflows[*].sand_fraction`` > 0, paper Fig. 1): :class:`couplekit.sand.emission.
 InflowEmitter` (:attr:`Simulation.emitter`) appends a layer of particles after every step in which a jet has
@@ -24,18 +25,6 @@ fraction is sand_fraction; a scene whose only sand comes from jets starts with a
 coupled solvers from the first step. Its accumulators are part of the checkpoint (group ``emission``), and a
 resumed run grows the particle arrays to the checkpoint's count, so the restart stays bitwise. Sand bodies may have different densities
 (``bodies[*].density``, paper Fig. 8): each particle carries its body's.
-
-Seeding (as :mod:`couplekit.coupling.scenes` does): a sand body gets ``particles_per_cell`` particles per
-cell, each of volume V_p = ε0 dx³ / particles_per_cell with ε0 = ``sand.packing_fraction`` (default 0.6, at
-most ε_max = 0.64) and mass ϱ V_p with ϱ the body's ``density``. So a body's sand fraction (Eq. 25) is ε0 and
-ϱ is the grain density, the ϱ of paper Eq. 31's balance (sand weight ϱ ε V_cell g against the buoyancy
-ρ_f ε V_cell g): sand lighter than water rises, as paper Fig. 8's 950 kg/m³ ball does. (With V_p = dx³ /
-particles_per_cell, ε would clamp at ε_max while the mass stayed ϱ V_cell, and the neutral density would be
-0.64 ρ_w.)
-
-The fluid starts hydrostatic when gravity lies along one non-periodic axis (:func:`hydrostatic_pressure`:
-p = ∫ ρ(φ) g along each column, in lattice units), so water at rest stays at rest instead of ringing with the
-pressure wave of a start from p = 0.
 
 Before anything is allocated the constructor prints the backend and why it was chosen, and a memory
 estimate; a scene that will not fit the device (or the host's available memory) is refused
@@ -55,10 +44,11 @@ from typing import Any
 import numpy as np
 
 from . import __version__
+from .assembly import CouplingUnavailableError, assemble, memory_estimate, refuse_unsupported
 from .backend import Backend, get_backend
+from .fluid.hydrostatic import hydrostatic_pressure
 from .lattice import CS2
 from .scene import Scene
-from .scene.geometry import Union, sdf_on_grid
 
 __all__ = [
     "Simulation",
@@ -68,14 +58,23 @@ __all__ = [
     "memory_estimate",
     "hydrostatic_pressure",
     "RunResult",
+    "with_scheduler",
 ]
 
-_FACE = {"x_min": "x-", "x_max": "x+", "y_min": "y-", "y_max": "y+", "z_min": "z-", "z_max": "z+"}
-_SAND_FACE = {"x_min": "-x", "x_max": "+x", "y_min": "-y", "y_max": "+y", "z_min": "-z", "z_max": "+z"}
+_refuse_unsupported = refuse_unsupported  # the name the CLI used before couplekit.assembly
 
 
-class CouplingUnavailableError(NotImplementedError):
-    """The scene needs fluid–sand coupling, which is not built yet."""
+def with_scheduler(scene: Scene, scheduler: str | dict) -> Scene:
+    """``scene`` with its ``[scheduler]`` table replaced (and validated again, so the limits of the new scheme
+    are checked): ``scheduler`` is a table (dict of the ``[scheduler]`` keys) or a spec string
+    (:func:`couplekit.schedulers.spec_table`: ``"lockstep"``, ``"subcycle:8"``, ``"subcycle:auto:linear"``,
+    ``"multirate:4"``)."""
+    from .schedulers import spec_table
+
+    table = spec_table(scheduler) if isinstance(scheduler, str) else dict(scheduler)
+    data = scene.to_dict()
+    data["scheduler"] = table
+    return Scene.from_dict(data, source_name=f"scene {scene.name!r} with [scheduler] {table}")
 
 
 class InsufficientMemoryError(MemoryError):
@@ -89,122 +88,6 @@ class SimulationDiverged(FloatingPointError):
     def __init__(self, step: int, solver: str, field: str, index: tuple, value: float, where: str):
         self.step, self.solver, self.field, self.index, self.value = step, solver, field, index, value
         super().__init__(f"non-finite value {value} in {solver} field {field!r} at {where} {index} after step {step}")
-
-
-def _refuse_unsupported(scene: Scene) -> None:
-    """Refuse, before allocation, what the coupler cannot do yet (CouplingUnavailableError naming the key)."""
-    problems = []
-    if scene.has_sand:
-        if scene.has_fluid:
-            for key in ("drag", "buoyancy"):
-                if not getattr(scene.effects, key):
-                    problems.append(f"effects.{key} = false: the coupler has no switch for it")
-    if problems:
-        raise CouplingUnavailableError(
-            f"scene {scene.name!r} needs what the coupling module does not do yet: " + "; ".join(problems)
-        )
-
-
-def hydrostatic_pressure(
-    shape: tuple[int, int, int],
-    gravity: tuple[float, float, float],
-    phi: np.ndarray | None = None,
-    rho_l: float = 1.0,
-    boundary: dict[str, str] | None = None,
-    interface_width: float = 4.0,
-) -> np.ndarray | None:
-    """The hydrostatic pressure (nz, ny, nx) of a fluid at rest in FluidSolver's lattice units (water ρ = 1,
-    ``gravity`` the lattice acceleration), or None when there is none to set: no gravity, gravity not along
-    one axis, or periodic faces (``boundary``, scene face names) along it.
-
-    Per column along gravity, from the face gravity points away from (p = 0 there): p_k = |g| (Σ_{k' above k}
-    ρ_k' + ρ_k / 2), the cell-centred integral of ρ g, with ρ = ρ_l + (1 − ρ_l) φ of the two-phase mixture
-    (``phi``; None: single-phase water, ρ = 1). Then −∇p/ρ + g = 0 to second order (Eq. 15's pressure and
-    gravity terms) and a tank at rest starts at rest, without the pressure wave a start from p = 0 sends
-    through it (the water falls by g Δt in the first step, the floor stops it, and it rings with a speed of
-    order |g| H / c_s). Obstacles are integrated through with the φ they were given (the water's SDF ignores
-    them): right under a submerged obstacle, irrelevant inside one.
-
-    Only water that rests on the floor is carried: per column, the water's excess weight (ρ − ρ_l) g counts up
-    to the top of the segment of cells with φ ≥ ½ that starts at the floor, plus 2 ``interface_width`` + 1
-    cells of the interface above it. Water that hangs in the air (a drop, a poured block)
-    adds nothing, so the air under and beside it keeps its own hydrostatic pressure: integrated straight
-    through, the weight of a hanging block sat on the floor under it, and the step in pressure at the edge of
-    its column blew the air out sideways (Fig. 17's poured block: 5.75 m/s in the first step, NaN by step 7).
-    """
-    g = np.asarray(gravity, np.float64)
-    axes = np.flatnonzero(g)
-    if len(axes) != 1:
-        return None
-    a = int(axes[0])  # 0 = x, 1 = y, 2 = z
-    if boundary and boundary.get(f"{'xyz'[a]}_min") == "periodic":
-        return None
-    if phi is None:
-        rho = np.ones(tuple(shape), np.float64)
-    else:
-        rho = rho_l + (1.0 - rho_l) * np.clip(np.asarray(phi, np.float64), 0.0, 1.0)
-    r = np.moveaxis(rho, 2 - a, 0)  # array axes are (z, y, x)
-    down = slice(None, None, -1) if g[a] < 0 else slice(None)  # from the face gravity points away from
-    rd = r[down]
-    n = rd.shape[0]
-    # height (cells from the floor) of the water segment resting on the floor, plus the interface's tail
-    water_up = (rd >= 0.5 * (1.0 + rho_l))[::-1]  # from the floor up
-    resting = np.cumprod(water_up, axis=0).sum(axis=0)
-    top = resting + int(np.ceil(2.0 * interface_width)) + 1
-    level = np.arange(n)[::-1].reshape((n,) + (1,) * (rd.ndim - 1))  # height of each cell of rd above the floor
-    carried = np.where(level < top, rd - rho_l, 0.0)
-    above = np.cumsum(rho_l + carried, axis=0) - 0.5 * (rho_l + carried)
-    return np.moveaxis((abs(g[a]) * above)[down], 0, 2 - a).astype(np.float32)
-
-
-# ---------------------------------------------------------------------------------------------- memory
-_FLUID_FLOATS_PER_CELL = 27 + 3 + 3 + 1 + 1  # f, velocity, wall velocity, p, pbar
-_PHASE_FLOATS_PER_CELL = 7 + 1 + 3 + 1 + 1  # h, phi, grad phi, mu, source term
-_SAND_FLOATS_PER_NODE = 1 + 3 + 1 + 3 + 3 + 1  # mass, momentum, volume, velocity, f_ext, sdf
-_SAND_FLOATS_PER_PARTICLE = 3 + 3 + 9 + 9 + 6 + 1 + 1 + 1 + 1 + 1  # x v C F tau q vc saturation mass volume
-
-
-def memory_estimate(scene: Scene) -> dict[str, float]:
-    """Bytes the solvers will allocate for ``scene`` (an estimate from the array sizes, before allocation).
-
-    Particles are bounded by the sand bodies' bounding boxes × particles per cell (an upper bound), plus the
-    particles the sand-carrying inflows emit over the scene's duration (``emitted_particles``,
-    :func:`couplekit.sand.emission.expected_particles`)."""
-    nx, ny, nz = scene.domain.resolution
-    padded = (nx + 2) * (ny + 2) * (nz + 2)
-    out = {"fluid": 0.0, "sand_grid": 0.0, "particles": 0.0, "particle_count": 0.0}
-    if scene.fluid is not None:
-        floats = _FLUID_FLOATS_PER_CELL + (_PHASE_FLOATS_PER_CELL if scene.fluid.phases == 2 else 0)
-        out["fluid"] = padded * (4 * floats + 1)  # + 1 byte of flags
-    if scene.has_sand:
-        out["sand_grid"] = 4.0 * _SAND_FLOATS_PER_NODE * nx * ny * nz
-        count = 0.0
-        for b in scene.bodies:
-            if b.kind == "sand":
-                lo, hi = b.geometry.bounds(scene.domain)
-                count += float(np.prod(np.maximum(hi - lo, 0.0))) / scene.domain.dx**3 * scene.sand.particles_per_cell
-        if scene.emits_sand:
-            from .sand.emission import InflowEmitter, expected_particles
-
-            duration = scene.time.frames * scene.time.steps_per_frame * scene.time.dt
-            out["emitted_particles"] = expected_particles(InflowEmitter.from_scene(scene), duration)
-            count += out["emitted_particles"]
-        out["particle_count"] = count
-        out["particles"] = 4.0 * _SAND_FLOATS_PER_PARTICLE * count
-    if scene.fluid is not None and scene.has_sand:
-        # fluid mixture inputs (fluid_fraction, sand_velocity, force) and the coupler's fields
-        flags = {b.retention if b.retention is not None else scene.sand.retention for b in scene.bodies
-                 if b.kind == "sand"}  # fmt: skip
-        retention, mixed = True in flags, len(flags) > 1  # mixed: + retentive fraction grid and flags
-        out["coupling"] = padded * 4.0 * (7 + 1 + 3 + 1) + nx * ny * nz * 4.0 * (1 + (3 + mixed if retention else 0))
-        out["particles"] += 4.0 * count * ((1 + mixed) if retention else 0)
-    if scene.fluid is not None and getattr(scene, "stirring", None) is not None:
-        # the stirring force's buffer, plus the force input a fluid-only scene would not have
-        out["stirring"] = padded * 4.0 * (3 if scene.has_sand else 6)
-    out["total"] = (
-        out["fluid"] + out["sand_grid"] + out["particles"] + out.get("coupling", 0.0) + out.get("stirring", 0.0)
-    )
-    return out
 
 
 def available_memory(backend: Backend) -> tuple[float, str]:
@@ -247,8 +130,12 @@ class Simulation:
     a scene whose estimate exceeds the available memory; timing: time every stage of every step
     (:meth:`stage_times`, :meth:`cost_report`; on a GPU this costs one synchronisation per stage).
 
-    Every scene is stepped by a :class:`couplekit.schedulers.lockstep.LockstepScheduler` (:attr:`scheduler`):
-    fluid-only and sand-only scenes run their solver's stages, coupled scenes paper Algorithm 1.
+    ``scheduler``: replaces the scene's ``[scheduler]`` table (a dict, or a spec string such as
+    ``"subcycle:8"``; :func:`with_scheduler`), checked like the scene's own.
+
+    The solvers are built by :func:`couplekit.assembly.assemble` and stepped by :attr:`scheduler`
+    (:mod:`couplekit.schedulers`): fluid-only and sand-only scenes run their solver's stages, coupled scenes
+    paper Algorithm 1 in the scheduler's rhythm.
     """
 
     def __init__(
@@ -259,13 +146,16 @@ class Simulation:
         log: Callable[[str], Any] | None = print,
         check_memory: bool = True,
         timing: bool = True,
+        scheduler: str | dict | None = None,
     ):
         self.scene = scene if isinstance(scene, Scene) else Scene.load(scene)
+        if scheduler is not None:
+            self.scene = with_scheduler(self.scene, scheduler)
         sc = self.scene
         self._log = log or (lambda s: None)
         self._preview_failed = False
         self.coupled = sc.has_fluid and sc.has_sand
-        _refuse_unsupported(sc)
+        refuse_unsupported(sc)
         self.backend = backend if isinstance(backend, Backend) else get_backend(backend, threads=threads)
         self._log(self.backend.describe())
         self._log(sc.summary())
@@ -291,215 +181,7 @@ class Simulation:
         self.fluid = self.sand = self.coupler = self.scheduler = self.emitter = None
         self._timing = bool(timing)
         self._rebuild()
-
-    # ------------------------------------------------------------------------------------ building
-    def _shape_of(self, kind: str) -> Union | None:
-        shapes = [
-            b.geometry.shape(self.scene.domain, 0.25 * self.scene.domain.dx)
-            for b in self.scene.bodies
-            if b.kind == kind
-        ]
-        return Union(shapes) if shapes else None
-
-    def _water_shape(self) -> Union | None:
-        """Water bodies for the initial φ. A box face, or a height field's side or base, lying on the domain
-        boundary is pushed out by 10 cells, so water that fills the shape up to a wall has no interface (a
-        tanh drop) along that wall."""
-        from .scene.geometry import Box
-        from .scene.mesh import HeightField, load_heights
-
-        dom = self.scene.domain
-        size, pad = np.asarray(dom.size), 10 * dom.dx
-        shapes = []
-        for b in self.scene.bodies:
-            if b.kind != "water":
-                continue
-            g = b.geometry
-            if g.type == "box" and g.scale == 1.0 and not any(g.rotate) and not g.invert:
-                lo = np.asarray(g.params["min"], float) + np.asarray(g.translate)
-                hi = np.asarray(g.params["max"], float) + np.asarray(g.translate)
-                tol = 1e-9 * size.max()
-                lo = np.where(lo <= tol, lo - pad, lo)
-                hi = np.where(hi >= size - tol, hi + pad, hi)
-                shapes.append(Box(lo, hi))
-            elif (
-                g.type == "heightfield"
-                and g.scale == 1.0
-                and not any(g.rotate)
-                and not any(g.translate)
-                and not g.invert
-            ):
-                p = g.params
-                h = np.asarray(p["heights"], float) if p.get("heights") is not None else load_heights(p["file"])
-                (x0, x1), (y0, y1) = p["x_range"], p["y_range"]
-                base = p.get("base")
-                tol = 1e-9 * size.max()
-                base = -pad if base is None or base <= tol else base
-                # the edge heights repeated beyond each side on the boundary, at the grid's own spacing (the
-                # height field's samples are evenly spaced), for at least `pad`
-                sx, sy = (x1 - x0) / (h.shape[1] - 1), (y1 - y0) / (h.shape[0] - 1)
-                nx_pad, ny_pad = int(np.ceil(pad / sx)), int(np.ceil(pad / sy))
-                if x0 <= tol:
-                    h, x0 = np.concatenate([np.repeat(h[:, :1], nx_pad, axis=1), h], axis=1), x0 - nx_pad * sx
-                if x1 >= size[0] - tol:
-                    h, x1 = np.concatenate([h, np.repeat(h[:, -1:], nx_pad, axis=1)], axis=1), x1 + nx_pad * sx
-                if y0 <= tol:
-                    h, y0 = np.concatenate([np.repeat(h[:1], ny_pad, axis=0), h], axis=0), y0 - ny_pad * sy
-                if y1 >= size[1] - tol:
-                    h, y1 = np.concatenate([h, np.repeat(h[-1:], ny_pad, axis=0)], axis=0), y1 + ny_pad * sy
-                shape = HeightField(h, (x0, x1), (y0, y1), base, 0.25 * dom.dx)
-                shapes.append(shape)
-            else:
-                shapes.append(g.shape(dom, 0.25 * dom.dx))
-        return Union(shapes) if shapes else None
-
-    def _build_fluid(self):
-        from .fluid.grid import Boundaries, Face, InflowRegion
-        from .fluid.inflow import region_mask
-        from .fluid.solver import FluidParams, FluidSolver
-
-        sc, u = self.scene, self.units
-        fl, dom, eff = sc.fluid, sc.domain, sc.effects
-        two = fl.phases == 2
-        prm = FluidParams(
-            rho_h=1.0,
-            rho_l=fl.air_density / fl.water_density if two else 1.0,
-            nu_h=fl.water_lattice_viscosity,
-            nu_l=fl.air_lattice_viscosity if two else fl.water_lattice_viscosity,
-            gravity=tuple(u.to_lattice(g, "acceleration") for g in dom.gravity),
-            sigma=u.to_lattice(fl.surface_tension, "surface_tension") if two and eff.surface_tension else 0.0,
-            mobility=fl.mobility,
-            width=fl.interface_width,
-            eta=fl.controller_eta if eff.volume_controller else 0.0,
-            odd_lambda=fl.odd_lambda,
-            smagorinsky=fl.smagorinsky,
-        )
-        inflow = {i.face: i for i in sc.inflows if i.shape == "face"}
-        faces, regions = {}, []
-        for name, kind in dom.boundary.items():
-            if kind == "inflow":
-                i = inflow[name]
-                vel = tuple(u.to_lattice(v, "velocity") for v in i.velocity)
-                faces[_FACE[name]] = Face("inflow", vel, 1.0 if i.kind == "water" else 0.0)
-            else:
-                faces[_FACE[name]] = Face(kind)
-        for i in sc.inflows:  # outlets: inflow on part of a wall / outflow face (couplekit.fluid.inflow)
-            if i.shape != "face":
-                vel = tuple(u.to_lattice(v, "velocity") for v in i.velocity)
-                mask = region_mask(dom.shape, dom.dx, _FACE[i.face], i.shape, i.center, i.size, i.radius)
-                regions.append(InflowRegion(_FACE[i.face], mask, vel, 1.0 if i.kind == "water" else 0.0))
-        obstacles = self._shape_of("obstacle")
-        solid = sdf_on_grid(obstacles, dom.resolution, dom.dx) < 0 if obstacles else None
-        phi = velocity = None
-        if two:
-            water = self._water_shape()
-            if water is None:
-                phi = np.zeros(dom.shape, np.float32)
-            else:
-                d_cells = sdf_on_grid(water, dom.resolution, dom.dx).astype(np.float64) / dom.dx
-                phi = (0.5 * (1.0 - np.tanh(2.0 * d_cells / fl.interface_width))).astype(
-                    np.float32
-                )  # text after Eq. 48
-            for b in sc.bodies:
-                if b.kind == "water" and any(b.velocity):
-                    if velocity is None:
-                        velocity = np.zeros((3, *dom.shape))
-                    inside = sdf_on_grid(b.geometry.shape(dom, 0.25 * dom.dx), dom.resolution, dom.dx) < 0
-                    for c in range(3):
-                        velocity[c][inside] = u.to_lattice(b.velocity[c], "velocity")
-        pressure = hydrostatic_pressure(
-            dom.shape, prm.gravity, phi if two else None, prm.rho_l, dom.boundary, fl.interface_width
-        )
-        if pressure is None and any(prm.gravity):
-            self._log("note: no hydrostatic start (gravity not along one non-periodic axis): the fluid starts at p = 0")
-        self._fluid_params = prm
-        fluid = FluidSolver(
-            self.backend,
-            dom.shape,
-            prm,
-            Boundaries(faces, tuple(regions)),
-            solid=solid,
-            phi=phi,
-            velocity=velocity,
-            pressure=pressure,
-            mixture=self.coupled,
-            external_force=self.coupled or sc.stirring is not None,
-        )
-        if sc.stirring is not None:  # the swirl of [stirring], added to the force input (couplekit.scene.forces)
-            from .scene.forces import StirringForce
-
-            StirringForce(sc.stirring, dom, u).attach(fluid)
-        return fluid
-
-    def _build_sand(self):
-        from .sand.boundaries import DomainWalls, SdfCollider, Wall
-        from .sand.params import SandParams
-        from .sand.seeding import seed_sdf
-        from .sand.solver import SandSolver
-
-        sc = self.scene
-        sd, dom, eff = sc.sand, sc.domain, sc.effects
-        bodies = [b for b in sc.bodies if b.kind == "sand"]
-        if not self.coupled and any(b.retention if b.retention is not None else sd.retention for b in bodies):
-            self._log("note: water retention has no effect in a sand-only scene (no water to retain)")
-        h0, h1, h2, h3 = sd.hardening
-        s1, s2, s3 = sd.cohesion_saturation
-        params = SandParams(
-            density=sd.density,
-            youngs_modulus=sd.youngs_modulus,
-            poisson_ratio=sd.poisson_ratio,
-            h0=h0,
-            h1=h1,
-            h2=h2,
-            h3=h3,
-            cohesion_max=sd.cohesion if eff.cohesion else 0.0,
-            cohesion_s1=s1,
-            cohesion_s2=s2,
-            cohesion_s3=s3,
-            hardening=eff.hardening,
-        )
-        xs, vols, vels, dens, retains = [], [], [], [], []
-        size = np.asarray(dom.size)
-        for i, b in enumerate(bodies):
-            shape = b.geometry.shape(dom, 0.25 * dom.dx)
-            lo, hi = shape.bounds()
-            lo, hi = np.maximum(lo, 0.0), np.minimum(hi, size)
-            seeded = seed_sdf(shape.sdf, lo, hi, dom.dx, sd.particles_per_axis, sd.jitter, sd.seed + i)
-            if seeded.count == 0:
-                raise ValueError(f"sand body {b.name!r} is thinner than the particle spacing: no particle seeded")
-            xs.append(seeded.x)
-            vols.append(sd.packing_fraction * seeded.volume)  # grain volume: ε0 of the sub-cell (module doc)
-            vels.append(np.repeat(np.asarray(b.velocity, np.float64)[:, None], seeded.count, axis=1))
-            dens.append(np.full(seeded.count, b.density or sd.density))  # per-body grain density
-            retains.append(np.full(seeded.count, b.retention if b.retention is not None else sd.retention))
-        # per-particle water retention (bodies[*].retention, paper Fig. 10): the coupler's retentive flags
-        self._sand_retentive = np.concatenate(retains) if retains else np.zeros(0, bool)
-        if not xs:  # the sand only enters through inflows (couplekit.sand.emission)
-            xs, vols, vels, dens = [np.zeros((3, 0))], [np.zeros(0)], [np.zeros((3, 0))], [np.zeros(0)]
-        walls = DomainWalls.from_dict({_SAND_FACE[f]: Wall("separate", sd.wall_friction) for f in dom.boundary})
-        obstacles = [b for b in sc.bodies if b.kind == "obstacle"]
-        collider = None
-        if obstacles:
-            union = Union([b.geometry.shape(dom, 0.25 * dom.dx) for b in obstacles])
-            friction = max(b.friction if b.friction is not None else sd.wall_friction for b in obstacles)
-            collider = SdfCollider(lambda p, t, s=union: s.sdf(p), mode="separate", friction=friction)
-        return SandSolver(
-            self.backend,
-            dom.shape,
-            dom.dx,
-            sc.time.dt,
-            params,
-            np.concatenate(xs, axis=1),
-            np.concatenate(vols),
-            velocities=np.concatenate(vels, axis=1),
-            densities=np.concatenate(dens),
-            gravity=dom.gravity,
-            walls=walls,
-            sdf_collider=collider,
-            cfl=sd.cfl,
-            elastic_cfl=sd.elastic_cfl,
-            allow_empty=sc.emits_sand,
-        )
+        self._sand_origin = self._sand_centroid()
 
     # ------------------------------------------------------------------------------------ state
     @property
@@ -538,7 +220,7 @@ class Simulation:
         }
 
     def step(self, n: int = 1) -> None:
-        """Advance ``n`` time steps (every solver in the scene) through :attr:`scheduler`."""
+        """Advance ``n`` time steps of ``time.dt`` (every solver in the scene) through :attr:`scheduler`."""
         n = int(n)
         if self.emitter is None:
             self.scheduler.step(n)
@@ -565,14 +247,19 @@ class Simulation:
         self.scheduler.reset_timing()
 
     def cost_summary(self, top: int | None = None) -> str:
-        """One line: mean ms per step and share of each stage (most expensive first), over the timed steps."""
+        """One line: mean ms per step and share of each stage (most expensive first), over the timed steps,
+        and the sand steps per step (sub-cycled and multi-rate schedulers)."""
         rep = self.cost_report()
         if not rep:
             return "stage costs: not timed"
         total = sum(r["mean"] for r in rep.values())
         items = sorted(rep.items(), key=lambda kv: -kv[1]["mean"])[: top or len(rep)]
         parts = ", ".join(f"{k} {1e3 * r['mean']:.3g} ({100 * r['fraction']:.0f}%)" for k, r in items)
-        return f"stage costs, ms/step over {self.scheduler._timed_steps} steps (total {1e3 * total:.3g}): {parts}"
+        line = f"stage costs, ms/step over {self.scheduler._timed_steps} steps (total {1e3 * total:.3g}): {parts}"
+        if self.sand is not None and self.scheduler.kind != "lockstep":
+            st = self.scheduler.sand_steps()
+            line += f"; {self.scheduler.describe()}: {st['mean']:.3g} sand steps per step ({st['total']:.0f} in all)"
+        return line
 
     def fields(self) -> dict[str, np.ndarray]:
         """Host NumPy grid fields: velocity (m/s), pressure (lattice), density, phi, solid (fluid);
@@ -605,22 +292,60 @@ class Simulation:
         """Floats: time, step, frame; fluid_volume, fluid_volume_drift, max_lattice_speed, mach, max_speed,
         momentum_x/y/z, kinetic_energy (fluid, lattice units); sand_mass, sand_momentum_x/y/z,
         sand_kinetic_energy, sand_max_speed (SI); step_seconds (wall time of the last step's stages, when
-        timed)."""
+        timed); with sand ``sand_dt`` (the sand's Δt, s) and ``sand_steps_per_step`` (sand steps per time
+        step over the current frame: k sub-cycled, 1/m multi-rate, 1 lockstep) with ``substeps_min`` and
+        ``substeps_max``.
+
+        Measurements (:mod:`couplekit.metrics`, SI): ``sand_centroid_x/y/z`` (m), ``sand_front`` (runout from
+        the initial centroid's vertical, m), ``sand_top`` (height of the pile, m); ``free_surface_height``
+        (mean height of the φ = ½ surface, m; two-phase fluids); ``fluid_kinetic_energy_si`` (½ Σ ε ρ |u|² dV,
+        J) and ``total_kinetic_energy_si`` (fluid + sand, J)."""
+        from . import metrics
+
+        sc = self.scene
         out = {"time": self.time, "step": float(self.step_count), "frame": float(self.frame)}
         times = self.stage_times()
         if times:
             out["step_seconds"] = float(sum(times.values()))
+        total_ke = 0.0
         if self.fluid is not None:
             d = self.fluid.diagnostics()
             d.pop("step", None)
             out.update(d)
             out["mach"] = d["max_lattice_speed"] / math.sqrt(CS2)
-            out["max_speed"] = d["max_lattice_speed"] * self.scene.domain.dx / self.scene.time.dt
+            out["max_speed"] = d["max_lattice_speed"] * sc.domain.dx / sc.time.dt
+            f = self.fluid.fields()
+            eps = None
+            if self.fluid.fluid_fraction is not None:
+                eps = self.backend.to_host(self.fluid.fluid_fraction)[1:-1, 1:-1, 1:-1]
+            velocity = f["velocity"] * (sc.domain.dx / sc.time.dt)
+            out["fluid_kinetic_energy_si"] = metrics.kinetic_energy(
+                velocity, f["density"] * self.units.rho, sc.domain.dx, eps
+            )
+            total_ke += out["fluid_kinetic_energy_si"]
+            if "phi" in f:
+                out["free_surface_height"] = metrics.free_surface_height(
+                    f["phi"], sc.domain.dx, sc.domain.gravity, f["solid"]
+                )
         if self.sand is not None:
             for k, v in self.sand.diagnostics().items():
                 if k not in ("time", "step"):
                     out[f"sand_{k}"] = v
+            total_ke += out["sand_kinetic_energy"]
+            x = self.backend.to_host(self.sand.x)
+            out.update(metrics.sand_metrics(x, self._sand_origin, sc.domain.gravity, sc.domain.size))
+            st = self.scheduler.sand_steps()
+            out["sand_dt"] = float(self.sand.dt)
+            out["sand_steps_per_step"] = st["frame_mean"]
+            out["substeps_min"], out["substeps_max"] = st["frame_min"], st["frame_max"]
+        out["total_kinetic_energy_si"] = total_ke
         return out
+
+    def _sand_centroid(self) -> np.ndarray | None:
+        """Mean particle position (m) now, None without particles (the origin of ``sand_front``)."""
+        if self.sand is None or self.sand.n_particles == 0:
+            return None
+        return self.backend.to_host(self.sand.x).astype(np.float64).mean(axis=1)
 
     # ------------------------------------------------------------------------------------ NaN / Inf
     def _solver_arrays(self) -> list[tuple[str, str, np.ndarray, str]]:
@@ -659,6 +384,9 @@ class Simulation:
             out["coupler"] = self.coupler.state()
         if self.emitter is not None:
             out["emission"] = self.emitter.state()
+        sched = self.scheduler.state()
+        if sched:
+            out["scheduler"] = sched
         return out
 
     def _load_states(self, states: dict[str, dict[str, np.ndarray]], step: int) -> None:
@@ -683,40 +411,17 @@ class Simulation:
             if st is None:
                 raise ValueError("the checkpoint has no coupler state, the scene is coupled")
             self.coupler.load_state(st)
+        self.scheduler.restart_at(step)
+        self.scheduler.load_state(states.get("scheduler", {}))
         self.step_count = int(step)
 
     def _rebuild(self) -> None:
         """Fresh solvers (scratch arrays outside the solver state, e.g. ghost layers, may hold NaN)."""
-        self.fluid = self._build_fluid() if self.scene.has_fluid else None
-        self.sand = self._build_sand() if self.scene.has_sand else None
-        self.coupler = self._build_coupler() if self.coupled else None
-        from .sand.emission import InflowEmitter
-
-        self.emitter = InflowEmitter.from_scene(self.scene, coupler=self.coupler) if self.scene.emits_sand else None
-        from .schedulers.lockstep import LockstepScheduler
-
-        self.scheduler = LockstepScheduler(
-            self.fluid,
-            self.sand,
-            self.coupler,
-            source_term=self.scene.effects.source_term,
-            timing=self._timing,
-            warm_up_steps=1,
-        )
-
-    def _build_coupler(self):
-        from .coupling.coupler import SandFluidCoupler
-        from .coupling.params import CouplingParams
-
-        sd = self.scene.sand
-        retention = any(
-            b.retention if b.retention is not None else sd.retention for b in self.scene.bodies if b.kind == "sand"
-        )
-        params = CouplingParams(retention=retention, r_max=sd.max_moisture, absorption_rate=sd.absorption_rate)
-        # retention on some bodies only: per-particle flags (all flags true = the one-setting model, bitwise)
-        flags = getattr(self, "_sand_retentive", None)
-        retentive = flags if retention and flags is not None and flags.size == self.sand.n_particles else None
-        return SandFluidCoupler(self.sand, self.fluid, self.units, params, retentive=retentive)
+        asm = assemble(self.scene, self.backend, log=self._log, timing=self._timing, warm_up_steps=1)
+        self.assembly = asm
+        self.fluid, self.sand, self.coupler = asm.fluid, asm.sand, asm.coupler
+        self.emitter, self.scheduler = asm.emitter, asm.scheduler
+        self._fluid_params = asm.fluid_params
 
     def _locate_divergence(self, good: dict, good_step: int, exc: SimulationDiverged) -> SimulationDiverged:
         """Replay from the last good state one step at a time to find the first non-finite step."""
@@ -791,6 +496,7 @@ class Simulation:
                 )
         if log_file is not None:
             log_file.write(self.diagnostics())
+        self.scheduler.frame_sand_steps()  # the next frame's substep statistics start here
 
     def run(
         self,

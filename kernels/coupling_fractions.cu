@@ -31,6 +31,10 @@
 // in one step: phi undershot below 0 there, the density flipped between air and tail water every step under
 // the old hydrostatic pressure gradient, and the dry plug under water went NaN at step ~97 at R_a = 0.01.
 // With the rate proportional to phi a node loses at most R_a r_max eps_s / eps_f of its water per step.
+// A step of the sand that covers a share s of a fluid step (a substep, s = 1/k; several fluid steps of a
+// multi-rate block, s = m; schedulers/) passes absorption = R_a s and free_share = min(s, 1): its uptake is
+// its share of the fluid step's, and the substeps of one fluid step together take at most the free water the
+// phase field holds (s = 1: the lockstep step, bitwise).
 // Measurements and the ruled-out causes: couplekit/coupling/reference.py (module docstring).
 // eps_prev must not alias eps_fluid.
 // variants: CK_RETENTION=0,1 CK_TWO_PHASE=0,1
@@ -62,7 +66,8 @@ KERNEL void coupling_fractions(const long long n, const float* RESTRICT grid_vol
                                float* RESTRICT d_bound /* size >= 1 */, float* RESTRICT bound_out /* size >= 1 */,
                                float* RESTRICT water /* size: nx * ny * nz */, const int nx, const int ny,
                                const int nz, const int px, const int py, const int pz, const float inv_cell_volume,
-                               const float eps_max, const float r_max, const float absorption, const int masked) {
+                               const float eps_max, const float r_max, const float absorption, const float free_share,
+                               const int masked) {
     const int PX = nx + 2;
     const long long PXY = (long long)PX * (ny + 2);
     FOR_EACH_CELL(X, Y, Z, nx + 2, ny + 2, nz + 2) {
@@ -81,7 +86,7 @@ KERNEL void coupling_fractions(const long long n, const float* RESTRICT grid_vol
 #if CK_RETENTION
         const float R = bound_in[node];
         const float cap = r_max * (masked ? fminf(es, retentive[node]) : es);           // retention capacity
-        const float free_water = fmaxf(fminf(1.f - es - R, eps_prev[image]), 0.f) * ph;
+        const float free_water = free_share * (fmaxf(fminf(1.f - es - R, eps_prev[image]), 0.f) * ph);
         const float dR = fminf(free_water, fminf(absorption * cap * ph, cap - R));  // Eq. 55, rate x phi
         const float Rn = R + dR;                                                        // Eq. 56
         const float ef = 1.f - es - Rn;                                                 // Eq. 54
@@ -111,6 +116,7 @@ KERNEL void coupling_fractions(const long long n, const float* RESTRICT grid_vol
     (void)bound_out;
     (void)r_max;
     (void)absorption;
+    (void)free_share;
     (void)retentive;
     (void)masked;
 #endif

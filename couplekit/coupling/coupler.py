@@ -19,7 +19,10 @@ fluid's inputs (``fluid_fraction``, ``force``, ``source_term``, ``sand_velocity`
     coupler.finish()           # this step's porosity becomes last step's
 
 :meth:`step` runs exactly that through :class:`couplekit.schedulers.lockstep.LockstepScheduler` (which
-also times the stages); other schedulers (sub-cycling) call the stages themselves.
+also times the stages); the multi-rate schedulers (:mod:`couplekit.schedulers.subcycle`,
+:mod:`couplekit.schedulers.multirate`) call the same stages in their own order, with the arguments that
+make a sand step cover part of a fluid step or several (``fractions(share)``, ``exchange(u, force)``,
+``sand_velocity(grid_v)``).
 
 Why :meth:`fluid_velocity`: the exchange must see the fluid's velocity as it is now (after the last
 streaming).  FluidSolver's ``velocity`` field is the Guo-forced velocity of the last collision, before its
@@ -113,8 +116,11 @@ class SandFluidCoupler:
         docstring)."""
         self.fluid.current_velocity(out=self.fluid_u)
 
-    def fractions(self) -> None:
-        """ε (Eq. 25), bound water (Eqs. 53–56, retention) and the porosity into ``fluid.fluid_fraction``."""
+    def fractions(self, share: float = 1.0) -> None:
+        """ε (Eq. 25), bound water (Eqs. 53–56, retention) and the porosity into ``fluid.fluid_fraction``.
+
+        ``share``: the part of a fluid step this sand step covers (1/k for a substep, m for a multi-rate
+        block; :meth:`couplekit.coupling.reference.ReferenceOps.fractions`)."""
         s, f = self.sand, self.fluid
         if self.retention:
             self.ops.bound_water_p2g(s.x, self.moisture_ratio, s.volume, self.bound_in, s.dx)
@@ -124,7 +130,7 @@ class SandFluidCoupler:
                 self.ops.bound_water_p2g(s.x, self.retain, s.volume, self.retentive, s.dx)
         self.ops.fractions(
             s.grid_vol, f.phi, self.bound_in, self.eps_prev, self.eps_sand, f.fluid_fraction, self.d_bound,
-            self.bound, self.water, s.dx, self.periodic, self.retentive,
+            self.bound, self.water, s.dx, self.periodic, self.retentive, share,
         )  # fmt: skip
         if not self._started:
             # first step: no sand motion yet, so last step's porosity is this one (without absorption)
@@ -153,13 +159,15 @@ class SandFluidCoupler:
                 f.fluid_fraction, self.eps_prev, f.phi, self.fluid_u, f.flags, self.d_bound, f.source_term
             )
 
-    def exchange(self) -> None:
-        """Buoyancy (Eq. 31) into ``sand.f_ext``; implicit drag into ``sand.grid_mv`` and ``fluid.force``."""
+    def exchange(self, u=None, force=None) -> None:
+        """Buoyancy (Eq. 31) into ``sand.f_ext``; implicit drag over the sand's Δt into ``sand.grid_mv`` and
+        −J/Δt into ``fluid.force`` (or ``force``), exchanged with the fluid velocity ``fluid_u`` (or ``u``, a
+        padded velocity: what a sand substep sees of the fluid, schedulers/subcycle.py)."""
         s, f = self.sand, self.fluid
         prm = f.params
         self.ops.drag_buoyancy(
-            s.grid_m, s.grid_mv, s.f_ext, f.force, self.fluid_u, f.phi, self.eps_sand, f.fluid_fraction, f.flags,
-            self.units, s.gravity, prm.rho_h, prm.rho_l, s.dt,
+            s.grid_m, s.grid_mv, s.f_ext, f.force if force is None else force, self.fluid_u if u is None else u,
+            f.phi, self.eps_sand, f.fluid_fraction, f.flags, self.units, s.gravity, prm.rho_h, prm.rho_l, s.dt,
         )  # fmt: skip
 
     def moisture(self) -> None:
@@ -170,9 +178,11 @@ class SandFluidCoupler:
             self.retain,
         )  # fmt: skip
 
-    def sand_velocity(self) -> None:
-        """The sand grid velocity (after the grid update) into ``fluid.sand_velocity`` (lattice units)."""
-        self.ops.sand_velocity(self.sand.grid_v, self.fluid.sand_velocity, self.units, self.periodic)
+    def sand_velocity(self, grid_v=None) -> None:
+        """The sand grid velocity (after the grid update; or ``grid_v``, e.g. the substeps' average) into
+        ``fluid.sand_velocity`` (lattice units)."""
+        v = self.sand.grid_v if grid_v is None else grid_v
+        self.ops.sand_velocity(v, self.fluid.sand_velocity, self.units, self.periodic)
 
     def finish(self) -> None:
         """End of the step: this step's porosity becomes last step's."""

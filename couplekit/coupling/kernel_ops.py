@@ -61,10 +61,12 @@ class KernelOps:
         dx: float,
         periodic: Sequence[bool] = (True, True, True),
         retentive=None,
+        share: float = 1.0,
     ) -> None:
         """Sand fraction ε and porosity (padded, ghosts filled), dR, R' and the water fraction (MPM grid):
         one pass of ``coupling_fractions`` (Eqs. 25, 33, 54–56, 59; the φ-scaled uptake rate of Eq. 55).
-        ``retentive``: the retentive sand's fraction for per-body retention (None: all sand retains)."""
+        ``retentive``: the retentive sand's fraction for per-body retention (None: all sand retains);
+        ``share``: the part of a fluid step this sand step covers (reference docstring)."""
         nz, ny, nx = grid_vol.shape
         p = self.params
         ret = self.retention
@@ -74,8 +76,8 @@ class KernelOps:
             self._opt(eps_prev, ret, "eps_prev"), eps_sand, eps_fluid,
             self._opt(d_bound, ret, "d_bound"), self._opt(bound_out, ret, "bound_out"), water,
             np.int32(nx), np.int32(ny), np.int32(nz), *(np.int32(bool(v)) for v in periodic),
-            np.float32(1.0 / dx**3), np.float32(p.eps_max), np.float32(p.r_max), np.float32(p.absorption_rate),
-            np.int32(retentive is not None and ret),
+            np.float32(1.0 / dx**3), np.float32(p.eps_max), np.float32(p.r_max),
+            np.float32(p.absorption_rate * share), np.float32(min(share, 1.0)), np.int32(retentive is not None and ret),
         )  # fmt: skip
 
     def sand_velocity(self, grid_v, sand_v, units: Units, periodic: Sequence[bool] = (True, True, True)) -> None:
@@ -114,6 +116,22 @@ class KernelOps:
             np.float32(rho_h), np.float32(rho_l), np.float32(p.drag_coefficient), np.float32(p.drag_exponent),
             np.float32(p.grain_diameter_lattice(units.dx)),
         )  # fmt: skip
+
+    def fluid_view(self, u0, u_prev, impulse, phi, eps_fluid, flags, u_seen, theta: float, rho_h, rho_l) -> None:
+        """The fluid velocity a sand substep sees (``coupling_fluid_view``): u0 + θ (u0 − u_prev) + A / (ρ ε_f)
+        on interior fluid cells; ``u_prev`` None holds the fluid (no θ term)."""
+        nz, ny, nx = (s - 2 for s in eps_fluid.shape)
+        self._fn("coupling_subcycle.cu", "coupling_fluid_view", "CK_TWO_PHASE")(
+            nx * ny * nz, u0, self._none if u_prev is None else u_prev, impulse,
+            self._opt(phi, self.two_phase, "phi"), eps_fluid, flags, u_seen, np.int32(nx), np.int32(ny),
+            np.int32(nz), np.int32(u_prev is not None), np.float32(theta), np.float32(rho_h), np.float32(rho_l),
+        )  # fmt: skip
+
+    def accumulate(self, acc, x, weight: float, first: bool) -> None:
+        """``acc = weight x`` (first) or ``acc += weight x`` in place (``coupling_accumulate``)."""
+        self._fn("coupling_subcycle.cu", "coupling_accumulate", "CK_TWO_PHASE")(
+            x.size, acc, x, np.float32(weight), np.int32(bool(first))
+        )
 
     def phase_source(self, eps, eps_prev, phi, u, flags, d_bound, source) -> None:
         """S_φ of Eq. 45 (Eq. 57 with retention) on interior FLUID cells of the padded ``source``."""

@@ -139,6 +139,7 @@ class ReferenceOps:
         dx: float,
         periodic: Sequence[bool] = (True, True, True),
         retentive=None,
+        share: float = 1.0,
     ) -> None:
         """Sand fraction ε and porosity (padded, ghosts filled), and on the MPM grid: bound-water increment
         dR, bound water R' and the water fraction that drives cohesion (Eq. 59 summand).
@@ -151,6 +152,11 @@ class ReferenceOps:
         interior node (zero normal gradient).  ``bound_in``: R from :meth:`bound_water_p2g` (retention).
         ``eps_prev``: last step's porosity (padded; retention): the free water Eq. 55 may take is
         min(1 − ε − R, ε̃_prev) φ, the water the phase field actually holds (kernels/coupling_fractions.cu).
+
+        ``share`` s: the part of one fluid step this sand step covers (a substep of k: 1/k; a multi-rate block of
+        m fluid steps: m; lockstep: 1). The uptake rate is R_a s and the free water it may take min(s, 1) of
+        the free water, so the k substeps of a fluid step absorb what one lockstep step would, and never more
+        than the phase field holds.
         """
         p = self.params
         nz, ny, nx = grid_vol.shape
@@ -164,8 +170,9 @@ class ReferenceOps:
             retaining = eps_node if retentive is None else np.minimum(eps_node, retentive.astype(np.float64))
             cap = p.r_max * retaining  # retention capacity r_max ε (of the retentive sand)
             free = np.maximum(np.minimum(1.0 - eps_node - R, _interior(eps_prev)), 0.0)  # Eq. 54 before the update
-            # Eq. 55 (Δt = 1), uptake rate scaled by the pores' water fraction φ (module docstring)
-            dR = np.minimum(free * ph_node, np.minimum(p.absorption_rate * cap * ph_node, cap - R))
+            # Eq. 55 (Δt = share fluid steps), uptake rate scaled by the pores' water fraction φ (module docstring)
+            rate = p.absorption_rate * share
+            dR = np.minimum(min(share, 1.0) * free * ph_node, np.minimum(rate * cap * ph_node, cap - R))
             R_new = R + dR  # Eq. 56
             ef_node = 1.0 - eps_node - R_new  # Eq. 54
             wet = R_new + ef_node * ph_node  # Eq. 59 summand
@@ -247,6 +254,38 @@ class ReferenceOps:
         grid_mv[...] = grid_mv.astype(np.float64) + impulse * mass_scale * velocity_scale
         f_ext[...] = f_b
         _interior(force)[...] = -impulse / dt_lattice  # F_d = −𝔽_d / V_cell (§4.3)
+
+    # ------------------------------------------------------------------ multi-rate coupling (schedulers/subcycle.py)
+    def fluid_view(self, u0, u_prev, impulse, phi, eps_fluid, flags, u_seen, theta: float, rho_h, rho_l) -> None:
+        """The fluid velocity a sand substep exchanges momentum with (lattice units, padded), on interior FLUID
+        cells: u_s = u0 + θ (u0 − u_prev) + A / (ρ ε_f); elsewhere u0 (interior) and the ghosts untouched.
+
+        u0: Σ f c at the start of the fluid step; ``u_prev``: the same one fluid step earlier, or None to hold
+        the fluid (θ unused); θ = s/k, the substep's start in fluid steps (linear in time through the last two
+        fluid states); ``impulse`` A: the fluid force summed over the earlier substeps, −Σ J (lattice momentum
+        per cell); ρ(φ) ε_f: the cell's fluid mass. A / (ρ ε_f) is the velocity the fluid will have gained from
+        the drag already exchanged, so the implicit exchange of each substep sees the fluid it acts on
+        (kernels/coupling_subcycle.cu).
+        """
+        u = _interior(u0).astype(np.float64)
+        if u_prev is not None:
+            u = u + theta * (u - _interior(u_prev).astype(np.float64))
+        if self.two_phase:
+            rho = rho_l + (rho_h - rho_l) * np.clip(_interior(phi).astype(np.float64), 0.0, 1.0)  # Eq. 4
+        else:
+            rho = float(rho_h)
+        u = u + _interior(impulse).astype(np.float64) / (rho * _interior(eps_fluid).astype(np.float64))
+        fluid = _interior(flags) == 0
+        _interior(u_seen)[...] = np.where(fluid, u, _interior(u0))
+
+    def accumulate(self, acc, x, weight: float, first: bool) -> None:
+        """``acc = weight x`` (first) or ``acc += weight x``, in place: the substeps' average (weight 1/k) or
+        sum (weight 1) of a field."""
+        w = np.float32(weight)
+        if first:
+            acc[...] = w * x
+        else:
+            acc[...] = acc + w * x
 
     # ------------------------------------------------------------------ phase-field source, Eqs. 45, 57
     def phase_source(self, eps, eps_prev, phi, u, flags, d_bound, source) -> None:

@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from ..faces import PLANE_AXES, SCENE_FACES, face_extent, face_plane_shape, region_bounds, region_mask, solver_face
 from ..lattice import CS2
 from ..units import Units
 from .geometry import Box, Cylinder, Inverted, Shape, Sphere, Transformed
@@ -57,6 +58,7 @@ __all__ = [
     "Stirring",
     "Outputs",
     "Effects",
+    "Scheduler",
     "LIMITS",
 ]
 
@@ -120,6 +122,9 @@ class Fluid:
     controller_eta: float
     odd_lambda: float = 0.015
     smagorinsky: float = 0.1
+    gravity: tuple[float, float, float] | None = None
+    """The fluid's acceleration (None: domain.gravity)."""
+    initial_pressure: str = "resting"
 
 
 @dataclass(frozen=True)
@@ -142,6 +147,10 @@ class Sand:
     packing_fraction: float = 0.6
     """ε0: sand volume fraction of a seeded body (particle volume ε0 dx³ / particles_per_cell; ``density`` is
     the grain density, mass per grain volume)."""
+    wall_layers: int = 2
+    """Node layers of the MPM domain walls; sand keeps this many cells from each face."""
+    periodic_walls: bool = False
+    """Periodic faces allowed with sand (the sand meets a wall there)."""
 
     @property
     def particles_per_axis(self) -> int:
@@ -259,6 +268,39 @@ class Outputs:
 
 
 @dataclass(frozen=True)
+class Scheduler:
+    """How the fluid and the sand are stepped (:mod:`couplekit.schedulers`): ``kind`` 'lockstep', 'subcycle'
+    (``substeps`` k or 'auto', capped at ``max_substeps``, fluid data ``interpolation`` 'hold' or 'linear') or
+    'multirate' (one sand step per ``sand_every`` fluid steps)."""
+
+    kind: str = "lockstep"
+    substeps: int | str = "auto"
+    max_substeps: int = 64
+    interpolation: str = "hold"
+    sand_every: int = 1
+
+    @property
+    def sand_dt_factor(self) -> float | None:
+        """The sand's Δt over time.dt: 1 (lockstep), 1/k (subcycle, fixed k), m (multirate); None with
+        substeps = 'auto' (chosen every step)."""
+        if self.kind == "subcycle":
+            return None if self.substeps == "auto" else 1.0 / int(self.substeps)
+        if self.kind == "multirate":
+            return float(self.sand_every)
+        return 1.0
+
+    def describe(self) -> str:
+        """One line for summaries."""
+        if self.kind == "subcycle":
+            k = "auto" if self.substeps == "auto" else str(self.substeps)
+            cap = f" (at most {self.max_substeps})" if self.substeps == "auto" else ""
+            return f"subcycle, {k} MPM substeps per LBM step{cap}, fluid data {self.interpolation}"
+        if self.kind == "multirate":
+            return f"multirate, one MPM step per {self.sand_every} LBM steps"
+        return "lockstep (one MPM step per LBM step, paper Algorithm 1)"
+
+
+@dataclass(frozen=True)
 class Effects:
     surface_tension: bool = True
     volume_controller: bool = True
@@ -284,6 +326,7 @@ class Scene:
     outputs: Outputs
     effects: Effects
     stirring: Stirring | None = None
+    scheduler: Scheduler = field(default_factory=Scheduler)
     source: dict = field(default_factory=dict, compare=False, repr=False)
     """The checked input dict with file paths made absolute (kept in checkpoints to rebuild the scene)."""
 
@@ -353,6 +396,8 @@ class Scene:
             f"bodies: {kinds['water']} water, {kinds['sand']} sand, {kinds['obstacle']} obstacle; inflows: {len(self.inflows)}",
             f"fluid: {'none' if not self.fluid else f'{self.fluid.phases} phase(s)'}; sand: {'yes' if self.has_sand else 'none'}",
         ]
+        if self.has_sand:
+            lines.append(f"scheduler: {self.scheduler.describe()}")
         return "\n".join(lines)
 
 
@@ -399,6 +444,8 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
     snd = read_table(data.get("sand", {}), "sand", SECTIONS["sand"], problems)
     out = read_table(data.get("outputs", {}), "outputs", SECTIONS["outputs"], problems)
     eff = read_table(data.get("effects", {}), "effects", SECTIONS["effects"], problems)
+    sch_raw = data.get("scheduler", {})
+    sch = read_table(sch_raw, "scheduler", SECTIONS["scheduler"], problems)
 
     # ---- domain
     domain = None
@@ -512,7 +559,8 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
                 v["sand_ramp"] if v["sand_ramp"] is not None else 0.0,
             )
         )
-    _check_inflows(inflows, bnd, fluid, problems, domain)
+    wall_cells = sand.wall_layers if sand is not None else LIMITS["sand_wall_cells"]
+    _check_inflows(inflows, bnd, fluid, problems, domain, wall_cells)
 
     # ---- stirring
     stirring = None
@@ -583,17 +631,23 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
     # ---- geometry inside the domain
     if domain is not None:
         for i, b in enumerate(bodies):
-            _check_inside(b, i, domain, problems)
+            _check_inside(b, i, domain, problems, wall_cells)
+        allowed = sand is not None and sand.periodic_walls
         for name, kind in domain.boundary.items():
-            if kind == "periodic" and any(b.kind == "sand" for b in bodies):
+            if kind == "periodic" and any(b.kind == "sand" for b in bodies) and not allowed:
                 problems.append(
                     Problem(
                         f"domain.boundary.{name}",
                         "sand does not support periodic faces (the MPM grid has walls on every face)",
-                        f"set domain.boundary.{name} = 'wall'",
+                        f"set domain.boundary.{name} = 'wall', or sand.periodic_walls = true (the fluid wraps "
+                        "around, the sand meets a wall there)",
                     )
                 )
                 break
+
+    # ---- scheduler
+    has_sand_content = any(b.kind == "sand" for b in bodies) or sand_jet
+    scheduler = _scheduler(sch, sch_raw if isinstance(sch_raw, dict) else {}, fluid, has_sand_content, problems)
 
     time = None
     if tim["dt"] is not None and tim["frame_duration"] is not None:
@@ -609,7 +663,7 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
 
     # ---- time-step limits
     if domain is not None and time is not None:
-        _check_time_step(domain, time, fluid, sand, bodies, inflows, problems)
+        _check_time_step(domain, time, fluid, sand, bodies, inflows, problems, scheduler)
         _check_water_outlets(domain, time, fluid, inflows, problems)
 
     if problems:
@@ -638,6 +692,7 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
         outputs=outputs,
         effects=effects,
         stirring=stirring,
+        scheduler=scheduler,
         source=source,
     )
 
@@ -695,6 +750,7 @@ def _fluid(flu: dict, raw: dict, domain: Domain | None, tim: dict, problems: lis
             "controller_eta",
             "odd_lambda",
             "smagorinsky",
+            "initial_pressure",
         )
     ):
         return None
@@ -710,6 +766,8 @@ def _fluid(flu: dict, raw: dict, domain: Domain | None, tim: dict, problems: lis
         flu["controller_eta"],
         flu["odd_lambda"],
         flu["smagorinsky"],
+        None if flu["gravity"] is None else tuple(flu["gravity"]),
+        flu["initial_pressure"],
     )
 
 
@@ -755,6 +813,8 @@ def _sand(snd: dict, problems: list[Problem]) -> Sand | None:
         snd["absorption_rate"],
         snd["max_moisture"],
         snd["packing_fraction"],
+        snd["wall_layers"],
+        snd["periodic_walls"],
     )
 
 
@@ -845,7 +905,12 @@ def _geometry(raw: Any, path: str, base_dir: Path, source: dict | None, problems
 
 
 def _check_inflows(
-    inflows: list[Inflow], bnd: dict, fluid: Fluid | None, problems: list[Problem], domain: Domain | None = None
+    inflows: list[Inflow],
+    bnd: dict,
+    fluid: Fluid | None,
+    problems: list[Problem],
+    domain: Domain | None = None,
+    wall_cells: int = 2,
 ) -> None:
     faces_used: dict[str, int] = {}
     for i, inf in enumerate(inflows):
@@ -925,7 +990,7 @@ def _check_inflows(
             )
     if domain is not None:
         _check_outlets_on_grid(inflows, domain, problems)
-        _check_sand_jets(inflows, domain, problems)
+        _check_sand_jets(inflows, domain, problems, wall_cells)
 
 
 def _check_outlet_keys(inf: Inflow, key: str, problems: list[Problem]) -> None:
@@ -946,8 +1011,6 @@ def _check_outlet_keys(inf: Inflow, key: str, problems: list[Problem]) -> None:
 
 def _check_outlets_on_grid(inflows: list[Inflow], domain: Domain, problems: list[Problem]) -> None:
     """Every outlet inside its face, covering at least one cell centre, overlapping no other outlet."""
-    from ..fluid.inflow import PLANE_AXES, face_extent, region_bounds, region_mask
-
     masks: dict[str, tuple[int, np.ndarray]] = {}
     for i, inf in enumerate(inflows):
         if inf.shape == "face" or inf.center is None or (inf.size is None and inf.radius is None):
@@ -994,13 +1057,9 @@ def _check_outlets_on_grid(inflows: list[Inflow], domain: Domain, problems: list
         masks[inf.face] = (i if prev is None else prev[0], mask if prev is None else prev[1] | mask)
 
 
-def _check_sand_jets(inflows: list[Inflow], domain: Domain, problems: list[Problem]) -> None:
-    """An outlet carrying sand must keep its cells ``sand_wall_cells`` from the face's edges: its particles are
-    emitted over its whole area (couplekit.sand.emission), and the MPM walls occupy that rim."""
-    from ..fluid.grid import face_plane_shape
-    from ..fluid.inflow import PLANE_AXES, face_extent, region_bounds, region_mask
-
-    rim = LIMITS["sand_wall_cells"]
+def _check_sand_jets(inflows: list[Inflow], domain: Domain, problems: list[Problem], rim: int) -> None:
+    """An outlet carrying sand must keep its cells ``rim`` (``sand.wall_layers``) from the face's edges: its
+    particles are emitted over its whole area (couplekit.sand.emission), and the MPM walls occupy that rim."""
     for i, inf in enumerate(inflows):
         if inf.sand_fraction <= 0 or inf.shape == "face" or inf.center is None:
             continue
@@ -1010,7 +1069,7 @@ def _check_sand_jets(inflows: list[Inflow], domain: Domain, problems: list[Probl
         extent = face_extent(domain.size, inf.face)
         if np.any(lo < 0) or np.any(hi > np.asarray(extent)):
             continue  # reported by _check_outlets_on_grid
-        face = {"x_min": "x-", "x_max": "x+", "y_min": "y-", "y_max": "y+", "z_min": "z-", "z_max": "z+"}[inf.face]
+        face = solver_face(inf.face)
         mask = region_mask(domain.shape, domain.dx, face, inf.shape, inf.center, inf.size, inf.radius)
         rows, cols = face_plane_shape(domain.shape, face)
         inner = np.zeros_like(mask)
@@ -1029,6 +1088,52 @@ def _check_sand_jets(inflows: list[Inflow], domain: Domain, problems: list[Probl
                     f"inflows[{i}].sand_fraction = 0",
                 )
             )
+
+
+_SCHEDULER_KEYS = {
+    "substeps": "subcycle",
+    "max_substeps": "subcycle",
+    "interpolation": "subcycle",
+    "sand_every": "multirate",
+}
+"""The [scheduler] keys that belong to one kind only."""
+
+
+def _scheduler(sch: dict, raw: dict, fluid: Fluid | None, has_sand: bool, problems: list[Problem]) -> Scheduler | None:
+    """The [scheduler] table checked across keys: a kind's keys only with that kind, sand_every required for
+    multirate, and sand to schedule for the multi-rate kinds. None when a problem was found."""
+    n = len(problems)
+    kind = sch["kind"]
+    if kind is None:
+        return None
+    for key, owner in _SCHEDULER_KEYS.items():
+        if key in raw and kind != owner:
+            problems.append(
+                Problem(
+                    f"scheduler.{key}",
+                    f"applies only to kind = '{owner}' (this scene's scheduler is '{kind}')",
+                    f"remove scheduler.{key}, or set scheduler.kind = '{owner}'",
+                )
+            )
+    if kind == "multirate" and "sand_every" not in raw:
+        problems.append(
+            Problem(
+                "scheduler.sand_every",
+                "is required with kind = 'multirate'",
+                "add sand_every = <LBM steps per MPM step>, e.g. sand_every = 4",
+            )
+        )
+    if kind != "lockstep" and not has_sand:
+        problems.append(
+            Problem(
+                "scheduler.kind",
+                f"'{kind}' steps the sand at its own rate, but the scene has no sand (a fluid has one rate)",
+                "remove the [scheduler] table, or set scheduler.kind = 'lockstep'",
+            )
+        )
+    if len(problems) > n or None in (sch["substeps"], sch["max_substeps"], sch["interpolation"]):
+        return None
+    return Scheduler(kind, sch["substeps"], sch["max_substeps"], sch["interpolation"], sch["sand_every"] or 1)
 
 
 def _stirring(st: dict, domain: Domain | None, fluid: Fluid | None, problems: list[Problem]) -> Stirring | None:
@@ -1062,7 +1167,7 @@ def _stirring(st: dict, domain: Domain | None, fluid: Fluid | None, problems: li
     )
 
 
-def _check_inside(body: Body, i: int, domain: Domain, problems: list[Problem]) -> None:
+def _check_inside(body: Body, i: int, domain: Domain, problems: list[Problem], wall_cells: int = 2) -> None:
     try:
         lo, hi = body.geometry.bounds(domain)
     except (ValueError, OSError) as exc:
@@ -1082,11 +1187,11 @@ def _check_inside(body: Body, i: int, domain: Domain, problems: list[Problem]) -
                 )
             )
         return
-    margin = LIMITS["sand_wall_cells"] * domain.dx if body.kind == "sand" else 0.0
+    margin = wall_cells * domain.dx if body.kind == "sand" else 0.0
     if np.any(lo < margin - tol) or np.any(hi > size - margin + tol):
         axis = int(np.argmax(np.maximum(margin - lo, hi - (size - margin))))
         where = (
-            f" (sand must stay {LIMITS['sand_wall_cells']} cells = {margin:g} m from each face, where the MPM walls are)"
+            f" (sand must stay {wall_cells} cells = {margin:g} m from each face, where the MPM walls are, sand.wall_layers)"
             if margin
             else ""
         )
@@ -1132,18 +1237,15 @@ def water_outlet_speed_limit(interface_width: float, across_cells: int) -> float
 def _check_water_outlets(domain: Domain, time: Time, fluid: Fluid | None, inflows, problems: list[Problem]) -> None:
     """Water outlets into air within the measured stable range (:func:`water_outlet_speed_limit`), refused
     before any allocation with the key and the fix."""
-    from ..fluid.inflow import region_mask
-
     if fluid is None or fluid.phases != 2:
         return
-    faces = {"x_min": "x-", "x_max": "x+", "y_min": "y-", "y_max": "y+", "z_min": "z-", "z_max": "z+"}
     xi = float(fluid.interface_width)
     for i, inf in enumerate(inflows):
-        if inf.kind != "water" or inf.shape == "face" or inf.center is None or inf.face not in faces:
+        if inf.kind != "water" or inf.shape == "face" or inf.center is None or inf.face not in SCENE_FACES:
             continue
         if (inf.shape == "rect" and inf.size is None) or (inf.shape == "disc" and inf.radius is None):
             continue
-        mask = region_mask(domain.shape, domain.dx, faces[inf.face], inf.shape, inf.center, inf.size, inf.radius)
+        mask = region_mask(domain.shape, domain.dx, solver_face(inf.face), inf.shape, inf.center, inf.size, inf.radius)
         if not mask.any():
             continue  # reported by _check_outlets_on_grid
         across = int(min(np.count_nonzero(mask.any(axis=0)), np.count_nonzero(mask.any(axis=1))))
@@ -1207,8 +1309,18 @@ def _speed_estimate(domain: Domain, time: Time | dict, bodies, inflows, _cache) 
 
 
 def _check_time_step(
-    domain: Domain, time: Time, fluid: Fluid | None, sand: Sand | None, bodies, inflows, problems
+    domain: Domain,
+    time: Time,
+    fluid: Fluid | None,
+    sand: Sand | None,
+    bodies,
+    inflows,
+    problems,
+    scheduler: Scheduler | None = None,
 ) -> None:
+    """The fluid's limits for time.dt (Mach number, weak compressibility, capillary waves; relaxation time is
+    checked with the viscosities) and the sand's (elastic, particle CFL) for the sand step the ``scheduler``
+    makes of it (:func:`_sand_step_problem` names the key to change)."""
     dt, dx = time.dt, domain.dx
     try:
         speed, why = _speed_estimate(domain, time, bodies, inflows, {})
@@ -1252,32 +1364,78 @@ def _check_time_step(
                     )
                 )
     jets = [i for i, inf in enumerate(inflows) if inf.sand_fraction > 0]
-    if sand is not None and (any(b.kind == "sand" for b in bodies) or jets):
-        # bodies at their density, emitted jet sand (couplekit.sand.emission) at sand.density
-        carriers = [(f"bodies[{i}]", b.density or sand.density) for i, b in enumerate(bodies) if b.kind == "sand"]
-        carriers += [(f"the sand of inflows[{i}]", sand.density) for i in jets]
-        for what, rho in carriers:
-            cp = sand.p_wave_speed(rho)
-            elastic = sand.elastic_cfl * dx / cp
-            if dt > elastic:
-                problems.append(
-                    Problem(
-                        "time.dt",
-                        f"dt = {dt:g} s breaks the MPM elastic limit of {what}: C_e dx / c_p = {sand.elastic_cfl:g} x {dx:g} / {cp:.3g} m/s = {elastic:.3g} s",
-                        f"use dt <= {elastic:.3g} s, or a softer sand (lower sand.youngs_modulus)",
-                    )
-                )
-                break
-        sand_speed, why = speed, why
-        if sand_speed > 0 and dt > sand.cfl * dx / sand_speed:
-            limit = sand.cfl * dx / sand_speed
-            problems.append(
-                Problem(
-                    "time.dt",
-                    f"dt = {dt:g} s breaks the MPM particle CFL limit C_v dx / v = {limit:.3g} s for the expected speed {sand_speed:.3g} m/s ({why})",
-                    f"use dt <= {limit:.3g} s; if the sand moves slower, set time.max_speed",
-                )
+    if sand is None or scheduler is None or not (any(b.kind == "sand" for b in bodies) or jets):
+        return
+    # bodies at their density, emitted jet sand (couplekit.sand.emission) at sand.density
+    carriers = [(f"bodies[{i}]", b.density or sand.density) for i, b in enumerate(bodies) if b.kind == "sand"]
+    carriers += [(f"the sand of inflows[{i}]", sand.density) for i in jets]
+    limits = []  # (limit s, what it is, fix when the sand's own step is what to change)
+    for what, rho in carriers:
+        cp = sand.p_wave_speed(rho)
+        elastic = sand.elastic_cfl * dx / cp
+        limits.append(
+            (
+                elastic,
+                f"the MPM elastic limit of {what}: C_e dx / c_p = {sand.elastic_cfl:g} x {dx:g} / {cp:.3g} m/s = {elastic:.3g} s",
+                "or a softer sand (lower sand.youngs_modulus)",
             )
+        )
+    if speed > 0:
+        cfl = sand.cfl * dx / speed
+        limits.append(
+            (
+                cfl,
+                f"the MPM particle CFL limit C_v dx / v = {cfl:.3g} s for the expected speed {speed:.3g} m/s ({why})",
+                "if the sand moves slower, set time.max_speed",
+            )
+        )
+    for limit, what, hint in sorted(limits, key=lambda item: item[0]):  # the tightest first: one message
+        problem = _sand_step_problem(dt, limit, what, hint, scheduler)
+        if problem is not None:
+            problems.append(problem)
+            return
+
+
+def _sand_step_problem(dt: float, limit: float, what: str, hint: str, scheduler: Scheduler) -> Problem | None:
+    """The problem (naming the key the scheduler's sand step comes from) when the sand's step breaks ``limit``."""
+    tol = 1.0 + 1e-9
+    if scheduler.kind == "subcycle" and scheduler.substeps == "auto":
+        need = max(1, math.ceil(dt / limit / tol))
+        if need <= scheduler.max_substeps:
+            return None
+        return Problem(
+            "scheduler.max_substeps",
+            f"the sand needs {need} substeps of dt = {dt:g} s to meet {what}, more than max_substeps = {scheduler.max_substeps}",
+            f"raise scheduler.max_substeps to >= {need}, or lower time.dt",
+        )
+    if scheduler.kind == "subcycle":
+        k = int(scheduler.substeps)
+        if dt / k <= limit * tol:
+            return None
+        need = math.ceil(dt / limit / tol)
+        return Problem(
+            "scheduler.substeps",
+            f"the substep dt / substeps = {dt:g} / {k} = {dt / k:.3g} s breaks {what}",
+            f'use scheduler.substeps >= {need} (or substeps = "auto"), {hint}',
+        )
+    if scheduler.kind == "multirate":
+        m = int(scheduler.sand_every)
+        if m * dt <= limit * tol:
+            return None
+        most = math.floor(limit * tol / dt)
+        fix = f"use scheduler.sand_every <= {most}" if most >= 1 else f"lower time.dt to <= {limit:.3g} s"
+        return Problem(
+            "scheduler.sand_every",
+            f"the sand step sand_every x dt = {m} x {dt:g} = {m * dt:.3g} s breaks {what}",
+            f"{fix}, {hint}",
+        )
+    if dt <= limit:
+        return None
+    return Problem(
+        "time.dt",
+        f"dt = {dt:g} s breaks {what}",
+        f'use dt <= {limit:.3g} s, {hint}; or sub-cycle the sand ([scheduler] kind = "subcycle")',
+    )
 
 
 def scene_dict(scene: Scene) -> dict:

@@ -25,10 +25,10 @@ the MPM (paper 000 Table 1 lists one resolution). Paper 000's figures have y up:
 `X × Y × Z` is written here as `resolution = [X, Z, Y]`.
 
 What runs: fluid-only scenes (one or two phases, water bodies, obstacles, inflows, outflows), sand-only
-scenes (sand bodies, obstacles), and both together, coupled in lockstep as in the paper's Algorithm 1 (drag,
-buoyancy, the phase-field source term, water retention), with a density and a `retention` setting per sand
-body, and water jets carrying sand (MPM particles emitted at the inflow: `inflows[i].sand_fraction`,
-`sand_start`, `sand_ramp`). These validate but `run` refuses them for now, naming the key:
+scenes (sand bodies, obstacles), and both together, coupled as in the paper's Algorithm 1 (drag, buoyancy,
+the phase-field source term, water retention) in lockstep or with the sand at its own rate (`[scheduler]`),
+with a density and a `retention` setting per sand body, and water jets carrying sand (MPM particles emitted
+at the inflow: `inflows[i].sand_fraction`, `sand_start`, `sand_ramp`). These validate but `run` refuses them for now, naming the key:
 `effects.drag` or `effects.buoyancy` = false with sand and a fluid.
 
 Example (the demo, `examples/sand_drop_small.toml`):
@@ -75,11 +75,39 @@ All run at load time, from the scene alone:
 - **Weak compressibility.** g Δt²/Δx × (largest cell count) / c_s², the relative hydrostatic density
   variation, must not exceed {LIMITS["max_density_variation"]:g}.
 - **Capillary time step** (two phases, σ > 0): σ Δt²/(ρ_h Δx³) ≤ (1 + ρ_l/ρ_h)/(4π) (Brackbill et al. 1992).
-- **MPM elastic limit:** Δt ≤ C_e Δx / c_p, c_p = √((λ + 2μ)/ϱ) of each sand body (C_e = `sand.elastic_cfl`).
-- **MPM particle CFL:** Δt ≤ C_v Δx / U (C_v = `sand.cfl`, U as above).
+- **MPM elastic limit:** Δt_s ≤ C_e Δx / c_p, c_p = √((λ + 2μ)/ϱ) of each sand body (C_e = `sand.elastic_cfl`).
+- **MPM particle CFL:** Δt_s ≤ C_v Δx / U (C_v = `sand.cfl`, U as above).
 
-Geometry: water and sand bodies must lie inside the domain, sand at least {LIMITS["sand_wall_cells"]} cells
-from every face (the MPM walls take two node layers); an obstacle must meet the domain.
+The fluid's checks apply to `time.dt`; the MPM's to the sand's step Δt_s, which the scheduler makes of it:
+Δt_s = `time.dt` (lockstep; a violation names `time.dt`), `time.dt` / `substeps` (subcycle; names
+`scheduler.substeps` and the smallest k that meets the limits), `time.dt` / `max_substeps` for `substeps =
+"auto"` (names `scheduler.max_substeps`: the run would need more substeps than it may take), `sand_every` ×
+`time.dt` (multirate; names `scheduler.sand_every` and the largest m that meets them). Only the tightest
+limit is reported. During a run, `substeps = "auto"` re-evaluates the particle CFL limit at the particles'
+actual speed every step, and a sub-cycled or multi-rate run checks it every 20 sand steps as lockstep does.
+
+## Schedulers
+
+`[time] dt` is the fluid's step, the coupling step; `[scheduler]` decides how the sand keeps pace
+(`couplekit.schedulers`; `couplekit run --scheduler SPEC` and `Simulation(..., scheduler=...)` replace the
+table):
+
+- `kind = "lockstep"` (default): paper 000's Algorithm 1, one MPM step per LBM step of `dt`.
+- `kind = "subcycle"`: `substeps` MPM steps of `dt / substeps` per LBM step (`"auto"`: each step the fewest
+  that meet the MPM limits, at most `max_substeps`). The fluid velocity the sand sees is held or linear in
+  time (`interpolation`), plus what the fluid gains from the drag already exchanged; the substeps' drag
+  impulse is handed to the fluid as one force (fluid + sand momentum conserved to round-off), and the fluid
+  sees the substeps' mean sand fraction and velocity, with the source term computed from that fraction
+  (volume-conserving). `substeps = 1` is lockstep bit for bit.
+- `kind = "multirate"`: one MPM step of `sand_every × dt` per `sand_every` LBM steps, its drag handed to the
+  fluid as `sand_every` equal forces; for sand that moves slowly.
+
+The keys of one kind are refused with another (`scheduler.substeps` with `kind = "multirate"`, ...), and a
+scene without sand takes only `lockstep`.
+
+Geometry: water and sand bodies must lie inside the domain, sand at least `sand.wall_layers` cells (default
+{LIMITS["sand_wall_cells"]}) from every face (the MPM walls take that many node layers); an obstacle must meet
+the domain.
 """
 
 
@@ -103,6 +131,7 @@ def _type(key: Key) -> str:
     return {
         "float": "number",
         "int": "integer",
+        "int_or_auto": 'integer or "auto"',
         "bool": "boolean",
         "str": "string",
         "choice": "string",
@@ -129,6 +158,7 @@ def render() -> str:
         "domain": "Required. Give `dx` or `resolution`.",
         "domain.boundary": "Optional; every face defaults to a wall.",
         "time": "Required.",
+        "scheduler": "Optional: how the fluid and the sand are stepped (below, 'Schedulers'). Default: lockstep.",
         "fluid": "Present ⇒ the scene has a fluid. Viscosities: give the SI or the lattice form per phase, not both.",
         "sand": 'Material of the sand bodies (used only when a body has `kind = "sand"`).',
         "outputs": "Optional. Files go to `directory`, frame by frame.",

@@ -1,0 +1,439 @@
+"""One path from a scene to running solvers: :func:`assemble` turns a :class:`~couplekit.scene.Scene` into the
+fluid solver, the sand solver, the coupler joining them, the emitter of sand-carrying jets and the scheduler
+that steps them (the scene's ``[scheduler]`` table).
+
+:class:`couplekit.simulation.Simulation`, the CLI, the benchmarks, sweeps and the validation scenes built in
+Python (:mod:`couplekit.coupling.scenes`, as scene dicts) all go through here, so a body, a particle volume or a
+default means the same thing everywhere.
+
+Conventions (stated once):
+
+* **Seeding.** A sand body gets ``particles_per_cell`` = k³ particles per cell on the sub-lattice of spacing
+  dx/k (:func:`couplekit.sand.seeding.seed_sdf`), each of grain volume V_p = ε0 (dx/k)³ with ε0 =
+  ``sand.packing_fraction`` (default 0.6, at most ε_max = 0.64), and mass ϱ V_p with ϱ the body's
+  ``density``. So a body's sand fraction (Eq. 25) is ε0 and ϱ is the grain density, the ϱ of paper Eq. 31's
+  balance (sand weight ϱ ε V_cell g against the buoyancy ρ_f ε V_cell g): sand lighter than water rises, as
+  paper Fig. 8's 950 kg/m³ ball does. (With V_p = (dx/k)³, ε would clamp at ε_max while the mass stayed
+  ϱ V_cell, and the neutral density would be 0.64 ρ_w.)
+* **Initial pressure** (``fluid.initial_pressure``): hydrostatic when gravity lies along one non-periodic axis
+  (:func:`couplekit.fluid.hydrostatic.hydrostatic_pressure`), so water at rest stays at rest instead of ringing
+  with the pressure wave of a start from p = 0: ``"resting"`` carries the weight of water resting on the floor
+  (water hanging in the air adds nothing), ``"column"`` every column straight through (a water layer over
+  trapped air), ``"zero"`` starts from p = 0.
+* **Time steps.** ``[time] dt`` is the fluid's (the coupling) step; the sand steps dt (lockstep), dt / k
+  (sub-cycled, k fixed; with ``substeps = "auto"`` the scheduler sets it every step) or m dt (multi-rate),
+  :func:`couplekit.schedulers.sand_step`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .backend import Backend
+from .faces import solver_face, wall_face
+from .fluid import hydrostatic
+from .scene import Scene
+from .scene.geometry import Union, sdf_on_grid
+from .units import Units
+
+__all__ = [
+    "Assembly",
+    "CouplingUnavailableError",
+    "assemble",
+    "build_coupler",
+    "build_fluid",
+    "build_sand",
+    "build_scheduler",
+    "memory_estimate",
+    "refuse_unsupported",
+    "retention_flags",
+]
+
+
+class CouplingUnavailableError(NotImplementedError):
+    """The scene needs fluid–sand coupling, which is not built yet."""
+
+
+@dataclass
+class Assembly:
+    """The solvers of a scene and the scheduler that steps them (:func:`assemble`).
+
+    ``fluid_params``: the lattice-unit :class:`~couplekit.fluid.solver.FluidParams` the fluid was built with
+    (None without a fluid); ``retentive``: per-particle water-retention flags of the seeded sand (None
+    without sand)."""
+
+    scene: Scene
+    backend: Backend
+    units: Units
+    fluid: Any
+    sand: Any
+    coupler: Any
+    emitter: Any
+    scheduler: Any
+    fluid_params: Any = None
+    retentive: np.ndarray | None = None
+
+
+def refuse_unsupported(scene: Scene) -> None:
+    """Refuse, before allocation, what the coupler cannot do yet (CouplingUnavailableError naming the key)."""
+    problems = []
+    if scene.has_sand and scene.has_fluid:
+        for key in ("drag", "buoyancy"):
+            if not getattr(scene.effects, key):
+                problems.append(f"effects.{key} = false: the coupler has no switch for it")
+    if problems:
+        raise CouplingUnavailableError(
+            f"scene {scene.name!r} needs what the coupling module does not do yet: " + "; ".join(problems)
+        )
+
+
+def assemble(
+    scene: Scene,
+    backend: Backend,
+    *,
+    log: Callable[[str], Any] | None = None,
+    timing: bool = True,
+    warm_up_steps: int = 1,
+) -> Assembly:
+    """Build every solver of ``scene`` on ``backend`` and the scheduler of its ``[scheduler]`` table.
+
+    ``log``: where notes go (None: nowhere); ``timing``: time every stage (the scheduler's); ``warm_up_steps``:
+    the first steps left out of the cost report (they load or compile the kernels)."""
+    refuse_unsupported(scene)
+    say = log or (lambda s: None)
+    units = scene.units()
+    coupled = scene.has_fluid and scene.has_sand
+    fluid = fluid_params = sand = coupler = emitter = retentive = None
+    if scene.has_fluid:
+        fluid, fluid_params = build_fluid(scene, backend, units, coupled, say)
+    if scene.has_sand:
+        sand, retentive = build_sand(scene, backend, say)
+    if coupled:
+        coupler = build_coupler(scene, sand, fluid, units, retentive)
+    if scene.emits_sand:
+        from .sand.emission import InflowEmitter
+
+        emitter = InflowEmitter.from_scene(scene, coupler=coupler)
+    scheduler = build_scheduler(scene, fluid, sand, coupler, timing=timing, warm_up_steps=warm_up_steps)
+    return Assembly(scene, backend, units, fluid, sand, coupler, emitter, scheduler, fluid_params, retentive)
+
+
+# ---------------------------------------------------------------------------------------------- fluid
+def _shapes_of(scene: Scene, kind: str) -> Union | None:
+    dom = scene.domain
+    shapes = [b.geometry.shape(dom, 0.25 * dom.dx) for b in scene.bodies if b.kind == kind]
+    return Union(shapes) if shapes else None
+
+
+def _water_shape(scene: Scene) -> Union | None:
+    """Water bodies for the initial φ. A box face, or a height field's side or base, lying on the domain
+    boundary is pushed out by 10 cells, so water that fills the shape up to a wall has no interface (a tanh
+    drop) along that wall."""
+    from .scene.geometry import Box
+    from .scene.mesh import HeightField, load_heights
+
+    dom = scene.domain
+    size, pad = np.asarray(dom.size), 10 * dom.dx
+    shapes = []
+    for b in scene.bodies:
+        if b.kind != "water":
+            continue
+        g = b.geometry
+        if g.type == "box" and g.scale == 1.0 and not any(g.rotate) and not g.invert:
+            lo = np.asarray(g.params["min"], float) + np.asarray(g.translate)
+            hi = np.asarray(g.params["max"], float) + np.asarray(g.translate)
+            tol = 1e-9 * size.max()
+            lo = np.where(lo <= tol, lo - pad, lo)
+            hi = np.where(hi >= size - tol, hi + pad, hi)
+            shapes.append(Box(lo, hi))
+        elif g.type == "heightfield" and g.scale == 1.0 and not any(g.rotate) and not any(g.translate) and not g.invert:
+            p = g.params
+            h = np.asarray(p["heights"], float) if p.get("heights") is not None else load_heights(p["file"])
+            (x0, x1), (y0, y1) = p["x_range"], p["y_range"]
+            base = p.get("base")
+            tol = 1e-9 * size.max()
+            base = -pad if base is None or base <= tol else base
+            # the edge heights repeated beyond each side on the boundary, at the grid's own spacing (the
+            # height field's samples are evenly spaced), for at least `pad`
+            sx, sy = (x1 - x0) / (h.shape[1] - 1), (y1 - y0) / (h.shape[0] - 1)
+            nx_pad, ny_pad = int(np.ceil(pad / sx)), int(np.ceil(pad / sy))
+            if x0 <= tol:
+                h, x0 = np.concatenate([np.repeat(h[:, :1], nx_pad, axis=1), h], axis=1), x0 - nx_pad * sx
+            if x1 >= size[0] - tol:
+                h, x1 = np.concatenate([h, np.repeat(h[:, -1:], nx_pad, axis=1)], axis=1), x1 + nx_pad * sx
+            if y0 <= tol:
+                h, y0 = np.concatenate([np.repeat(h[:1], ny_pad, axis=0), h], axis=0), y0 - ny_pad * sy
+            if y1 >= size[1] - tol:
+                h, y1 = np.concatenate([h, np.repeat(h[-1:], ny_pad, axis=0)], axis=0), y1 + ny_pad * sy
+            shapes.append(HeightField(h, (x0, x1), (y0, y1), base, 0.25 * dom.dx))
+        else:
+            shapes.append(g.shape(dom, 0.25 * dom.dx))
+    return Union(shapes) if shapes else None
+
+
+def build_fluid(scene: Scene, backend: Backend, units: Units, coupled: bool, log: Callable[[str], Any]):
+    """The :class:`~couplekit.fluid.solver.FluidSolver` of ``scene`` and its FluidParams (lattice units):
+    boundaries and outlets, obstacles as bounce-back cells, the initial φ of the water bodies and their
+    velocity, the initial pressure (module docstring), and the stirring force."""
+    from .faces import region_mask
+    from .fluid.grid import Boundaries, Face, InflowRegion
+    from .fluid.solver import FluidParams, FluidSolver
+
+    fl, dom, eff = scene.fluid, scene.domain, scene.effects
+    two = fl.phases == 2
+    gravity = dom.gravity if fl.gravity is None else fl.gravity
+    prm = FluidParams(
+        rho_h=1.0,
+        rho_l=fl.air_density / fl.water_density if two else 1.0,
+        nu_h=fl.water_lattice_viscosity,
+        nu_l=fl.air_lattice_viscosity if two else fl.water_lattice_viscosity,
+        gravity=tuple(units.to_lattice(g, "acceleration") for g in gravity),
+        sigma=units.to_lattice(fl.surface_tension, "surface_tension") if two and eff.surface_tension else 0.0,
+        mobility=fl.mobility,
+        width=fl.interface_width,
+        eta=fl.controller_eta if eff.volume_controller else 0.0,
+        odd_lambda=fl.odd_lambda,
+        smagorinsky=fl.smagorinsky,
+    )
+    inflow = {i.face: i for i in scene.inflows if i.shape == "face"}
+    faces, regions = {}, []
+    for name, kind in dom.boundary.items():
+        if kind == "inflow":
+            i = inflow[name]
+            vel = tuple(units.to_lattice(v, "velocity") for v in i.velocity)
+            faces[solver_face(name)] = Face("inflow", vel, 1.0 if i.kind == "water" else 0.0)
+        else:
+            faces[solver_face(name)] = Face(kind)
+    for i in scene.inflows:  # outlets: inflow on part of a wall / outflow face (couplekit.faces)
+        if i.shape != "face":
+            vel = tuple(units.to_lattice(v, "velocity") for v in i.velocity)
+            face = solver_face(i.face)
+            mask = region_mask(dom.shape, dom.dx, face, i.shape, i.center, i.size, i.radius)
+            regions.append(InflowRegion(face, mask, vel, 1.0 if i.kind == "water" else 0.0))
+    obstacles = _shapes_of(scene, "obstacle")
+    solid = sdf_on_grid(obstacles, dom.resolution, dom.dx) < 0 if obstacles else None
+    phi = velocity = None
+    if two:
+        water = _water_shape(scene)
+        if water is None:
+            phi = np.zeros(dom.shape, np.float32)
+        else:
+            d_cells = sdf_on_grid(water, dom.resolution, dom.dx).astype(np.float64) / dom.dx
+            phi = (0.5 * (1.0 - np.tanh(2.0 * d_cells / fl.interface_width))).astype(np.float32)  # after Eq. 48
+        for b in scene.bodies:
+            if b.kind == "water" and any(b.velocity):
+                if velocity is None:
+                    velocity = np.zeros((3, *dom.shape))
+                inside = sdf_on_grid(b.geometry.shape(dom, 0.25 * dom.dx), dom.resolution, dom.dx) < 0
+                for c in range(3):
+                    velocity[c][inside] = units.to_lattice(b.velocity[c], "velocity")
+    pressure = None
+    if fl.initial_pressure != "zero":
+        pressure = hydrostatic.hydrostatic_pressure(
+            dom.shape, prm.gravity, phi if two else None, prm.rho_l, dom.boundary, fl.interface_width,
+            resting_only=fl.initial_pressure == "resting",
+        )  # fmt: skip
+        if pressure is None and any(prm.gravity):
+            log("note: no hydrostatic start (gravity not along one non-periodic axis): the fluid starts at p = 0")
+    fluid = FluidSolver(
+        backend,
+        dom.shape,
+        prm,
+        Boundaries(faces, tuple(regions)),
+        solid=solid,
+        phi=phi,
+        velocity=velocity,
+        pressure=pressure,
+        mixture=coupled,
+        external_force=coupled or scene.stirring is not None,
+    )
+    if scene.stirring is not None:  # the swirl of [stirring], added to the force input (couplekit.scene.forces)
+        from .scene.forces import StirringForce
+
+        StirringForce(scene.stirring, dom, units).attach(fluid)
+    return fluid, prm
+
+
+# ---------------------------------------------------------------------------------------------- sand
+def retention_flags(scene: Scene) -> list[bool]:
+    """Per sand body (in scene order): does it retain water (``bodies[*].retention``, else ``sand.retention``)."""
+    sd = scene.sand
+    return [b.retention if b.retention is not None else sd.retention for b in scene.bodies if b.kind == "sand"]
+
+
+def build_sand(scene: Scene, backend: Backend, log: Callable[[str], Any]):
+    """The :class:`~couplekit.sand.solver.SandSolver` of ``scene`` (bodies seeded as the module docstring says,
+    walls on every face, obstacles as one SDF collider, the sand's Δt from the scheduler) and the particles'
+    retention flags."""
+    from .sand.boundaries import DomainWalls, SdfCollider, Wall
+    from .sand.params import SandParams
+    from .sand.seeding import seed_sdf
+    from .sand.solver import SandSolver
+    from .schedulers import sand_step
+
+    sd, dom, eff, sch = scene.sand, scene.domain, scene.effects, scene.scheduler
+    bodies = [b for b in scene.bodies if b.kind == "sand"]
+    flags = retention_flags(scene)
+    if not scene.has_fluid and any(flags):
+        log("note: water retention has no effect in a sand-only scene (no water to retain)")
+    h0, h1, h2, h3 = sd.hardening
+    s1, s2, s3 = sd.cohesion_saturation
+    params = SandParams(
+        density=sd.density,
+        youngs_modulus=sd.youngs_modulus,
+        poisson_ratio=sd.poisson_ratio,
+        h0=h0,
+        h1=h1,
+        h2=h2,
+        h3=h3,
+        cohesion_max=sd.cohesion if eff.cohesion else 0.0,
+        cohesion_s1=s1,
+        cohesion_s2=s2,
+        cohesion_s3=s3,
+        hardening=eff.hardening,
+    )
+    xs, vols, vels, dens, retains = [], [], [], [], []
+    size = np.asarray(dom.size)
+    for i, b in enumerate(bodies):
+        shape = b.geometry.shape(dom, 0.25 * dom.dx)
+        lo, hi = shape.bounds()
+        lo, hi = np.maximum(lo, 0.0), np.minimum(hi, size)
+        seeded = seed_sdf(shape.sdf, lo, hi, dom.dx, sd.particles_per_axis, sd.jitter, sd.seed + i)
+        if seeded.count == 0:
+            raise ValueError(f"sand body {b.name!r} is thinner than the particle spacing: no particle seeded")
+        xs.append(seeded.x)
+        vols.append(sd.packing_fraction * seeded.volume)  # grain volume: ε0 of the sub-cell (module docstring)
+        vels.append(np.repeat(np.asarray(b.velocity, np.float64)[:, None], seeded.count, axis=1))
+        dens.append(np.full(seeded.count, b.density or sd.density))  # per-body grain density
+        retains.append(np.full(seeded.count, flags[i]))
+    retentive = np.concatenate(retains) if retains else np.zeros(0, bool)
+    if not xs:  # the sand only enters through inflows (couplekit.sand.emission)
+        xs, vols, vels, dens = [np.zeros((3, 0))], [np.zeros(0)], [np.zeros((3, 0))], [np.zeros(0)]
+    walls = DomainWalls.from_dict(
+        {wall_face(f): Wall("separate", sd.wall_friction) for f in dom.boundary}, bound=sd.wall_layers
+    )
+    obstacles = [b for b in scene.bodies if b.kind == "obstacle"]
+    collider = None
+    if obstacles:
+        union = Union([b.geometry.shape(dom, 0.25 * dom.dx) for b in obstacles])
+        friction = max(b.friction if b.friction is not None else sd.wall_friction for b in obstacles)
+        collider = SdfCollider(lambda p, t, s=union: s.sdf(p), mode="separate", friction=friction)
+    sand = SandSolver(
+        backend,
+        dom.shape,
+        dom.dx,
+        sand_step(sch.kind, scene.time.dt, sch.substeps, sch.sand_every),
+        params,
+        np.concatenate(xs, axis=1),
+        np.concatenate(vols),
+        velocities=np.concatenate(vels, axis=1),
+        densities=np.concatenate(dens),
+        gravity=dom.gravity,
+        walls=walls,
+        sdf_collider=collider,
+        cfl=sd.cfl,
+        elastic_cfl=sd.elastic_cfl,
+        allow_empty=scene.emits_sand,
+    )
+    return sand, retentive
+
+
+# ---------------------------------------------------------------------------------------------- coupling
+def build_coupler(scene: Scene, sand, fluid, units: Units, retentive: np.ndarray | None):
+    """The :class:`~couplekit.coupling.coupler.SandFluidCoupler` of ``scene``: retention on when any sand body
+    retains, per-particle flags when only some do (all flags true = the one-setting model, bitwise)."""
+    from .coupling.coupler import SandFluidCoupler
+    from .coupling.params import CouplingParams
+
+    sd = scene.sand
+    retention = any(retention_flags(scene))
+    params = CouplingParams(retention=retention, r_max=sd.max_moisture, absorption_rate=sd.absorption_rate)
+    flags = retentive if retention and retentive is not None and retentive.size == sand.n_particles else None
+    return SandFluidCoupler(sand, fluid, units, params, retentive=flags)
+
+
+def build_scheduler(scene: Scene, fluid, sand, coupler, *, timing: bool = True, warm_up_steps: int = 1):
+    """The scheduler of the scene's ``[scheduler]`` table over these solvers (:func:`couplekit.schedulers.
+    make_scheduler`); a fluid-only scene is stepped in lockstep."""
+    from .schedulers import make_scheduler
+
+    sch = scene.scheduler
+    return make_scheduler(
+        sch.kind,
+        fluid,
+        sand,
+        coupler,
+        dt=scene.time.dt,
+        substeps=sch.substeps,
+        max_substeps=sch.max_substeps,
+        interpolation=sch.interpolation,
+        sand_every=sch.sand_every,
+        source_term=scene.effects.source_term,
+        timing=timing,
+        warm_up_steps=warm_up_steps,
+    )
+
+
+# ---------------------------------------------------------------------------------------------- memory
+_FLUID_FLOATS_PER_CELL = 27 + 3 + 3 + 1 + 1  # f, velocity, wall velocity, p, pbar
+_PHASE_FLOATS_PER_CELL = 7 + 1 + 3 + 1 + 1  # h, phi, grad phi, mu, source term
+_SAND_FLOATS_PER_NODE = 1 + 3 + 1 + 3 + 3 + 1  # mass, momentum, volume, velocity, f_ext, sdf
+_SAND_FLOATS_PER_PARTICLE = 3 + 3 + 9 + 9 + 6 + 1 + 1 + 1 + 1 + 1  # x v C F tau q vc saturation mass volume
+
+
+def memory_estimate(scene: Scene) -> dict[str, float]:
+    """Bytes the solvers will allocate for ``scene`` (an estimate from the array sizes, before allocation).
+
+    Particles are bounded by the sand bodies' bounding boxes × particles per cell (an upper bound), plus the
+    particles the sand-carrying inflows emit over the scene's duration (``emitted_particles``,
+    :func:`couplekit.sand.emission.expected_particles`). ``scheduler``: the sub-cycling scheduler's buffers
+    (fluid view, force, porosity, sand velocity and absorbed-water sums; with linear interpolation last step's
+    fluid velocity)."""
+    nx, ny, nz = scene.domain.resolution
+    cells = nx * ny * nz
+    padded = (nx + 2) * (ny + 2) * (nz + 2)
+    out = {"fluid": 0.0, "sand_grid": 0.0, "particles": 0.0, "particle_count": 0.0}
+    if scene.fluid is not None:
+        floats = _FLUID_FLOATS_PER_CELL + (_PHASE_FLOATS_PER_CELL if scene.fluid.phases == 2 else 0)
+        out["fluid"] = padded * (4 * floats + 1)  # + 1 byte of flags
+    if scene.has_sand:
+        out["sand_grid"] = 4.0 * _SAND_FLOATS_PER_NODE * cells
+        count = 0.0
+        for b in scene.bodies:
+            if b.kind == "sand":
+                lo, hi = b.geometry.bounds(scene.domain)
+                count += float(np.prod(np.maximum(hi - lo, 0.0))) / scene.domain.dx**3 * scene.sand.particles_per_cell
+        if scene.emits_sand:
+            from .sand.emission import InflowEmitter, expected_particles
+
+            duration = scene.time.frames * scene.time.steps_per_frame * scene.time.dt
+            out["emitted_particles"] = expected_particles(InflowEmitter.from_scene(scene), duration)
+            count += out["emitted_particles"]
+        out["particle_count"] = count
+        out["particles"] = 4.0 * _SAND_FLOATS_PER_PARTICLE * count
+    retention = False
+    if scene.fluid is not None and scene.has_sand:
+        # fluid mixture inputs (fluid_fraction, sand_velocity, force) and the coupler's fields
+        flags = set(retention_flags(scene))
+        retention, mixed = True in flags, len(flags) > 1  # mixed: + retentive fraction grid and flags
+        out["coupling"] = padded * 4.0 * (7 + 1 + 3 + 1) + cells * 4.0 * (1 + (3 + mixed if retention else 0))
+        out["particles"] += 4.0 * count * ((1 + mixed) if retention else 0)
+        if scene.scheduler.kind == "subcycle":
+            linear = scene.scheduler.interpolation == "linear"
+            out["scheduler"] = 4.0 * (padded * (3 + 3 + 1 + (3 if linear else 0)) + cells * (3 + retention))
+    if scene.fluid is not None and getattr(scene, "stirring", None) is not None:
+        # the stirring force's buffer, plus the force input a fluid-only scene would not have
+        out["stirring"] = padded * 4.0 * (3 if scene.has_sand else 6)
+    out["total"] = (
+        out["fluid"]
+        + out["sand_grid"]
+        + out["particles"]
+        + out.get("coupling", 0.0)
+        + out.get("stirring", 0.0)
+        + out.get("scheduler", 0.0)
+    )
+    return out
