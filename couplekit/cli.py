@@ -127,6 +127,51 @@ def _cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    """``couplekit sweep``: exit 0 when every point is final (done, diverged, invalid), 1 when a point ended in
+    an error, 2 for a malformed sweep file, bad options, missing dask or an unreachable scheduler, 130 on Ctrl-C."""
+    from pathlib import Path
+
+    from .sweep import BACKENDS, DaskUnavailableError, SweepError, is_final, load_sweep, require_dask, run_sweep
+
+    for name in ("workers", "threads"):
+        if getattr(args, name) is not None and getattr(args, name) < 1:
+            print(f"error: --{name} must be 1 or more, got {getattr(args, name)}", file=sys.stderr)
+            return 2
+    if args.backend is not None and args.backend not in BACKENDS:
+        print(f"error: unknown --backend {args.backend!r}; use one of {', '.join(BACKENDS)}", file=sys.stderr)
+        return 2
+    try:
+        require_dask()
+        spec = load_sweep(args.sweep)
+    except DaskUnavailableError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except SweepError as exc:
+        print(exc, file=sys.stderr)
+        return 2
+    out = Path(args.out) if args.out else Path("runs") / "sweeps" / spec.name
+    try:
+        rows = run_sweep(
+            spec, out, address=args.address, workers=args.workers, progress=not args.no_progress,
+            threads=args.threads, backend=args.backend,
+        )  # fmt: skip
+    except KeyboardInterrupt:
+        print(f"interrupted: finished points are kept in {out}/points; run the same command to resume", file=sys.stderr)
+        return 130
+    except OSError as exc:  # includes the timeout of connecting to --address
+        print(f"error: cannot run the sweep on {args.address or 'a LocalCluster'}: {exc}", file=sys.stderr)
+        return 2
+    failed = [r for r in rows if not is_final(r["status"])]
+    if args.no_progress:
+        print(f"{spec.name}: {len(rows)} points, {len(failed)} failed; results in {out}")
+    if failed:
+        names = ", ".join(f"{r['name']} ({r['status']})" for r in failed[:5]) + (" ..." if len(failed) > 5 else "")
+        print(f"{len(failed)} point(s) did not finish: {names}; see {out}/points/<id>.json", file=sys.stderr)
+        return 1
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``couplekit`` command."""
     parser = argparse.ArgumentParser(prog="couplekit", description=__doc__.split("\n")[0])
@@ -158,6 +203,22 @@ def build_parser() -> argparse.ArgumentParser:
     )
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
     run.set_defaults(func=_cmd_run)
+
+    sweep = sub.add_parser("sweep", help="run a parameter sweep of a scene on Dask (docs/sweeps.md)")
+    sweep.add_argument("sweep", metavar="SWEEP", help="sweep file (TOML)")
+    sweep.add_argument("--out", default=None, metavar="DIR", help="sweep folder (default runs/sweeps/<name>)")
+    sweep.add_argument(
+        "--address", default=None, metavar="HOST:PORT", help="a running Dask scheduler (default: a LocalCluster)"
+    )
+    sweep.add_argument(
+        "--workers", type=int, default=None, metavar="N", help="LocalCluster workers (default cores // threads)"
+    )
+    sweep.add_argument(
+        "--threads", type=int, default=None, metavar="N", help="OpenMP threads per point (overrides the file)"
+    )
+    sweep.add_argument("--backend", default=None, metavar="B", help="auto, cuda, cpu or numpy (overrides the file)")
+    sweep.add_argument("--no-progress", action="store_true", help="no line per finished point")
+    sweep.set_defaults(func=_cmd_sweep)
     return parser
 
 
