@@ -272,8 +272,8 @@ def build_sand(scene: Scene, backend: Backend, log: Callable[[str], Any]):
     from .sand.boundaries import DomainWalls, SdfCollider, Wall
     from .sand.params import SandParams
     from .sand.seeding import seed_sdf
-    from .sand.solver import SandSolver
-    from .schedulers import sand_step
+    from .sand.solver import SandSolver, TimeStepError
+    from .schedulers import SubstepLimitError, sand_step
 
     sd, dom, eff, sch = scene.sand, scene.domain, scene.effects, scene.scheduler
     bodies = [b for b in scene.bodies if b.kind == "sand"]
@@ -322,11 +322,28 @@ def build_sand(scene: Scene, backend: Backend, log: Callable[[str], Any]):
         union = Union([b.geometry.shape(dom, 0.25 * dom.dx) for b in obstacles])
         friction = max(b.friction if b.friction is not None else sd.wall_friction for b in obstacles)
         collider = SdfCollider(lambda p, t, s=union: s.sdf(p), mode="separate", friction=friction)
-    sand = SandSolver(
+    auto = sch.kind == "subcycle" and sch.substeps == "auto"
+    # with substeps = "auto" the scheduler sets the sand's step every step; it starts at the smallest it may take
+    dt = scene.time.dt / sch.max_substeps if auto else sand_step(sch.kind, scene.time.dt, sch.substeps, sch.sand_every)
+    try:
+        sand = _sand_solver(SandSolver, backend, scene, dt, params, xs, vols, vels, dens, walls, collider)
+    except TimeStepError as exc:
+        if not auto:
+            raise
+        raise SubstepLimitError(
+            f"the sand's initial state needs more than scheduler.max_substeps = {sch.max_substeps} substeps of "
+            f"time.dt = {scene.time.dt:g} s ({exc}); raise scheduler.max_substeps, or lower time.dt"
+        ) from None
+    return sand, retentive
+
+
+def _sand_solver(SandSolver, backend, scene, dt, params, xs, vols, vels, dens, walls, collider):
+    sd, dom = scene.sand, scene.domain
+    return SandSolver(
         backend,
         dom.shape,
         dom.dx,
-        sand_step(sch.kind, scene.time.dt, sch.substeps, sch.sand_every),
+        dt,
         params,
         np.concatenate(xs, axis=1),
         np.concatenate(vols),
@@ -339,7 +356,6 @@ def build_sand(scene: Scene, backend: Backend, log: Callable[[str], Any]):
         elastic_cfl=sd.elastic_cfl,
         allow_empty=scene.emits_sand,
     )
-    return sand, retentive
 
 
 # ---------------------------------------------------------------------------------------------- coupling

@@ -2,24 +2,29 @@
 a sand ball dropped into (or released inside) a water pool under air, a uniform suspension settling in a
 closed water column, a saturated sand bed, and a dry sand plug under a water layer (wetting front).
 
-Each builder returns a :class:`CoupledScene`: the FluidSolver, SandSolver, SandFluidCoupler and the
-:class:`couplekit.schedulers.lockstep.LockstepScheduler` that advances them, plus the measurements the
-tests and benchmarks use.  Conventions: z is up, shapes are ``(nz, ny, nx)``, SI in, lattice inside.
+Each builder writes a scene dict (the TOML structure, :func:`scene_dict`) and builds it through
+:func:`couplekit.assembly.assemble`, the path every scene takes, so seeding, particle volumes, defaults and the
+scheduler mean what they mean in a scene file. It returns a :class:`CoupledScene`: the FluidSolver, SandSolver,
+SandFluidCoupler and the scheduler that advances them (the scene's ``[scheduler]``: ``scheduler=`` a table,
+lockstep by default), plus the measurements the tests and benchmarks use. Conventions: z is up, shapes are
+``(nz, ny, nx)``, SI in, lattice inside.
 
 Choices (not in the paper; stated here once):
 
-* Particle volume V_p = ε0 (dx/k)³ for k³ particles per cell, so a body's sand fraction is ε0 < ε_max and
-  its mass ϱ ε0 V_cell: the sand density is the grain density of Eq. 31's balance, and sand of the water's
-  density is neutrally buoyant, as paper Fig. 8's 950 kg/m³ ball "slightly lower than that of water"
-  floats back up.  (With V_p = (dx/k)³, ε clamps at ε_max = 0.64 while the mass keeps ϱ V_cell: then the
-  neutral density would be 0.64 ρ_w = 640 kg/m³.)
-* The water starts at rest with its hydrostatic pressure (including the air column above it), and the
-  water–air interface is the tanh profile of width ξ (text after Eq. 48).
+* Particles: 8 per cell (2 per axis), no jitter, on the seeding sub-lattice; sand fraction (``packing_fraction``)
+  0.55 < ε_max: the sand density is the grain density of Eq. 31's balance, and sand of the water's density is
+  neutrally buoyant, as paper Fig. 8's 950 kg/m³ ball "slightly lower than that of water" floats back up
+  (:mod:`couplekit.assembly`).
+* The water starts at rest with its hydrostatic pressure integrated through every column, the air included
+  (``fluid.initial_pressure = "column"``: the plug's and bed's pores hold trapped air that carries the water
+  above), and the water–air interface is the tanh profile of width ξ of the water bodies' signed distance
+  (text after Eq. 48).
 * Fluid walls on every face (a closed tank); the sand's domain walls are "separate" with friction 0.5,
   2 node layers thick (1 for the bodies that fill the cross-section: bed, plug, suspension, so that the
-  sand reaches the first cell and water cannot bypass it along the walls).
+  sand reaches the first cell and water cannot bypass it along the walls: ``sand.wall_layers``).
 * Lattice viscosities of paper Table 1 (ν_h = 1e-4 water, ν_l = 1e-2 air) unless given; surface tension
-  0.073 N/m; density ratio 800:1; volume controller η = 2.
+  0.073 N/m; density ratio 800:1; volume controller η = 2; no fluid closures unless given (the paper's
+  collision; scene files default to the closures, docs/fluid-stability.md).
 """
 
 from __future__ import annotations
@@ -29,16 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..backend import Backend
-from ..fluid.grid import Boundaries
-from ..fluid.phasefield_layout import tanh_profile
-from ..fluid.solver import FluidParams, FluidSolver
-from ..sand import SandParams
-from ..sand.boundaries import DomainWalls
-from ..sand.seeding import Seeded, seed_box, seed_sphere
-from ..sand.solver import SandSolver
 from ..units import Units
-from .coupler import SandFluidCoupler
-from .params import CouplingParams
 
 __all__ = [
     "CoupledScene",
@@ -47,6 +43,7 @@ __all__ = [
     "dry_plug_under_water",
     "saturated_bed",
     "sand_ball_into_water",
+    "scene_dict",
     "uniform_suspension",
 ]
 
@@ -59,16 +56,18 @@ RHO_AIR = 1000.0 / 800.0
 class CoupledScene:
     """A built coupled scene and what it is measured by (see the module docstring)."""
 
-    fluid: FluidSolver
-    sand: SandSolver
-    coupler: SandFluidCoupler
+    fluid: object
+    sand: object
+    coupler: object
     units: Units
     scheduler: object = field(repr=False)
     water_level: float = 0.0  # initial water surface height, m (0: no free surface)
     info: dict = field(default_factory=dict)
+    scene: object = field(default=None, repr=False)
+    """The validated :class:`~couplekit.scene.Scene` the solvers were assembled from."""
 
     def step(self, n: int = 1) -> None:
-        """``n`` lockstep steps (Algorithm 1)."""
+        """``n`` steps of the scene's scheduler (lockstep: Algorithm 1)."""
         self.scheduler.step(n)
 
     # ------------------------------------------------------------------ measurements
@@ -114,21 +113,21 @@ class CoupledScene:
         return free + bound
 
 
-def _hydrostatic(phi: np.ndarray, rho_l: float, g_lat: float) -> np.ndarray:
-    """p(z) = Σ_{z' above} ρ(φ) |g| (lattice), integrated down from the lid, per column."""
-    rho = rho_l + (1.0 - rho_l) * np.clip(phi.astype(np.float64), 0.0, 1.0)
-    above = np.cumsum(rho[::-1], axis=0)[::-1] - 0.5 * rho  # cell-centred integral from the top
-    return (abs(g_lat) * above).astype(np.float32)
+_SAND_PARAM_KEYS = {"cohesion_max": "cohesion", "poisson_ratio": "poisson_ratio", "density": "density"}
+"""SandParams names a builder's ``sand_params`` may set, and the [sand] key each is."""
 
 
-def build_scene(
-    backend: Backend,
+def _box(lo, hi) -> dict:
+    return {"type": "box", "min": [float(v) for v in lo], "max": [float(v) for v in hi]}
+
+
+def scene_dict(
     shape: tuple[int, int, int],
     units: Units,
-    seeded: Seeded,
+    sand_geometry: dict,
     *,
     density: float,
-    water_depth: float | None,
+    water: dict | None,
     sand_fraction: float = 0.55,
     velocity: tuple[float, float, float] = (0.0, 0.0, 0.0),
     nu_h: float = 1e-4,
@@ -136,64 +135,113 @@ def build_scene(
     surface_tension: float = 0.073,
     eta: float = 2.0,
     source_term: bool = True,
-    coupling: CouplingParams | None = None,
+    retention: bool = False,
+    absorption_rate: float = 0.001,
     youngs_modulus: float = 3.5e5,
-    moisture: float = 0.0,
     fluid_gravity: float | None = None,
-    timing: bool = False,
     periodic_xy: bool = False,
     wall_layers: int = 2,
     sand_params: dict | None = None,
     smagorinsky: float = 0.0,
     odd_lambda: float | None = None,
-    solid: np.ndarray | None = None,
-) -> CoupledScene:
-    """The common builder: a closed tank (``shape`` cells, ``units``) of water up to ``water_depth`` m
-    (``None``: single-phase water everywhere) under air, and the sand particles ``seeded`` (positions in m)
-    with sand fraction ``sand_fraction`` and grain ``density``, moving at ``velocity`` m/s.
+    obstacles: list[dict] | None = None,
+    scheduler: dict | None = None,
+) -> dict:
+    """The scene dict of a closed tank (``shape`` cells, ``units``) holding the sand body ``sand_geometry``
+    (a geometry table, SI) of sand fraction ``sand_fraction`` and grain ``density`` moving at ``velocity`` m/s,
+    and the water body ``water`` (a geometry table; ``None``: single-phase water everywhere) under air.
 
-    ``fluid_gravity``: the fluid's vertical acceleration in m/s² (default −g; the settling test replaces it
-    by the mean pressure gradient of a closed column, see :func:`uniform_suspension`).  ``periodic_xy``:
-    periodic fluid faces in x and y; ``wall_layers``: node layers of the sand's domain walls (particles must
-    start inside them); ``sand_params``: further SandParams fields (e.g. cohesion); ``smagorinsky``,
-    ``odd_lambda``: the fluid's closures (FluidParams; docs/fluid-stability.md; None = FluidParams' default).  The rest: module docstring.
-    ``solid``: (nz, ny, nx) mask of the fluid's stationary obstacle cells (e.g. a partition wall), or None.
-    """
+    ``fluid_gravity``: the fluid's vertical acceleration in m/s² (default −g; the settling test replaces it by
+    the mean pressure gradient of a closed column, see :func:`uniform_suspension`). ``periodic_xy``: periodic
+    fluid faces in x and y (the sand meets walls there, ``sand.periodic_walls``); ``wall_layers``: node layers
+    of the sand's domain walls (the sand must keep that many cells from each face); ``sand_params``: further
+    SandParams fields by their SandParams names (``cohesion_max``, ``poisson_ratio``); ``smagorinsky``,
+    ``odd_lambda``: the fluid's closures (docs/fluid-stability.md; None = the paper's rate 1);
+    ``retention``, ``absorption_rate``: water retention (Eqs. 53–58, R_a); ``obstacles``: geometry tables of
+    fixed solids (a partition wall); ``scheduler``: a ``[scheduler]`` table. The rest: module docstring."""
     nz, ny, nx = shape
     dx = units.dx
-    g_fluid = -G if fluid_gravity is None else float(fluid_gravity)
-    g_lat = units.to_lattice(g_fluid, "acceleration")
-    two_phase = water_depth is not None
-    rho_l = RHO_AIR / RHO_W if two_phase else 1.0
-    zc = (np.arange(nz) + 0.5) * dx
-    phi = None
+    two_phase = water is not None
+    sand = {
+        "density": float(density),
+        "youngs_modulus": float(youngs_modulus),
+        "packing_fraction": float(sand_fraction),
+        "particles_per_cell": 8,
+        "jitter": 0.0,
+        "wall_layers": int(wall_layers),
+        "retention": bool(retention),
+        "absorption_rate": float(absorption_rate),
+    }
+    for name, value in (sand_params or {}).items():
+        if name not in _SAND_PARAM_KEYS:
+            raise ValueError(f"sand_params: {name!r} is not one of {', '.join(_SAND_PARAM_KEYS)}")
+        sand[_SAND_PARAM_KEYS[name]] = float(value)
+    fluid = {
+        "phases": 2 if two_phase else 1,
+        "water_lattice_viscosity": float(nu_h),
+        "air_lattice_viscosity": float(nu_l if two_phase else nu_h),
+        "surface_tension": float(surface_tension) if two_phase else 0.0,
+        "controller_eta": float(eta) if two_phase else 0.0,
+        "smagorinsky": float(smagorinsky),
+        "odd_lambda": 0.0 if odd_lambda is None else float(odd_lambda),
+        "initial_pressure": "column",
+        "air_density": RHO_AIR,
+        "water_density": RHO_W,
+    }
+    if fluid_gravity is not None:
+        fluid["gravity"] = [0.0, 0.0, float(fluid_gravity)]
+    boundary = {}
+    if periodic_xy:
+        boundary = {f: "periodic" for f in ("x_min", "x_max", "y_min", "y_max")}
+        sand["periodic_walls"] = True
+    bodies = [{"kind": "sand", "name": "sand", "velocity": [float(v) for v in velocity], "geometry": sand_geometry}]
     if two_phase:
-        width = 4.0
-        prof = tanh_profile((water_depth - zc) / dx, width)
-        phi = np.broadcast_to(prof[:, None, None], shape).astype(np.float32).copy()
-        pressure = _hydrostatic(phi, rho_l, g_lat)
-    else:
-        pressure = _hydrostatic(np.ones(shape, np.float32), 1.0, g_lat)
-    sigma = units.to_lattice(surface_tension, "surface_tension") if two_phase else 0.0
-    params = FluidParams(rho_h=1.0, rho_l=rho_l, nu_h=nu_h, nu_l=nu_l if two_phase else nu_h, gravity=(0.0, 0.0, g_lat),
-                         sigma=sigma, eta=eta if two_phase else 0.0, smagorinsky=smagorinsky,
-                         **({} if odd_lambda is None else {"odd_lambda": odd_lambda}))  # fmt: skip
-    bounds = Boundaries.channel("z" if periodic_xy else "xyz")
-    fluid = FluidSolver(backend, shape, params, boundaries=bounds, phi=phi, pressure=pressure, mixture=True,
-                        external_force=True, solid=solid)  # fmt: skip
-    ppc = round((dx**3 / float(seeded.volume[0])) ** (1.0 / 3.0))
-    vol = sand_fraction * dx**3 / ppc**3
-    vel = np.repeat(np.asarray(velocity, np.float64)[:, None], seeded.count, axis=1)
-    sand = SandSolver(backend, shape, dx, units.dt, SandParams(density=density, youngs_modulus=youngs_modulus, **(sand_params or {})),
-                      seeded.x, vol, velocities=vel, gravity=(0.0, 0.0, -G),
-                      walls=DomainWalls.uniform("separate", 0.5, wall_layers))  # fmt: skip
-    coupler = SandFluidCoupler(sand, fluid, units, coupling or CouplingParams(), moisture=moisture)
-    from ..schedulers.lockstep import LockstepScheduler
+        bodies.append({"kind": "water", "name": "water", "geometry": water})
+    bodies += [{"kind": "obstacle", "name": f"obstacle {i}", "geometry": g} for i, g in enumerate(obstacles or [])]
+    d = {
+        "scene": {"name": "coupled validation scene"},
+        "domain": {"size": [nx * dx, ny * dx, nz * dx], "dx": dx, "gravity": [0.0, 0.0, -G], "boundary": boundary},
+        "time": {"dt": units.dt, "frame_duration": units.dt, "frames": 1},
+        "fluid": fluid,
+        "sand": sand,
+        "bodies": bodies,
+        "effects": {"source_term": bool(source_term)},
+        "outputs": {"preview": False, "vtk": False, "ply": False},
+    }
+    if scheduler:
+        d["scheduler"] = dict(scheduler)
+    return d
 
-    sched = LockstepScheduler(fluid, sand, coupler, source_term=source_term, timing=timing)
-    info = {"shape": list(shape), "dx": dx, "dt": units.dt, "density": density, "particles": int(seeded.count),
-            "sand_fraction": sand_fraction, "nu_h": nu_h, "nu_l": nu_l}  # fmt: skip
-    return CoupledScene(fluid, sand, coupler, units, sched, float(water_depth or 0.0), info)
+
+def build_scene(
+    backend: Backend,
+    shape: tuple[int, int, int],
+    units: Units,
+    sand_geometry: dict,
+    *,
+    water_depth: float | None,
+    water: dict | None = None,
+    timing: bool = False,
+    **kw,
+) -> CoupledScene:
+    """Assemble the tank of :func:`scene_dict` on ``backend``: water up to ``water_depth`` m over the whole floor
+    (``None``: single-phase water everywhere), or the water body ``water``. ``timing``: time every stage.
+    ``kw``: :func:`scene_dict`."""
+    from ..assembly import assemble
+    from ..scene import Scene
+
+    nz, ny, nx = shape
+    dx = units.dx
+    if water is None and water_depth is not None:
+        water = _box((0.0, 0.0, 0.0), (nx * dx, ny * dx, water_depth))
+    d = scene_dict(shape, units, sand_geometry, water=water, **kw)
+    scene = Scene.from_dict(d, source_name="coupled validation scene")
+    asm = assemble(scene, backend, timing=timing, warm_up_steps=0)
+    info = {"shape": list(shape), "dx": dx, "dt": units.dt, "density": kw["density"], "particles": int(asm.sand.n_particles),
+            "sand_fraction": kw.get("sand_fraction", 0.55), "nu_h": kw.get("nu_h", 1e-4), "nu_l": kw.get("nu_l", 1e-2),
+            "scheduler": scene.scheduler.describe()}  # fmt: skip
+    return CoupledScene(asm.fluid, asm.sand, asm.coupler, asm.units, asm.scheduler, float(water_depth or 0.0), info,
+                        scene)  # fmt: skip
 
 
 def sand_ball_into_water(
@@ -216,8 +264,8 @@ def sand_ball_into_water(
     depth = 0.45 * nz if water_depth is None else float(water_depth)
     zc = depth + 1.5 * radius + 1.0 if centre_height is None else float(centre_height)
     units = Units(dx=dx, dt=dt)
-    seeded = seed_sphere((0.5 * nx * dx, 0.5 * ny * dx, zc * dx), radius * dx, dx, ppc=2)
-    scene = build_scene(backend, shape, units, seeded, density=density, water_depth=depth * dx,
+    ball = {"type": "sphere", "center": [0.5 * nx * dx, 0.5 * ny * dx, zc * dx], "radius": radius * dx}
+    scene = build_scene(backend, shape, units, ball, density=density, water_depth=depth * dx,
                         velocity=(0.0, 0.0, -abs(impact_speed)), **kw)  # fmt: skip
     scene.info.update(scene="sand_ball_into_water", radius_cells=radius, centre_cells=zc, depth_cells=depth,
                       impact_speed=impact_speed)  # fmt: skip
@@ -247,14 +295,13 @@ def uniform_suspension(
     """
     nz, ny, nx = shape
     units = Units(dx=dx, dt=dt)
-    seeded = seed_box((0.0, 0.0, layer[0] * dx), (nx * dx, ny * dx, layer[1] * dx), dx, ppc=2)
-    keep = (seeded.x[0] > dx) & (seeded.x[0] < (nx - 1) * dx) & (seeded.x[1] > dx) & (seeded.x[1] < (ny - 1) * dx)
-    seeded = Seeded(seeded.x[:, keep], seeded.volume[keep])
+    # the layer less one cell at each side wall (the sand's 1-layer walls there)
+    layer_box = _box((dx, dx, layer[0] * dx), ((nx - 1) * dx, (ny - 1) * dx, layer[1] * dx))
     # net sand weight per cell volume over the column, carried by the water of the column
-    sand_cells = float(keep.sum()) * 0.125
+    sand_cells = float((nx - 2) * (ny - 2) * (layer[1] - layer[0]))
     water_cells = nx * ny * nz - sand_fraction * sand_cells
     a_f = (density - RHO_W) * sand_fraction * sand_cells * G / (RHO_W * water_cells)
-    scene = build_scene(backend, shape, units, seeded, density=density, water_depth=None,
+    scene = build_scene(backend, shape, units, layer_box, density=density, water_depth=None,
                         sand_fraction=sand_fraction, fluid_gravity=a_f, periodic_xy=True, wall_layers=1,
                         **kw)  # fmt: skip
     scene.info.update(scene="uniform_suspension", layer_cells=list(layer), fluid_acceleration=a_f)
@@ -276,9 +323,9 @@ def saturated_bed(
     deep (paper: "full saturation" among the hard cases).  ``kw``: :func:`build_scene`."""
     nz, ny, nx = shape
     units = Units(dx=dx, dt=dt)
-    seeded = seed_box((dx, dx, dx), ((nx - 1) * dx, (ny - 1) * dx, bed_height * dx), dx, ppc=2)
+    bed = _box((dx, dx, dx), ((nx - 1) * dx, (ny - 1) * dx, bed_height * dx))
     kw.setdefault("wall_layers", 1)
-    scene = build_scene(backend, shape, units, seeded, density=density, water_depth=water_depth * dx, **kw)
+    scene = build_scene(backend, shape, units, bed, density=density, water_depth=water_depth * dx, **kw)
     scene.info.update(scene="saturated_bed", bed_cells=bed_height, depth_cells=water_depth)
     return scene
 
@@ -301,15 +348,12 @@ def dry_plug_under_water(
     The water seeps into the plug; with ``retention`` the sand absorbs part of it (Eqs. 53–58)."""
     nz, ny, nx = shape
     units = Units(dx=dx, dt=dt)
-    seeded = seed_box((dx, dx, plug[0] * dx), ((nx - 1) * dx, (ny - 1) * dx, plug[1] * dx), dx, ppc=2)
-    coupling = CouplingParams(retention=retention, absorption_rate=absorption_rate)
-    kw.setdefault("wall_layers", 1)
-    scene = build_scene(backend, shape, units, seeded, density=density, water_depth=water[1] * dx,
-                        coupling=coupling, **kw)  # fmt: skip
+    plug_box = _box((dx, dx, plug[0] * dx), ((nx - 1) * dx, (ny - 1) * dx, plug[1] * dx))
     # only the layer above the plug is water at the start: the plug's pores hold air
-    zc = np.arange(nz) + 0.5
-    prof = tanh_profile(water[1] - zc, 4.0) * tanh_profile(zc - water[0], 4.0)
-    _set_phase(scene.fluid, np.broadcast_to(prof[:, None, None], shape).astype(np.float32))
+    layer = _box((0.0, 0.0, water[0] * dx), (nx * dx, ny * dx, water[1] * dx))
+    kw.setdefault("wall_layers", 1)
+    scene = build_scene(backend, shape, units, plug_box, density=density, water_depth=water[1] * dx, water=layer,
+                        retention=retention, absorption_rate=absorption_rate, **kw)  # fmt: skip
     scene.info.update(scene="dry_plug_under_water", plug_cells=list(plug), water_cells=list(water), retention=retention)
     return scene
 
@@ -339,45 +383,22 @@ def bed_under_partition(
     :func:`build_scene`."""
     nz, ny, nx = shape
     units = Units(dx=dx, dt=dt)
-    seeded = seed_box((dx, dx, dx), ((nx - 1) * dx, (ny - 1) * dx, bed * dx), dx, ppc=2)
-    xc = np.arange(nx) + 0.5
-    zc = np.arange(nz) + 0.5
-    solid = np.zeros(shape, bool)
-    wall_x = (xc > partition[0]) & (xc < partition[1])
-    wall_z = (zc > bed) & (zc < partition_top)
-    solid[wall_z[:, None, None] & wall_x[None, None, :] & np.ones((1, ny, 1), bool)] = True
-    # the fluid's floor and side walls one cell in: the MPM walls keep the sand out of the outer node layer,
-    # so those cells hold only the B-spline tail of the bed (eps ~ 0.01) and were a bypass channel along the
-    # floor (max |u| 0.13 there, measured) around the bed
-    solid[0] = True
-    solid[:, 0] = solid[:, ny - 1] = True
-    coupling = CouplingParams(retention=retention, absorption_rate=absorption_rate)
-    kw.setdefault("wall_layers", 1)
-    scene = build_scene(backend, shape, units, seeded, density=density, water_depth=water_top * dx,
-                        coupling=coupling, solid=solid, **kw)  # fmt: skip
+    bed_box = _box((dx, dx, dx), ((nx - 1) * dx, (ny - 1) * dx, bed * dx))
+    size = (nx * dx, ny * dx, nz * dx)
+    obstacles = [
+        _box((partition[0] * dx, 0.0, bed * dx), (partition[1] * dx, size[1], partition_top * dx)),
+        # the fluid's floor (z = 0) and side walls (y = 0, ny - 1) one cell in: the MPM walls keep the sand out
+        # of the outer node layer, so those cells hold only the B-spline tail of the bed (eps ~ 0.01) and were a
+        # bypass channel along the floor (max |u| 0.13 there, measured) around the bed
+        _box((0.0, 0.0, 0.0), (size[0], size[1], dx)),
+        _box((0.0, 0.0, 0.0), (size[0], dx, size[2])),
+        _box((0.0, size[1] - dx, 0.0), size),
+    ]
     # water only left of the wall and above the bed: the bed's pores hold air at the start
-    ramp_z = tanh_profile(water_top - zc, 4.0) * tanh_profile(zc - bed, 4.0)
-    ramp_x = tanh_profile(partition[0] - xc, 4.0)
-    prof = ramp_z[:, None, None] * ramp_x[None, None, :] * np.ones((1, ny, 1))
-    _set_phase(scene.fluid, prof.astype(np.float32))
+    left = _box((0.0, 0.0, bed * dx), (partition[0] * dx, size[1], water_top * dx))
+    kw.setdefault("wall_layers", 1)
+    scene = build_scene(backend, shape, units, bed_box, density=density, water_depth=water_top * dx, water=left,
+                        retention=retention, absorption_rate=absorption_rate, obstacles=obstacles, **kw)  # fmt: skip
     scene.info.update(scene="bed_under_partition", bed_cells=bed, partition_cells=list(partition),
                       partition_top=partition_top, water_top=water_top, retention=retention)  # fmt: skip
     return scene
-
-
-def _set_phase(fluid: FluidSolver, phi: np.ndarray) -> None:
-    """Replace the phase field of a fresh two-phase solver (populations at equilibrium with the fluid at rest)
-    and its reference volume."""
-    be = fluid.backend
-    host = be.to_host(fluid.phi)
-    host[1:-1, 1:-1, 1:-1] = phi
-    fluid.phi = be.asarray(host)
-    fluid.pf_ops.set_equilibrium(fluid.h, fluid.phi, fluid.velocity, fluid.flags, fluid.step_count)
-    fluid._phase_macroscopic()
-    rho = fluid.params.rho_l + (1.0 - fluid.params.rho_l) * np.clip(phi.astype(np.float64), 0.0, 1.0)
-    g = abs(fluid.params.gravity[2])
-    above = np.cumsum(rho[::-1], axis=0)[::-1] - 0.5 * rho
-    p = be.to_host(fluid.p)
-    p[1:-1, 1:-1, 1:-1] = g * above
-    fluid.p = be.asarray(p.astype(np.float32))
-    fluid.reset_volume_reference()
