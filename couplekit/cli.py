@@ -10,6 +10,10 @@ with a progress bar, writing ParaView/PLY/PNG outputs, diagnostics and checkpoin
 the scene's ``[scheduler]`` table, e.g. ``subcycle:8``). Exit codes: 0 done, 1 NaN/Inf (the report names
 step, field and cell; ``last_good.h5`` is kept), 2 invalid scene, 3 refused (coupled scene,
 not enough memory), 130 interrupted by Ctrl-C (``interrupted.h5`` written; resume with ``--resume``).
+
+``couplekit sweep SWEEP [--out DIR] [--address HOST:PORT] [--workers N] [--threads N]``: run a sweep file (a
+base scene and a grid of dotted-key values, docs/sweeps.md) on Dask; exit 0 when every point finished, 1 when
+a point ended in an error, 2 for a malformed sweep file.
 """
 
 from __future__ import annotations
