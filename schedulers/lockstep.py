@@ -49,7 +49,7 @@ from __future__ import annotations
 
 from .base import FLUID_STAGES, SAND_STAGES, Scheduler
 
-__all__ = ["LockstepScheduler", "COUPLED_STAGES", "FLUID_STAGES", "SAND_STAGES"]
+__all__ = ["LockstepScheduler", "COUPLED_STAGES", "FLUID_STAGES", "SAND_STAGES", "algorithm1_step"]
 
 COUPLED_STAGES = (
     "mpm_p2g",
@@ -87,33 +87,38 @@ class LockstepScheduler(Scheduler):
         super().__init__(fluid, sand, coupler, source_term, timing, warm_up_steps)
 
     def _coupled_step(self) -> None:
-        c, sand = self.coupler, self.sand
-        stage = self._stage
-        with stage("mpm_p2g"):
-            sand.p2g()
-        with stage("fluid_velocity"):
-            c.fluid_velocity()
-        with stage("volume_fractions"):
-            c.fractions()
-        if c.two_phase and self.source_term:
-            with stage("retention_source"):
-                c.phase_source()
-        with stage("drag_buoyancy"):
-            c.exchange()
-        with stage("mpm_grid_update"):
-            sand.grid_update()
-        with stage("moisture"):
-            c.moisture()
-        with stage("mpm_g2p"):
-            sand.g2p()
-        with stage("sand_velocity"):
-            c.sand_velocity()
-        self._fluid_step()
-        with stage("coupling_finish"):
-            c.finish()
-        self._check_sand_dt()
+        algorithm1_step(self)
         self.last_sand_steps = 1.0
 
     def _sand_only_step(self) -> None:
         self._mpm_step()
         self.last_sand_steps = 1.0
+
+
+def algorithm1_step(sched: Scheduler, share: float = 1.0) -> None:
+    """One coupled step of paper Algorithm 1 (module docstring) through ``sched``'s timed stages, the sand's
+    step covering ``share`` fluid steps of absorption (lockstep: 1; a multi-rate block of m steps: m)."""
+    c, sand, stage = sched.coupler, sched.sand, sched._stage
+    with stage("mpm_p2g"):
+        sand.p2g()
+    with stage("fluid_velocity"):
+        c.fluid_velocity()
+    with stage("volume_fractions"):
+        c.fractions(share=share)
+    if c.two_phase and sched.source_term:
+        with stage("retention_source"):
+            c.phase_source()
+    with stage("drag_buoyancy"):
+        c.exchange()
+    with stage("mpm_grid_update"):
+        sand.grid_update()
+    with stage("moisture"):
+        c.moisture()
+    with stage("mpm_g2p"):
+        sand.g2p()
+    with stage("sand_velocity"):
+        c.sand_velocity()
+    sched._fluid_step()
+    with stage("coupling_finish"):
+        c.finish()
+    sched._check_sand_dt()

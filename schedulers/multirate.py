@@ -25,7 +25,7 @@ from __future__ import annotations
 import math
 
 from .base import Scheduler
-from .lockstep import COUPLED_STAGES
+from .lockstep import COUPLED_STAGES, algorithm1_step
 
 __all__ = ["MultirateScheduler"]
 
@@ -73,36 +73,19 @@ class MultirateScheduler(Scheduler):
         self.last_sand_steps = 1.0 if due else 0.0
 
     def _coupled_step(self) -> None:
-        c, sand = self.coupler, self.sand
-        stage = self._stage
-        due = self._sand_due()
-        if due:
-            with stage("mpm_p2g"):
-                sand.p2g()
+        c, stage = self.coupler, self._stage
+        if self._sand_due():
+            algorithm1_step(self, share=float(self.sand_every))
+            if c.retention and self.sand_every > 1:
+                c.d_bound[...] = 0.0  # the block's absorbed water is in this step's source term only
+            self.last_sand_steps = 1.0
+            return
         with stage("fluid_velocity"):
             c.fluid_velocity()
-        if due:
-            with stage("volume_fractions"):
-                c.fractions(share=float(self.sand_every))
         if c.two_phase and self.source_term:
             with stage("retention_source"):
                 c.phase_source()
-        if due:
-            with stage("drag_buoyancy"):
-                c.exchange()
-            with stage("mpm_grid_update"):
-                sand.grid_update()
-            with stage("moisture"):
-                c.moisture()
-            with stage("mpm_g2p"):
-                sand.g2p()
-            with stage("sand_velocity"):
-                c.sand_velocity()
         self._fluid_step()
         with stage("coupling_finish"):
             c.finish()
-            if due and c.retention and self.sand_every > 1:
-                c.d_bound[...] = 0.0  # the block's absorbed water is in this step's source term only
-        if due:
-            self._check_sand_dt()
-        self.last_sand_steps = 1.0 if due else 0.0
+        self.last_sand_steps = 0.0

@@ -19,6 +19,16 @@ def cpu_backend():
 
 
 @pytest.fixture(scope="session")
+def cpu1():
+    """The cpu backend on one OpenMP thread (grids of a few thousand cells); skips where it cannot run. The
+    coupling tests' conftest defines its own of the same name."""
+    ok, why = cpu_status()
+    if not ok:
+        pytest.skip(f"cpu backend unavailable: {why}")
+    return get_backend("cpu", threads=1)
+
+
+@pytest.fixture(scope="session")
 def numpy_backend():
     """The NumPy reference backend."""
     return get_backend("numpy")

@@ -13,7 +13,6 @@ import numpy as np
 import pytest
 from couplekit.schedulers import MultirateScheduler, SubcycleScheduler, SubstepLimitError, make_scheduler
 
-from couplekit.backend import BackendUnavailableError, get_backend
 from couplekit.coupling import CouplingParams, SandFluidCoupler
 from couplekit.coupling.scenes import sand_ball_into_water
 from couplekit.fluid.grid import Boundaries
@@ -31,14 +30,6 @@ from sim_scenes import tiny_coupled, tiny_sand  # noqa: E402
 F32 = float(np.finfo(np.float32).eps)
 UNITS = Units(dx=0.005, dt=1e-4)
 MASS, SPEED = UNITS.rho * UNITS.dx**3, UNITS.dx / UNITS.dt  # lattice mass and velocity in SI
-
-
-@pytest.fixture(scope="module")
-def cpu1():
-    try:
-        return get_backend("cpu", threads=1)
-    except BackendUnavailableError as exc:  # pragma: no cover - CI has g++
-        pytest.skip(f"cpu backend unavailable: {exc}")
 
 
 def _state_bytes(sim: Simulation) -> dict[str, bytes]:

@@ -21,7 +21,6 @@ before anything is allocated:
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -44,6 +43,7 @@ from .schema import (
     Problem,
     SceneError,
     read_table,
+    read_toml,
 )
 
 __all__ = [
@@ -335,19 +335,7 @@ class Scene:
     def load(cls, path: str | Path) -> Scene:
         """Read and validate a TOML scene file; raises :class:`SceneError` naming every problem."""
         path = Path(path)
-        try:
-            text = path.read_text()
-        except OSError as exc:
-            raise SceneError(
-                [Problem("(file)", f"cannot read {path}: {exc.strerror}", "check the path")], str(path)
-            ) from None
-        try:
-            data = tomllib.loads(text)
-        except tomllib.TOMLDecodeError as exc:
-            raise SceneError(
-                [Problem("(syntax)", f"not valid TOML: {exc}", "fix the TOML syntax at that line")], str(path)
-            ) from None
-        return cls.from_dict(data, base_dir=path.parent, source_name=str(path))
+        return cls.from_dict(read_toml(path, SceneError), base_dir=path.parent, source_name=str(path))
 
     @classmethod
     def from_dict(cls, data: dict, base_dir: str | Path = ".", source_name: str = "scene") -> Scene:

@@ -23,7 +23,9 @@ __all__ = [
     "REQUIRED",
     "Key",
     "Problem",
+    "ProblemError",
     "SceneError",
+    "read_toml",
     "SECTIONS",
     "BODY_KEYS",
     "GEOMETRY_KEYS",
@@ -97,10 +99,10 @@ class Problem:
         return f"{self.key}: {self.message}. Fix: {self.fix}"
 
 
-class SceneError(ValueError):
-    """A scene was refused; ``problems`` lists every :class:`Problem` found (the message shows them all)."""
+class ProblemError(ValueError):
+    """An input file was refused; ``problems`` lists every :class:`Problem` found (the message shows them all)."""
 
-    def __init__(self, problems: list[Problem], source: str = "scene"):
+    def __init__(self, problems: list[Problem], source: str = "input"):
         self.problems = list(problems)
         self.source = source
         lines = [f"{source} is invalid ({len(problems)} problem{'s' if len(problems) != 1 else ''}):"]
@@ -111,6 +113,32 @@ class SceneError(ValueError):
     def keys(self) -> list[str]:
         """The dotted keys of the problems."""
         return [p.key for p in self.problems]
+
+
+class SceneError(ProblemError):
+    """A scene was refused; ``problems`` lists every :class:`Problem` found (the message shows them all)."""
+
+    def __init__(self, problems: list[Problem], source: str = "scene"):
+        super().__init__(problems, source)
+
+
+def read_toml(path, error: type[ProblemError] = SceneError) -> dict:
+    """The TOML file at ``path`` as a dict; a file that cannot be read or is not TOML raises ``error`` with one
+    :class:`Problem` (key ``(file)`` or ``(syntax)``) naming the file and the fix."""
+    import tomllib
+    from pathlib import Path
+
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise error([Problem("(file)", f"cannot read {path}: {exc.strerror}", "check the path")], str(path)) from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise error(
+            [Problem("(syntax)", f"not valid TOML: {exc}", "fix the TOML syntax at that line")], str(path)
+        ) from None
 
 
 # ------------------------------------------------------------------------------------------------ the schema

@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from ..scene import Scene, SceneError
-from ..scene.schema import Problem
+from ..scene.schema import Problem, ProblemError, read_toml
 from .keys import KeyPathError, check_key, flatten_keys, set_key
 
 __all__ = [
@@ -53,21 +53,12 @@ REFERENCE_ID = "reference"
 """The id (and name and case) of the reference point."""
 
 
-class SweepError(ValueError):
+class SweepError(ProblemError):
     """A sweep file was refused; ``problems`` lists every :class:`~couplekit.scene.Problem` found (their keys
     are dotted paths in the sweep file, e.g. ``sweep.grid."time.dt"``)."""
 
     def __init__(self, problems: list[Problem], source: str = "sweep file"):
-        self.problems = list(problems)
-        self.source = source
-        lines = [f"{source} is invalid ({len(problems)} problem{'s' if len(problems) != 1 else ''}):"]
-        lines += [f"  - {p}" for p in problems]
-        super().__init__("\n".join(lines))
-
-    @property
-    def keys(self) -> list[str]:
-        """The dotted sweep-file keys of the problems."""
-        return [p.key for p in self.problems]
+        super().__init__(problems, source)
 
 
 @dataclass(frozen=True)
@@ -130,18 +121,7 @@ class _Case:
 def load_sweep(path: str | Path) -> SweepSpec:
     """Read, check and expand a TOML sweep file; raises :class:`SweepError` naming every bad key and the fix."""
     path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise SweepError(
-            [Problem("(file)", f"cannot read {path}: {exc.strerror}", "check the path")], str(path)
-        ) from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SweepError(
-            [Problem("(syntax)", f"not valid TOML: {exc}", "fix the TOML syntax at that line")], str(path)
-        ) from None
+    data = read_toml(path, SweepError)
     return parse_sweep(data, base_dir=path.parent, source=str(path), default_name=path.stem)
 
 
