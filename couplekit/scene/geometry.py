@@ -25,6 +25,8 @@ __all__ = [
     "Transformed",
     "Inverted",
     "Union",
+    "Difference",
+    "overlapping",
     "rotation_matrix",
     "cell_centres",
     "sdf_on_grid",
@@ -191,6 +193,40 @@ class Union(Shape):
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         b = [s.bounds() for s in self.shapes]
         return np.min([x[0] for x in b], axis=0), np.max([x[1] for x in b], axis=0)
+
+
+class Difference(Shape):
+    """``shape`` less the ``cutters`` (e.g. a sand body less the obstacles it overlaps): inside where ``shape`` is
+    and no cutter is. The sign is exact; the distance is ``shape``'s outside it and max(d_shape, −d_cutters)
+    inside (a bound), which is what seeding needs. The cutters are evaluated only at points inside ``shape``."""
+
+    def __init__(self, shape: Shape, cutters: Sequence[Shape]):
+        self.shape, self.cutters = shape, list(cutters)
+
+    def sdf(self, points: np.ndarray) -> np.ndarray:
+        p = _points(points)
+        d = np.array(self.shape.sdf(p), dtype=np.float64)
+        inside = d < 0
+        if self.cutters and inside.any():
+            q = p[inside]
+            cut = np.min([c.sdf(q) for c in self.cutters], axis=0)
+            d[inside] = np.maximum(d[inside], -cut)
+        return d
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.shape.bounds()
+
+
+def overlapping(shape: Shape, others: Sequence[Shape]) -> list[Shape]:
+    """The shapes of ``others`` whose bounding boxes meet ``shape``'s (e.g. the obstacles a sand body may
+    overlap: the only ones :class:`Difference` needs)."""
+    lo, hi = shape.bounds()
+    out = []
+    for o in others:
+        olo, ohi = o.bounds()
+        if np.all(olo <= hi) and np.all(ohi >= lo):
+            out.append(o)
+    return out
 
 
 def cell_centres(resolution: Sequence[int], dx: float) -> np.ndarray:

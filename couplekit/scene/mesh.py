@@ -21,6 +21,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -29,7 +30,11 @@ from scipy.spatial import cKDTree
 
 from .geometry import Shape
 
-__all__ = ["TriangleMesh", "HeightField", "load_mesh", "point_triangle_distance", "load_heights"]
+__all__ = ["TriangleMesh", "HeightField", "load_mesh", "point_triangle_distance", "load_heights", "open_edges"]
+
+MAX_SURFACE_SAMPLES = 2**31
+"""Most surface samples a mesh SDF may take (48 bytes each with the KD-tree: ~100 GiB); a mesh that would need
+more at its sample spacing (a coarse triangle far larger than the spacing) is refused before allocation."""
 
 _RAY_SHIFT = (0.7548776662466927e-7, 0.5698402909980532e-7)  # irrational fractions of the mesh size
 
@@ -77,7 +82,16 @@ def _surface_samples(v: np.ndarray, f: np.ndarray, spacing: float) -> tuple[np.n
     """Points on every triangle on a barycentric grid finer than ``spacing``; returns (points, triangle ids)."""
     tri = v[f]  # (T, 3, 3)
     edge = np.max(np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2), axis=1)
-    nsub = np.maximum(1, np.ceil(edge / spacing)).astype(np.int64)
+    with np.errstate(over="ignore", invalid="ignore"):
+        steps = np.maximum(1.0, np.ceil(edge / spacing))
+        total = float(np.sum((steps + 1.0) * (steps + 2.0) / 2.0))
+    if not total <= MAX_SURFACE_SAMPLES:  # also catches inf and NaN
+        raise ValueError(
+            f"sampling the surface every {spacing:.3g} m would take {total:.3g} points (at most "
+            f"{MAX_SURFACE_SAMPLES:.3g}): its longest edge is {float(np.max(edge)):.3g} m; use a finer mesh or a "
+            "smaller shape"
+        )
+    nsub = steps.astype(np.int64)
     pts, ids = [], []
     for n in np.unique(nsub):
         sel = np.nonzero(nsub == n)[0]
@@ -109,11 +123,15 @@ class TriangleMesh(Shape):
         self.faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
         if self.faces.size == 0:
             raise ValueError("the mesh has no triangles")
+        if not np.all(np.isfinite(self.vertices)):
+            raise ValueError(f"{int(np.sum(~np.isfinite(self.vertices).all(axis=1)))} mesh vertices are not finite")
         if self.faces.min() < 0 or self.faces.max() >= len(self.vertices):
             raise ValueError("mesh faces index vertices that do not exist")
         lo, hi = self.vertices.min(axis=0), self.vertices.max(axis=0)
         self._lo, self._hi = lo, hi
         self.size = float(np.linalg.norm(hi - lo)) or 1.0
+        if not math.isfinite(self.size):
+            raise ValueError(f"the mesh's extent {lo.tolist()} .. {hi.tolist()} is too large to measure")
         self.sample_spacing = float(sample_spacing) if sample_spacing else self.size / 100.0
         self.candidates = int(candidates)
         self._samples, self._sample_tri = _surface_samples(self.vertices, self.faces, self.sample_spacing)
@@ -197,11 +215,38 @@ class TriangleMesh(Shape):
         return np.where(self.inside(p), -d, d)
 
 
+def open_edges(vertices: np.ndarray, faces: np.ndarray) -> int:
+    """Edges of a triangle mesh that do not close: those used by an odd number of triangles, vertices welded
+    where their coordinates are equal (STL and some OBJ exports repeat a vertex per triangle). 0 for a closed
+    (watertight) surface, whose inside the parity test of :meth:`TriangleMesh.inside` is defined for."""
+    v = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+    _, weld = np.unique(v, axis=0, return_inverse=True)
+    f = weld.reshape(-1)[np.asarray(faces, dtype=np.int64).reshape(-1, 3)]
+    edges = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    edges = np.sort(edges[edges[:, 0] != edges[:, 1]], axis=1)  # a degenerate triangle's collapsed edge closes
+    if edges.size == 0:
+        return 0
+    _, counts = np.unique(edges, axis=0, return_counts=True)
+    return int(np.count_nonzero(counts % 2))
+
+
 def load_mesh(path: str | Path, sample_spacing: float | None = None) -> TriangleMesh:
-    """Read a triangle mesh (OBJ, STL, PLY, or any format meshio reads) as a :class:`TriangleMesh`."""
+    """Read a closed triangle mesh (OBJ, STL, PLY, or any format meshio reads) as a :class:`TriangleMesh`.
+
+    Raises ValueError for a file meshio cannot read (whatever meshio raised is in the message), a mesh without
+    triangles or quads, non-finite vertices, or an open surface (:func:`open_edges`)."""
+    import contextlib
+    import io
+
     import meshio
 
-    mesh = meshio.read(str(path))
+    said = io.StringIO()  # meshio prints what it tries and fails; that belongs in the message, not the output
+    try:
+        with contextlib.redirect_stdout(said), contextlib.redirect_stderr(said):
+            mesh = meshio.read(str(path))
+    except (Exception, SystemExit) as exc:  # ReadError, a format reader's error, or meshio's own sys.exit(1)
+        why = " ".join(said.getvalue().split()) or f"{type(exc).__name__}: {exc}"
+        raise ValueError(f"{path}: not a mesh meshio can read ({why[-300:]})") from None
     faces = []
     for block in mesh.cells:
         if block.type == "triangle":
@@ -211,19 +256,41 @@ def load_mesh(path: str | Path, sample_spacing: float | None = None) -> Triangle
             faces += [q[:, [0, 1, 2]], q[:, [0, 2, 3]]]
     if not faces:
         raise ValueError(f"{path}: no triangles or quads in the mesh (cell types: {[b.type for b in mesh.cells]})")
-    return TriangleMesh(np.asarray(mesh.points, dtype=np.float64)[:, :3], np.concatenate(faces), sample_spacing)
+    points = np.asarray(mesh.points, dtype=np.float64)
+    if points.ndim != 2 or points.shape[1] < 3:
+        raise ValueError(f"{path}: the mesh's points are not 3-D (shape {points.shape})")
+    points, faces = points[:, :3], np.concatenate(faces).astype(np.int64)
+    if faces.size and (faces.min() < 0 or faces.max() >= len(points)):
+        raise ValueError(f"{path}: mesh faces index vertices that do not exist")
+    if not np.all(np.isfinite(points)):
+        raise ValueError(f"{path}: {int(np.sum(~np.isfinite(points).all(axis=1)))} mesh vertices are not finite")
+    holes = open_edges(points, faces)
+    if holes:
+        raise ValueError(
+            f"{path}: the mesh is not closed (watertight): {holes} edges belong to one triangle only (or an odd "
+            "number), so its inside is undefined; close the holes (e.g. Blender's 'Fill Holes' or MeshLab's "
+            "'Close Holes')"
+        )
+    return TriangleMesh(points, faces, sample_spacing)
 
 
 def load_heights(path: str | Path) -> np.ndarray:
     """A 2-D height grid from a .npy file or a whitespace/comma separated text file."""
     path = Path(path)
-    if path.suffix == ".npy":
-        h = np.load(path)
-    else:
-        h = np.loadtxt(path, delimiter="," if path.suffix == ".csv" else None)
-    h = np.asarray(h, dtype=np.float64)
+    try:
+        if path.suffix == ".npy":
+            h = np.load(path)  # allow_pickle is off: a pickled object is refused, not run
+        else:
+            h = np.loadtxt(path, delimiter="," if path.suffix == ".csv" else None)
+        h = np.asarray(h, dtype=np.float64)
+    except OSError:
+        raise
+    except Exception as exc:  # not an array file, not numbers, ragged rows, ...
+        raise ValueError(f"{path}: not a grid of numbers ({type(exc).__name__}: {exc})") from None
     if h.ndim != 2 or min(h.shape) < 2:
         raise ValueError(f"{path}: a height grid must be 2-D with at least 2 rows and columns, got shape {h.shape}")
+    if not np.all(np.isfinite(h)):
+        raise ValueError(f"{path}: {int(np.count_nonzero(~np.isfinite(h)))} heights are not finite (NaN or inf)")
     return h
 
 
@@ -246,6 +313,10 @@ class HeightField(TriangleMesh):
         h = np.asarray(heights, dtype=np.float64)
         if h.ndim != 2 or min(h.shape) < 2:
             raise ValueError(f"heights must be a 2-D grid with at least 2 rows and columns, got shape {h.shape}")
+        if not np.all(np.isfinite(h)):
+            raise ValueError(f"{int(np.count_nonzero(~np.isfinite(h)))} heights are not finite (NaN or inf)")
+        if not np.all(np.isfinite([*x_range, *y_range, base])):
+            raise ValueError("height field x_range, y_range and base must be finite")
         if not x_range[1] > x_range[0] or not y_range[1] > y_range[0]:
             raise ValueError("height field x_range and y_range must be increasing")
         if np.any(h <= base):

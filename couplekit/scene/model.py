@@ -11,8 +11,13 @@ before anything is allocated:
   an outlet (an inflow with ``shape = "rect"`` or ``"disc"``) lies on a wall or outflow face, inside the
   face, covers at least one cell and overlaps no other outlet;
 * stirring: needs a [fluid]; its axis is not zero and its centre lies in the domain;
-* bodies: geometry inside the domain (sand at least two cells from each face, where the MPM walls are);
-  files exist; what each body kind needs ([fluid] for water and inflows, sand keys only on sand bodies);
+* every number finite and in scale, no nesting deeper than :data:`~couplekit.scene.schema.MAX_DEPTH`
+  (:mod:`couplekit.scene.schema`); a value that fails is None to every later check;
+* bodies: every shape builds as the solvers build it (any exception of a mesh or height-file reader is a
+  problem of ``bodies[i].geometry``); geometry inside the domain (sand at least two cells from each face,
+  where the MPM walls are); files exist; what each body kind needs ([fluid] for water and inflows, sand keys
+  only on sand bodies); every sand body gets particles outside the obstacles (:func:`_check_seeding`);
+* ``time.max_speed`` at least every velocity the scene gives (bodies, inflows);
 * time step: the lattice Mach number of the fastest expected flow (:class:`couplekit.units.Units`), the
   relaxation time of both viscosities, weak compressibility under gravity, the capillary time-step limit,
   and the MPM elastic and particle CFL limits (:func:`couplekit.sand.solver.elastic_dt_limit`).
@@ -44,6 +49,8 @@ from .schema import (
     SceneError,
     read_table,
     read_toml,
+    show,
+    too_deep,
 )
 
 __all__ = [
@@ -67,11 +74,16 @@ LIMITS = {
     "max_lattice_viscosity": 1.0,
     "max_density_variation": 0.1,
     "sand_wall_cells": 2,
+    "max_cells_per_axis": 2**31 - 1,
+    "max_outlet_face_cells": 2**28,
 }
 """Fixed limits of the cross checks (see docs/scene-reference.md, 'Time-step checks'):
 lattice viscosity in [1e-5, 1] (τ in [0.50003, 3.5]; the paper's smallest is 1e-4, the NOCM-MRT scheme is
 untested below a tenth of that); hydrostatic density variation g_lat·H_lat/c_s² ≤ 0.1 (weak compressibility);
-sand kept 2 cells from each face (the MPM walls take two node layers)."""
+sand kept 2 cells from each face (the MPM walls take two node layers); at most 2³¹ − 1 cells along an axis
+(the kernels index an axis with 32-bit integers). Outlets are checked on the grid (a mask of their face) only
+on faces of at most 2²⁸ cells: a larger face belongs to a grid of more than 10⁹ cells, which no device holds
+(the memory estimate refuses it), and its mask alone would take gigabytes."""
 
 _DEFAULT_LATTICE_VISCOSITY = {"water": 1e-4, "air": 1e-2}  # the most common Table 1 values
 
@@ -92,7 +104,7 @@ class Domain:
 
     @property
     def cells(self) -> int:
-        return int(np.prod(self.resolution))
+        return math.prod(int(n) for n in self.resolution)  # Python integers: no overflow at any size
 
 
 @dataclass(frozen=True)
@@ -163,9 +175,17 @@ class Sand:
         return math.sqrt(modulus / (density or self.density))
 
 
+SAMPLE_SPACING_CELLS = 0.25
+"""Surface sampling of mesh and height-field SDFs, in cells (:meth:`Geometry.solver_shape`): what the solvers
+build and validation builds, so that both read and sample a file the same way."""
+
+
 @dataclass(frozen=True)
 class Geometry:
-    """A checked ``geometry`` table; :meth:`shape` builds the SDF (files resolved against ``base_dir``)."""
+    """A checked ``geometry`` table; :meth:`shape` builds the SDF (files resolved against ``base_dir``).
+
+    Built shapes are kept (per domain and sample spacing): validation builds each body's shape once, and the
+    solvers take the same object instead of reading a mesh file again. The cache is not pickled or copied."""
 
     type: str
     params: dict[str, Any]
@@ -174,8 +194,34 @@ class Geometry:
     translate: tuple[float, float, float] = (0.0, 0.0, 0.0)
     invert: bool = False
 
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "_shapes", {})
+
+    def __getstate__(self) -> dict:
+        return {k: v for k, v in self.__dict__.items() if k != "_shapes"}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self.__dict__["_shapes"] = {}
+
+    @staticmethod
+    def _domain_key(domain: Domain | None):
+        return None if domain is None else (tuple(domain.size), float(domain.dx))
+
     def shape(self, domain: Domain | None = None, sample_spacing: float | None = None) -> Shape:
-        """The solid as a :class:`~couplekit.scene.geometry.Shape` in world coordinates."""
+        """The solid as a :class:`~couplekit.scene.geometry.Shape` in world coordinates (built once per domain
+        and sample spacing)."""
+        cache = self.__dict__.setdefault("_shapes", {})
+        key = (self._domain_key(domain), sample_spacing)
+        if key not in cache:
+            cache[key] = self._build_shape(domain, sample_spacing)
+        return cache[key]
+
+    def solver_shape(self, domain: Domain) -> Shape:
+        """The shape the solvers use: surfaces sampled every :data:`SAMPLE_SPACING_CELLS` cells."""
+        return self.shape(domain, SAMPLE_SPACING_CELLS * domain.dx)
+
+    def _build_shape(self, domain: Domain | None, sample_spacing: float | None) -> Shape:
         from .mesh import HeightField, load_heights, load_mesh
 
         p = self.params
@@ -204,7 +250,12 @@ class Geometry:
         return s
 
     def bounds(self, domain: Domain | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Axis-aligned bounds in world coordinates (a mesh file is read to get them)."""
+        """Axis-aligned bounds in world coordinates (a mesh file is read to get them, unless a shape was built
+        for this domain already: the sample spacing changes the distance search only, not the bounds)."""
+        dkey = self._domain_key(domain)
+        for (d, _spacing), built in self.__dict__.get("_shapes", {}).items():
+            if d == dkey:
+                return built.bounds()
         return self.shape(domain).bounds()
 
 
@@ -340,6 +391,9 @@ class Scene:
     @classmethod
     def from_dict(cls, data: dict, base_dir: str | Path = ".", source_name: str = "scene") -> Scene:
         """Validate a scene given as a dict (the TOML structure); relative files resolve against ``base_dir``."""
+        deep = too_deep(data)  # before anything walks the dict recursively (copying it, printing a value)
+        if deep is not None:
+            raise SceneError([deep], source_name)
         problems: list[Problem] = []
         scene = _build(data, Path(base_dir), problems)
         if problems or scene is None:
@@ -407,10 +461,10 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
         if name not in TOP_LEVEL:
             import difflib
 
-            close = difflib.get_close_matches(name, TOP_LEVEL, n=1)
+            close = difflib.get_close_matches(name, TOP_LEVEL, n=1) if isinstance(name, str) else []
             problems.append(
                 Problem(
-                    name,
+                    name if isinstance(name, str) else show(name),
                     "unknown table",
                     f"did you mean [{close[0]}]?" if close else f"remove it; the tables are {', '.join(TOP_LEVEL)}",
                 )
@@ -457,10 +511,19 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
                 )
             )
         elif dx is not None:
-            counts = [s / dx for s in size]
+            counts = [s / dx for s in size]  # finite: size and dx are > 0 and within the schema's magnitudes
             res = [int(round(c)) for c in counts]
             for i, (c, n) in enumerate(zip(counts, res, strict=True)):
-                if abs(c - n) > 1e-6 * max(1.0, c):
+                if n > LIMITS["max_cells_per_axis"]:
+                    problems.append(
+                        Problem(
+                            f"domain.size[{i}]",
+                            f"{size[i]:g} m is {c:.4g} cells of dx = {dx:g} m, more than the solvers index along "
+                            f"one axis ({LIMITS['max_cells_per_axis']})",
+                            "use a larger domain.dx or a smaller domain.size",
+                        )
+                    )
+                elif abs(c - n) > 1e-6 * max(1.0, c):
                     problems.append(
                         Problem(
                             f"domain.size[{i}]",
@@ -477,7 +540,16 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
                         )
                     )
         elif res is not None:
-            dxs = [s / n for s, n in zip(size, res, strict=True)]
+            dxs = [s / n for s, n in zip(size, res, strict=True)]  # n >= 5 (schema)
+            for i, n in enumerate(res):
+                if n > LIMITS["max_cells_per_axis"]:
+                    problems.append(
+                        Problem(
+                            f"domain.resolution[{i}]",
+                            f"{n} cells, more than the solvers index along one axis ({LIMITS['max_cells_per_axis']})",
+                            "use fewer cells",
+                        )
+                    )
             if max(dxs) - min(dxs) > 1e-6 * max(dxs):
                 problems.append(
                     Problem(
@@ -507,13 +579,13 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
     # ---- fluid
     fluid = None
     if flu is not None:
-        fluid = _fluid(flu, data["fluid"], domain, tim, problems)
+        fluid = _fluid(flu, data["fluid"] if isinstance(data["fluid"], dict) else {}, domain, tim, problems)
 
     # ---- sand material
     sand = _sand(snd, problems)
 
     # ---- bodies
-    bodies = []
+    bodies, body_ids = [], []  # the bodies that were read, and their index in [[bodies]]
     raw_bodies = data.get("bodies", [])
     if not isinstance(raw_bodies, list):
         problems.append(Problem("bodies", "must be an array of tables", "write each body as [[bodies]] ..."))
@@ -522,6 +594,10 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
         body = _body(rb, f"bodies[{i}]", base_dir, source["bodies"][i] if isinstance(rb, dict) else None, problems)
         if body is not None:
             bodies.append(body)
+            body_ids.append(i)
+    # the kinds the file asks for, also of bodies that failed (so that one bad key of a sand body does not add
+    # "no sand body" problems)
+    kinds = {rb.get("kind") for rb in raw_bodies if isinstance(rb, dict) and isinstance(rb.get("kind"), str)}
 
     # ---- inflows
     inflows = []
@@ -529,9 +605,12 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
     if not isinstance(raw_inflows, list):
         problems.append(Problem("inflows", "must be an array of tables", "write each inflow as [[inflows]] ..."))
         raw_inflows = []
+    failed_inflows = False  # an entry with a bad key: the checks across inflows (which name them by index) wait
     for i, ri in enumerate(raw_inflows):
+        n_inflow = len(problems)
         v = read_table(ri, f"inflows[{i}]", INFLOW_KEYS, problems)
-        if None in (v["face"], v["velocity"], v["shape"]):
+        if len(problems) > n_inflow:
+            failed_inflows = True
             continue
         inflows.append(
             Inflow(
@@ -548,7 +627,8 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
             )
         )
     wall_cells = sand.wall_layers if sand is not None else LIMITS["sand_wall_cells"]
-    _check_inflows(inflows, bnd, fluid, problems, domain, wall_cells)
+    if not failed_inflows:
+        _check_inflows(inflows, bnd, fluid, problems, domain, wall_cells)
 
     # ---- stirring
     stirring = None
@@ -557,7 +637,7 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
         stirring = _stirring(st, domain, fluid, problems)
 
     # ---- what each body needs
-    for i, b in enumerate(bodies):
+    for i, b in zip(body_ids, bodies, strict=True):
         if b.kind == "water" and fluid is None:
             problems.append(
                 Problem(
@@ -599,7 +679,7 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
         isinstance(r, dict) and isinstance(r.get("sand_fraction"), (int, float)) and r["sand_fraction"] > 0
         for r in raw_jets
     )
-    if "sand" in data and not any(b.kind == "sand" for b in bodies) and not sand_jet:
+    if "sand" in data and "sand" not in kinds and not sand_jet:
         problems.append(
             Problem(
                 "sand",
@@ -607,7 +687,7 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
                 "add a [[bodies]] entry with kind = 'sand' (or an inflow with sand_fraction > 0), or remove [sand]",
             )
         )
-    if fluid is None and not any(b.kind == "sand" for b in bodies):
+    if "fluid" not in data and "sand" not in kinds:
         problems.append(
             Problem(
                 "bodies",
@@ -616,10 +696,14 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
             )
         )
 
-    # ---- geometry inside the domain
+    # ---- geometry: every shape builds (any error of a reader or a shape is a problem of its key), inside
+    # the domain, and every sand body gets particles outside the obstacles
     if domain is not None:
-        for i, b in enumerate(bodies):
+        n_geometry = len(problems)
+        for i, b in zip(body_ids, bodies, strict=True):
             _check_inside(b, i, domain, problems, wall_cells)
+        if sand is not None and len(problems) == n_geometry:  # every shape built and in place
+            _check_seeding(list(zip(body_ids, bodies, strict=True)), domain, sand, problems)
         allowed = sand is not None and sand.periodic_walls
         for name, kind in domain.boundary.items():
             if kind == "periodic" and any(b.kind == "sand" for b in bodies) and not allowed:
@@ -651,8 +735,10 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
 
     # ---- time-step limits
     if domain is not None and time is not None:
-        _check_time_step(domain, time, fluid, sand, bodies, inflows, problems, scheduler)
-        _check_water_outlets(domain, time, fluid, inflows, problems)
+        _check_max_speed(time, zip(body_ids, bodies, strict=True), inflows, problems)
+        _check_time_step(domain, time, fluid, sand, bodies, inflows, problems, scheduler, body_ids)
+        if not failed_inflows:
+            _check_water_outlets(domain, time, fluid, inflows, problems)
 
     if problems:
         return None
@@ -833,7 +919,7 @@ def _geometry(raw: Any, path: str, base_dir: Path, source: dict | None, problems
         problems.append(Problem(path, "must be a table", f"write [{path}] with type = ... and the shape's keys"))
         return None
     gtype = raw.get("type")
-    if gtype not in GEOMETRY_KEYS:
+    if not isinstance(gtype, str) or gtype not in GEOMETRY_KEYS:
         read_table({"type": gtype} if gtype is not None else {}, path, GEOMETRY_COMMON_KEYS[:1], problems)
         return None
     v = read_table(raw, path, GEOMETRY_COMMON_KEYS + GEOMETRY_KEYS[gtype], problems)
@@ -851,7 +937,7 @@ def _geometry(raw: Any, path: str, base_dir: Path, source: dict | None, problems
                     )
                 )
     if gtype == "heightfield":
-        if (params["heights"] is None) == (params["file"] is None):
+        if ("heights" in raw) == ("file" in raw):
             problems.append(
                 Problem(
                     f"{path}.heights",
@@ -880,12 +966,16 @@ def _geometry(raw: Any, path: str, base_dir: Path, source: dict | None, problems
             from .mesh import load_heights
 
             load_heights(params["file"])
-        except (ValueError, OSError) as exc:
+        except Exception as exc:  # whatever the reader raises: a file that is no height grid
             problems.append(
-                Problem(f"{path}.file", f"unreadable height grid: {exc}", "save a 2-D array with numpy.save or as CSV")
+                Problem(
+                    f"{path}.file",
+                    f"unreadable height grid: {_error_text(exc)}",
+                    "save a 2-D array of finite numbers with numpy.save or as CSV",
+                )
             )
     if gtype == "heightfield" and params.get("heights") is not None and params.get("base") is not None:
-        if min(min(r) for r in params["heights"]) <= params["base"]:
+        if min(min(r) for r in params["heights"]) <= params["base"]:  # finite numbers (schema)
             problems.append(Problem(f"{path}.base", "the base is not below every height", "lower base"))
     if len([p for p in problems if p.key.startswith(path)]):
         return None
@@ -981,6 +1071,12 @@ def _check_inflows(
         _check_sand_jets(inflows, domain, problems, wall_cells)
 
 
+def _face_too_large(domain: Domain, face: str) -> bool:
+    """The face has more cells than outlets are checked on (LIMITS['max_outlet_face_cells'])."""
+    rows, cols = face_plane_shape(domain.shape, solver_face(face))
+    return rows * cols > LIMITS["max_outlet_face_cells"]
+
+
 def _check_outlet_keys(inf: Inflow, key: str, problems: list[Problem]) -> None:
     """The keys each shape takes: none for 'face'; center + size for 'rect'; center + radius for 'disc'."""
     given = {k for k in ("center", "size", "radius") if getattr(inf, k) is not None}
@@ -1002,6 +1098,8 @@ def _check_outlets_on_grid(inflows: list[Inflow], domain: Domain, problems: list
     masks: dict[str, tuple[int, np.ndarray]] = {}
     for i, inf in enumerate(inflows):
         if inf.shape == "face" or inf.center is None or (inf.size is None and inf.radius is None):
+            continue
+        if _face_too_large(domain, inf.face):
             continue
         if (inf.shape == "rect" and inf.size is None) or (inf.shape == "disc" and inf.radius is None):
             continue
@@ -1049,7 +1147,7 @@ def _check_sand_jets(inflows: list[Inflow], domain: Domain, problems: list[Probl
     """An outlet carrying sand must keep its cells ``rim`` (``sand.wall_layers``) from the face's edges: its
     particles are emitted over its whole area (couplekit.sand.emission), and the MPM walls occupy that rim."""
     for i, inf in enumerate(inflows):
-        if inf.sand_fraction <= 0 or inf.shape == "face" or inf.center is None:
+        if inf.sand_fraction <= 0 or inf.shape == "face" or inf.center is None or _face_too_large(domain, inf.face):
             continue
         if (inf.shape == "rect" and inf.size is None) or (inf.shape == "disc" and inf.radius is None):
             continue
@@ -1155,14 +1253,37 @@ def _stirring(st: dict, domain: Domain | None, fluid: Fluid | None, problems: li
     )
 
 
+def _error_text(exc: BaseException) -> str:
+    """An exception as message text: its own words, with its type when they do not say what went wrong."""
+    text = str(exc).strip()
+    if len(text) > 300:
+        text = text[:300] + " ..."
+    if isinstance(exc, (ValueError, OSError)) and text:
+        return text
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
+
 def _check_inside(body: Body, i: int, domain: Domain, problems: list[Problem], wall_cells: int = 2) -> None:
+    """Build the body's shape as the solvers will (:meth:`Geometry.solver_shape`) and check that it lies in the
+    domain. Any exception of a file reader or a shape becomes a problem of ``bodies[i].geometry``."""
     try:
-        lo, hi = body.geometry.bounds(domain)
-    except (ValueError, OSError) as exc:
+        lo, hi = body.geometry.solver_shape(domain).bounds()
+        if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+            raise ValueError(f"the shape's bounds {lo.tolist()} .. {hi.tolist()} are not finite")
+    except Exception as exc:
         problems.append(
-            Problem(f"bodies[{i}].geometry", f"cannot build the shape: {exc}", "check the geometry keys and file")
+            Problem(
+                f"bodies[{i}].geometry",
+                f"cannot build the shape: {_error_text(exc)}",
+                "check the geometry keys and file"
+                + (" (a closed triangle mesh, OBJ, STL or PLY)" if body.geometry.type == "mesh" else ""),
+            )
         )
         return
+    _check_bounds(body, i, lo, hi, domain, problems, wall_cells)
+
+
+def _check_bounds(body: Body, i: int, lo, hi, domain: Domain, problems: list[Problem], wall_cells: int) -> None:
     size = np.asarray(domain.size)
     tol = 1e-9 * size.max()
     if body.kind == "obstacle":
@@ -1188,6 +1309,116 @@ def _check_inside(body: Body, i: int, domain: Domain, problems: list[Problem], w
                 f"bodies[{i}].geometry",
                 f"the {body.kind} body {body.name!r} reaches outside the domain along {'xyz'[axis]}: bounds {lo[axis]:.6g} .. {hi[axis]:.6g} m, domain 0 .. {size[axis]:g} m{where}",
                 f"move or shrink it so that it lies within [{margin:g}, {size[axis] - margin:.6g}] m along {'xyz'[axis]}",
+            )
+        )
+
+
+def _seeds_any(sdf, lo, hi, dx: float, per_axis: int, chunk: int = 1 << 18, cap: int = 1 << 27) -> bool | None:
+    """Whether :func:`couplekit.sand.seeding.seed_sdf` places any particle where ``sdf`` < 0 in the box [lo, hi)
+    (the seeding lattice of spacing dx / per_axis; the jitter moves particles after they are chosen, so it is
+    left out). The box is searched block by block (about ``chunk`` lattice points each), the blocks nearest its
+    centre first, stopping at the first particle: a solid body costs one block. A box of more than ``cap``
+    lattice points is searched in its centre block only, and None (unknown) is returned when that holds none
+    (its particles, at most ``cap``, would take gigabytes: the memory estimate speaks for such a body)."""
+    from ..sand.seeding import seed_sdf
+
+    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    if np.any(hi <= lo):
+        return False
+    h = dx / per_axis
+    first = np.ceil(lo / h - 0.5)  # the lattice points seed_sdf takes: centres in [lo, hi)
+    last = np.ceil(hi / h - 0.5)
+    n = np.maximum(last - first, 0.0)
+    if np.any(n == 0):
+        return False
+    bx = min(n[0], chunk)
+    by = min(n[1], max(1.0, chunk // bx))
+    bz = min(n[2], max(1.0, chunk // (bx * by)))
+    block = np.array([bx, by, bz])
+    if float(np.prod(n)) > cap:  # the block around the centre only
+        start = np.floor(0.5 * (first + last) - 0.5 * block)
+        starts = [start]
+    else:
+        counts = np.ceil(n / block).astype(np.int64)
+        grid = np.stack(np.meshgrid(*(np.arange(c) for c in counts), indexing="ij"), axis=-1).reshape(-1, 3)
+        starts = first + grid * block
+        centre = 0.5 * (first + last)
+        starts = starts[np.argsort(np.linalg.norm(starts + 0.5 * block - centre, axis=1), kind="stable")]
+    for start in starts:
+        # block faces at multiples of h lie between lattice points: the blocks share no point
+        blo, bhi = np.maximum(lo, start * h), np.minimum(hi, (start + block) * h)
+        if np.all(bhi > blo) and seed_sdf(sdf, blo, bhi, dx, per_axis, 0.0).count:
+            return True
+    return None if float(np.prod(n)) > cap else False
+
+
+def _check_seeding(built: list[tuple[int, Body]], domain: Domain, sand: Sand, problems: list[Problem]) -> None:
+    """Every sand body gets particles: seeded as :func:`couplekit.assembly.build_sand` seeds it (the seeding
+    lattice over its bounding box, less what lies inside an obstacle), searched cheaply (:func:`_seeds_any`)."""
+    from .geometry import Difference, overlapping
+
+    size = np.asarray(domain.size, np.float64)
+    k = sand.particles_per_axis
+    obstacles = [(i, b.geometry.solver_shape(domain)) for i, b in built if b.kind == "obstacle"]
+    for i, b in built:
+        if b.kind != "sand":
+            continue
+        shape = b.geometry.solver_shape(domain)
+        lo, hi = shape.bounds()
+        lo, hi = np.maximum(lo, 0.0), np.minimum(hi, size)
+        try:
+            cutters = overlapping(shape, [s for _, s in obstacles])
+            seeded = _seeds_any(Difference(shape, cutters).sdf if cutters else shape.sdf, lo, hi, domain.dx, k)
+            alone = bool(cutters) and seeded is False and _seeds_any(shape.sdf, lo, hi, domain.dx, k)
+        except Exception as exc:  # an SDF that fails on the lattice points
+            problems.append(
+                Problem(f"bodies[{i}].geometry", f"cannot seed the sand body: {_error_text(exc)}", "check its geometry")
+            )
+            continue
+        if seeded is not False:  # particles found, or a body too large to search (None)
+            continue
+        spacing = domain.dx / k
+        if alone:
+            names = ", ".join(f"bodies[{j}]" for j, s in obstacles if s in cutters)
+            problems.append(
+                Problem(
+                    f"bodies[{i}].geometry",
+                    f"the sand body {b.name!r} lies wholly inside obstacles ({names}): no particle would be seeded "
+                    "(particles are not seeded inside obstacles)",
+                    "move the sand body out of the obstacle, or the obstacle away",
+                )
+            )
+        else:
+            problems.append(
+                Problem(
+                    f"bodies[{i}].geometry",
+                    f"the sand body {b.name!r} is thinner than the particle spacing dx / k = {domain.dx:g} / {k} = "
+                    f"{spacing:.4g} m: no seeding point (sub-cell centre) lies inside it, so no particle would be "
+                    "seeded",
+                    f"make it at least {spacing:.4g} m thick on every axis (or raise sand.particles_per_cell, or "
+                    "lower domain.dx)",
+                )
+            )
+
+
+def _check_max_speed(time: Time, bodies, inflows, problems: list[Problem]) -> None:
+    """``time.max_speed``, the speed every time-step check trusts when given, is at least every speed the scene
+    states itself: each water or sand body's velocity and each inflow's."""
+    if time.max_speed is None:
+        return
+    given = [(math.hypot(*b.velocity), f"bodies[{i}].velocity") for i, b in bodies if b.kind != "obstacle"]
+    given += [(math.hypot(*inf.velocity), f"inflows[{i}].velocity") for i, inf in enumerate(inflows)]
+    if not given:
+        return
+    speed, key = max(given, key=lambda item: item[0])
+    if speed > time.max_speed * (1.0 + 1e-9):
+        problems.append(
+            Problem(
+                "time.max_speed",
+                f"{time.max_speed:g} m/s is below the speed the scene itself gives, |{key}| = {speed:.4g} m/s (the "
+                "time-step checks would trust a speed the flow exceeds from the first step)",
+                f"set time.max_speed >= {speed:.4g} m/s, or remove it (the default estimates it from gravity, body "
+                "velocities and inflows)",
             )
         )
 
@@ -1230,6 +1461,8 @@ def _check_water_outlets(domain: Domain, time: Time, fluid: Fluid | None, inflow
     xi = float(fluid.interface_width)
     for i, inf in enumerate(inflows):
         if inf.kind != "water" or inf.shape == "face" or inf.center is None or inf.face not in SCENE_FACES:
+            continue
+        if _face_too_large(domain, inf.face):
             continue
         if (inf.shape == "rect" and inf.size is None) or (inf.shape == "disc" and inf.radius is None):
             continue
@@ -1305,6 +1538,7 @@ def _check_time_step(
     inflows,
     problems,
     scheduler: Scheduler | None = None,
+    body_ids: list[int] | None = None,
 ) -> None:
     """The fluid's limits for time.dt (Mach number, weak compressibility, capillary waves; relaxation time is
     checked with the viscosities) and the sand's (elastic, particle CFL) for the sand step the ``scheduler``
@@ -1312,8 +1546,8 @@ def _check_time_step(
     dt, dx = time.dt, domain.dx
     try:
         speed, why = _speed_estimate(domain, time, bodies, inflows, {})
-    except (ValueError, OSError):
-        return  # the geometry problem is already reported
+    except Exception:
+        return  # the geometry problem is already reported (_check_inside)
     if fluid is not None:
         units = Units(dx=dx, dt=dt, rho=fluid.water_density)
         if speed > 0 and units.mach(speed) > time.mach_limit:
@@ -1355,7 +1589,10 @@ def _check_time_step(
     if sand is None or scheduler is None or not (any(b.kind == "sand" for b in bodies) or jets):
         return
     # bodies at their density, emitted jet sand (couplekit.sand.emission) at sand.density
-    carriers = [(f"bodies[{i}]", b.density or sand.density) for i, b in enumerate(bodies) if b.kind == "sand"]
+    ids = body_ids if body_ids is not None else range(len(bodies))
+    carriers = [
+        (f"bodies[{i}]", b.density or sand.density) for i, b in zip(ids, bodies, strict=True) if b.kind == "sand"
+    ]
     carriers += [(f"the sand of inflows[{i}]", sand.density) for i in jets]
     limits = []  # (limit s, what it is, fix when the sand's own step is what to change)
     for what, rho in carriers:

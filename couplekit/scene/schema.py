@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import difflib
 import math
+import reprlib
 from dataclasses import dataclass
 from typing import Any
 
@@ -35,6 +36,12 @@ __all__ = [
     "BOUNDARY_KINDS",
     "FIELD_NAMES",
     "read_table",
+    "show",
+    "too_deep",
+    "MAX_MAGNITUDE",
+    "MIN_MAGNITUDE",
+    "MAX_INT",
+    "MAX_DEPTH",
 ]
 
 
@@ -130,15 +137,26 @@ def read_toml(path, error: type[ProblemError] = SceneError) -> dict:
 
     path = Path(path)
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise error([Problem("(file)", f"cannot read {path}: {exc.strerror}", "check the path")], str(path)) from None
+    except UnicodeDecodeError as exc:  # a binary file (TOML is UTF-8 text)
+        raise error(
+            [Problem("(file)", f"{path} is not a text file (byte {exc.start} is not UTF-8)", "give a TOML text file")],
+            str(path),
+        ) from None
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise error(
             [Problem("(syntax)", f"not valid TOML: {exc}", "fix the TOML syntax at that line")], str(path)
         ) from None
+    except RecursionError:  # arrays or inline tables nested thousands deep
+        raise error(
+            [Problem("(syntax)", "arrays or tables are nested too deeply to read", "flatten the nesting")], str(path)
+        ) from None
+    except (ValueError, OverflowError) as exc:  # e.g. an integer literal of more digits than Python converts
+        raise error([Problem("(syntax)", f"not valid TOML: {exc}", "fix the value")], str(path)) from None
 
 
 # ------------------------------------------------------------------------------------------------ the schema
@@ -734,6 +752,51 @@ TOP_LEVEL = (
 
 
 # ------------------------------------------------------------------------------------------------ checking
+MAX_MAGNITUDE = 1e30
+"""Largest magnitude of any number in a scene (SI units: nothing physical in a scene comes near it). With
+every input between MIN_MAGNITUDE and MAX_MAGNITUDE (or 0), the products and quotients of up to ten of them
+that the checks and the solvers form stay finite and non-zero in float64."""
+MIN_MAGNITUDE = 1e-30
+"""Smallest magnitude of a non-zero number in a scene (see MAX_MAGNITUDE)."""
+MAX_INT = 2**63 - 1
+"""Largest integer a scene may hold (it must fit the solvers' 64-bit integers)."""
+MAX_DEPTH = 16
+"""Deepest nesting of tables and arrays a scene may have (a height grid inside a body is 6 deep)."""
+
+_SHOW = reprlib.Repr()
+_SHOW.maxlevel, _SHOW.maxlist, _SHOW.maxdict, _SHOW.maxstring, _SHOW.maxother = 3, 6, 4, 60, 60
+
+
+def show(value: Any) -> str:
+    """A short repr of ``value`` for messages: truncated, at most 3 levels deep (so a huge or deeply nested
+    value cannot make a message huge or recurse without bound)."""
+    try:
+        return _SHOW.repr(value)
+    except Exception:  # a foreign object whose repr fails
+        return f"<{type(value).__name__}>"
+
+
+def too_deep(data: Any, path: str = "", limit: int = MAX_DEPTH) -> Problem | None:
+    """A :class:`Problem` at the dotted key of the first value nested more than ``limit`` tables or arrays deep
+    in ``data`` (walked without recursion, so a nesting of any depth, even a cycle, is safe); None if none is."""
+    stack = [(data, path, 0)]
+    while stack:
+        value, where, depth = stack.pop()
+        if not isinstance(value, (dict, list)):
+            continue
+        if depth >= limit:
+            return Problem(
+                where or "(scene)",
+                f"is nested more than {limit} tables or arrays deep",
+                "flatten it: no scene key takes values nested that deep (a height grid is a list of lists)",
+            )
+        if isinstance(value, dict):
+            stack.extend((v, f"{where}.{k}" if where else str(k), depth + 1) for k, v in value.items())
+        else:
+            stack.extend((v, f"{where}[{i}]", depth + 1) for i, v in enumerate(value))
+    return None
+
+
 def _is_number(v: Any) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool)
 
@@ -743,9 +806,23 @@ def _type_name(v: Any) -> str:
     return names.get(type(v), type(v).__name__)
 
 
-def _check_range(key: Key, value: float, path: str) -> Problem | None:
-    if not math.isfinite(value):
-        return Problem(path, f"must be a finite number, got {value}", f"give {key.range_text() or 'a finite value'}")
+def _check_range(key: Key, value: int | float, path: str) -> Problem | None:
+    """The problem with number ``value`` of ``key``: not finite, outside [MIN_MAGNITUDE, MAX_MAGNITUDE] in
+    magnitude (0 excepted), an integer key's value beyond MAX_INT, or outside the key's range; None if fine."""
+    allowed = f" {key.range_text()}" if key.range_text() else ""
+    if isinstance(value, float) and not math.isfinite(value):
+        return Problem(path, f"must be a finite number, got {value}", f"set {path} to a finite number{allowed}")
+    if key.kind in ("int", "ivec3", "int_or_auto") and abs(value) > MAX_INT:
+        return Problem(path, f"{show(value)} is too large (at most {MAX_INT})", f"set {path} to an integer{allowed}")
+    if value != 0 and not MIN_MAGNITUDE <= abs(value) <= MAX_MAGNITUDE:  # exact for integers of any size
+        shown = f"{value:g}" if isinstance(value, float) else show(value)
+        unit = f" {key.unit}" if key.unit else ""
+        return Problem(
+            path,
+            f"{shown}{unit} is out of scale: a number must be 0 or between {MIN_MAGNITUDE:g} and "
+            f"{MAX_MAGNITUDE:g} in magnitude (SI units)",
+            f"set {path} to a value{allowed} in SI units{f' ({key.unit})' if key.unit else ''}",
+        )
     bad = False
     if key.lo is not None and (value < key.lo or (key.lo_open and value == key.lo)):
         bad = True
@@ -757,7 +834,10 @@ def _check_range(key: Key, value: float, path: str) -> Problem | None:
 
 
 def _check_value(key: Key, value: Any, path: str) -> tuple[Any, list[Problem]]:
+    """(checked value, problems): the value is None whenever a problem was found (so no check or computation
+    after this one sees a value that was refused)."""
     k = key.kind
+    name = path.rsplit(".", 1)[-1]
     example = {
         "float": "1.5",
         "int": "8",
@@ -773,12 +853,12 @@ def _check_value(key: Key, value: Any, path: str) -> tuple[Any, list[Problem]]:
             return None, [
                 Problem(
                     path,
-                    f'must be an integer or "auto", got {_type_name(value)} ({value!r})',
-                    f'write e.g. {path.rsplit(".", 1)[-1]} = 4, or {path.rsplit(".", 1)[-1]} = "auto"',
+                    f'must be an integer or "auto", got {_type_name(value)} ({show(value)})',
+                    f'write e.g. {name} = 4, or {name} = "auto"',
                 )
             ]
-        p = _check_range(key, float(value), path)
-        return int(value), [p] if p else []
+        p = _check_range(key, value, path)
+        return (None, [p]) if p else (int(value), [])
     if k in ("float", "int"):
         ok = _is_number(value) if k == "float" else isinstance(value, int) and not isinstance(value, bool)
         if not ok:
@@ -786,20 +866,21 @@ def _check_value(key: Key, value: Any, path: str) -> tuple[Any, list[Problem]]:
             return None, [
                 Problem(
                     path,
-                    f"must be {what}, got {_type_name(value)} ({value!r})",
-                    f"write e.g. {path.rsplit('.', 1)[-1]} = {example[k]}",
+                    f"must be {what}, got {_type_name(value)} ({show(value)})",
+                    f"write e.g. {name} = {example[k]}",
                 )
             ]
-        value = float(value) if k == "float" else int(value)
         p = _check_range(key, value, path)
-        return value, [p] if p else []
+        if p:
+            return None, [p]
+        return (float(value) if k == "float" else int(value)), []
     if k == "bool":
         if not isinstance(value, bool):
             return None, [
                 Problem(
                     path,
-                    f"must be true or false, got {_type_name(value)} ({value!r})",
-                    f"write {path.rsplit('.', 1)[-1]} = true or false (no quotes)",
+                    f"must be true or false, got {_type_name(value)} ({show(value)})",
+                    f"write {name} = true or false (no quotes)",
                 )
             ]
         return value, []
@@ -807,16 +888,22 @@ def _check_value(key: Key, value: Any, path: str) -> tuple[Any, list[Problem]]:
         if not isinstance(value, str):
             return None, [
                 Problem(
-                    path, f"must be a string, got {_type_name(value)} ({value!r})", "put the value in double quotes"
+                    path, f"must be a string, got {_type_name(value)} ({show(value)})", "put the value in double quotes"
                 )
             ]
+        if "\x00" in value:  # no file name, output folder or label can hold one
+            return None, [Problem(path, "contains a NUL character", "remove it")]
         return value, []
     if k == "choice":
         if not isinstance(value, str) or value not in key.choices:
-            close = difflib.get_close_matches(str(value), [str(c) for c in key.choices], n=1)
+            close = (
+                difflib.get_close_matches(value, [str(c) for c in key.choices], n=1) if isinstance(value, str) else []
+            )
             hint = f" (did you mean {close[0]!r}?)" if close else ""
             return None, [
-                Problem(path, f"must be {key.range_text()}, got {value!r}{hint}", f"set {path} to {key.range_text()}")
+                Problem(
+                    path, f"must be {key.range_text()}, got {show(value)}{hint}", f"set {path} to {key.range_text()}"
+                )
             ]
         return value, []
     if k in ("vec3", "ivec3", "floats"):
@@ -830,30 +917,23 @@ def _check_value(key: Key, value: Any, path: str) -> tuple[Any, list[Problem]]:
             what = f"a list of {n} {'integers' if integer else 'numbers'}" if n else "a list of numbers"
             return None, [
                 Problem(
-                    path,
-                    f"must be {what}, got {value!r}",
-                    f"write e.g. {path.rsplit('.', 1)[-1]} = {example.get(k, '[1.0, 2.0]')}",
+                    path, f"must be {what}, got {show(value)}", f"write e.g. {name} = {example.get(k, '[1.0, 2.0]')}"
                 )
             ]
-        out = [int(v) if integer else float(v) for v in value]
-        problems = []
-        for i, v in enumerate(out):
-            p = _check_range(key, float(v), f"{path}[{i}]")
-            if p:
-                problems.append(p)
-        return out, problems
+        problems = [p for i, v in enumerate(value) if (p := _check_range(key, v, f"{path}[{i}]"))]
+        if problems:
+            return None, problems
+        return [int(v) if integer else float(v) for v in value], []
     if k == "strs":
         if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
             return None, [
                 Problem(
-                    path,
-                    f"must be a list of strings, got {value!r}",
-                    f'write e.g. {path.rsplit(".", 1)[-1]} = ["{key.choices[0]}"]',
+                    path, f"must be a list of strings, got {show(value)}", f'write e.g. {name} = ["{key.choices[0]}"]'
                 )
             ]
         bad = [v for v in value if v not in key.choices]
         if bad:
-            return None, [Problem(path, f"unknown entries {bad}", f"use only {key.range_text()}")]
+            return None, [Problem(path, f"unknown entries {show(bad)}", f"use only {key.range_text()}")]
         return list(value), []
     if k == "grid":
         if (
@@ -869,6 +949,11 @@ def _check_value(key: Key, value: Any, path: str) -> tuple[Any, list[Problem]]:
                     "write e.g. heights = [[0.0, 0.1], [0.1, 0.2]]",
                 )
             ]
+        for j, row in enumerate(value):  # every number finite and in scale; the first bad one is named
+            for i, v in enumerate(row):
+                p = _check_range(key, v, f"{path}[{j}][{i}]")
+                if p:
+                    return None, [p]
         return [[float(v) for v in r] for r in value], []
     raise AssertionError(f"unknown key kind {k}")
 
@@ -888,9 +973,9 @@ def read_table(data: Any, path: str, keys: list[Key], problems: list[Problem]) -
     known = {k.name: k for k in keys}
     for name in data:
         if name not in known:
-            close = difflib.get_close_matches(name, list(known), n=1)
+            close = difflib.get_close_matches(name, list(known), n=1) if isinstance(name, str) else []
             fix = f"did you mean {close[0]!r}?" if close else f"remove it; the keys of [{path}] are {', '.join(known)}"
-            problems.append(Problem(f"{path}.{name}", "unknown key", fix))
+            problems.append(Problem(f"{path}.{show(name) if not isinstance(name, str) else name}", "unknown key", fix))
     out: dict[str, Any] = {}
     for key in keys:
         sub = f"{path}.{key.name}"
