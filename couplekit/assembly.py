@@ -268,11 +268,17 @@ def retention_flags(scene: Scene) -> list[bool]:
 def build_sand(scene: Scene, backend: Backend, log: Callable[[str], Any]):
     """The :class:`~couplekit.sand.solver.SandSolver` of ``scene`` (bodies seeded as the module docstring says,
     walls on every face, obstacles as one SDF collider, the sand's Δt from the scheduler) and the particles'
-    retention flags."""
+    retention flags.
+
+    No particle is seeded inside an obstacle: a body is seeded less the obstacles it overlaps
+    (:class:`~couplekit.scene.geometry.Difference`; validation refuses a body left without particles). Each
+    obstacle keeps its own friction: the SDF collider of all of them samples, per grid node, the friction of the
+    obstacle nearest the node (:meth:`~couplekit.sand.boundaries.SdfCollider.union`)."""
     from .sand.boundaries import DomainWalls, SdfCollider, Wall
     from .sand.params import SandParams
     from .sand.seeding import seed_sdf
     from .sand.solver import SandSolver, TimeStepError
+    from .scene.geometry import Difference, overlapping
     from .schedulers import SubstepLimitError, sand_step
 
     sd, dom, eff, sch = scene.sand, scene.domain, scene.effects, scene.scheduler
@@ -298,13 +304,19 @@ def build_sand(scene: Scene, backend: Backend, log: Callable[[str], Any]):
     )
     xs, vols, vels, dens, retains = [], [], [], [], []
     size = np.asarray(dom.size)
+    obstacles = [b for b in scene.bodies if b.kind == "obstacle"]
+    solids = [b.geometry.solver_shape(dom) for b in obstacles]
     for i, b in enumerate(bodies):
-        shape = b.geometry.shape(dom, 0.25 * dom.dx)
+        shape = b.geometry.solver_shape(dom)
         lo, hi = shape.bounds()
         lo, hi = np.maximum(lo, 0.0), np.minimum(hi, size)
-        seeded = seed_sdf(shape.sdf, lo, hi, dom.dx, sd.particles_per_axis, sd.jitter, sd.seed + i)
-        if seeded.count == 0:
-            raise ValueError(f"sand body {b.name!r} is thinner than the particle spacing: no particle seeded")
+        cutters = overlapping(shape, solids)
+        sdf = Difference(shape, cutters).sdf if cutters else shape.sdf  # particles only outside the obstacles
+        seeded = seed_sdf(sdf, lo, hi, dom.dx, sd.particles_per_axis, sd.jitter, sd.seed + i)
+        if seeded.count == 0:  # validation refuses this (couplekit.scene.model._check_seeding)
+            raise ValueError(
+                f"sand body {b.name!r} gets no particle: it is thinner than the particle spacing, or inside obstacles"
+            )
         xs.append(seeded.x)
         vols.append(sd.packing_fraction * seeded.volume)  # grain volume: ε0 of the sub-cell (module docstring)
         vels.append(np.repeat(np.asarray(b.velocity, np.float64)[:, None], seeded.count, axis=1))
@@ -316,12 +328,11 @@ def build_sand(scene: Scene, backend: Backend, log: Callable[[str], Any]):
     walls = DomainWalls.from_dict(
         {wall_face(f): Wall("separate", sd.wall_friction) for f in dom.boundary}, bound=sd.wall_layers
     )
-    obstacles = [b for b in scene.bodies if b.kind == "obstacle"]
     collider = None
     if obstacles:
-        union = Union([b.geometry.shape(dom, 0.25 * dom.dx) for b in obstacles])
-        friction = max(b.friction if b.friction is not None else sd.wall_friction for b in obstacles)
-        collider = SdfCollider(lambda p, t, s=union: s.sdf(p), mode="separate", friction=friction)
+        frictions = [b.friction if b.friction is not None else sd.wall_friction for b in obstacles]
+        sdfs = [lambda p, t, s=s: s.sdf(p) for s in solids]
+        collider = SdfCollider.union(sdfs, frictions, mode="separate")
     auto = sch.kind == "subcycle" and sch.substeps == "auto"
     # with substeps = "auto" the scheduler sets the sand's step every step; it starts at the smallest it may take
     dt = scene.time.dt / sch.max_substeps if auto else sand_step(sch.kind, scene.time.dt, sch.substeps, sch.sand_every)

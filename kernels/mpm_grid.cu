@@ -17,7 +17,9 @@
 // half-spaces, spheres, boxes and capped cylinders with linear and angular velocity, optionally inverted
 // (solid outside, for containers); a node is in contact when the signed distance is <= 0.
 // Grid SDF collider: a node field of signed distance (has_sdf = 1), normal by central differences,
-// parameters sdf_params = (mode, friction, vx, vy, vz).
+// parameters sdf_params = (mode, friction, vx, vy, vz); with node_friction = 1 the friction is read per node
+// from sdf_friction (several obstacles in one SDF, each with its own friction: the nearest one's at a node),
+// otherwise sdf_params[1] holds everywhere (sdf_friction is then a dummy of one element).
 #include "common.cuh"
 #include "mpm_loops.cuh"
 
@@ -118,7 +120,8 @@ KERNEL void mpm_grid_update(const long long n, const float* RESTRICT grid_m, con
                             const int nz, const float dx, const float dt, const float gx, const float gy,
                             const float gz, const int bound, const float* RESTRICT walls,
                             const float* RESTRICT colliders, const int ncolliders, const float* RESTRICT sdf,
-                            const int has_sdf, const float* RESTRICT sdf_params) {
+                            const int has_sdf, const float* RESTRICT sdf_params,
+                            const float* RESTRICT sdf_friction, const int node_friction) {
     const long long ncell = (long long)nx * ny * nz;
     MPM_FOR_EACH_CELL(x, y, z, nx, ny, nz) {
         const long long i = x + (long long)nx * (y + (long long)ny * z);
@@ -163,8 +166,9 @@ KERNEL void mpm_grid_update(const long long n, const float* RESTRICT grid_m, con
                     sx /= len;
                     sy /= len;
                     sz /= len;
-                    mpm_apply_bc(vx, vy, vz, sx, sy, sz, (int)sdf_params[0], sdf_params[1], sdf_params[2],
-                                 sdf_params[3], sdf_params[4]);
+                    const float mu = node_friction ? sdf_friction[i] : sdf_params[1];
+                    mpm_apply_bc(vx, vy, vz, sx, sy, sz, (int)sdf_params[0], mu, sdf_params[2], sdf_params[3],
+                                 sdf_params[4]);
                 }
             }
         }

@@ -13,7 +13,9 @@ reaches one node beyond the particle's cell).  Colliders are half-spaces, sphere
 y-axis capped cylinders with a linear and an angular velocity; a moving collider's centre is advanced by
 the solver each step (x_c += Δt v_lin).  ``inverted=True`` makes the solid the *outside* of the shape
 (a container).  A :class:`SdfCollider` takes any SDF callable ``sdf(points (N, 3), t) -> (N,)`` (negative
-inside the solid); it is sampled on the nodes once, or every step when ``moving=True``.
+inside the solid); it is sampled on the nodes once, or every step when ``moving=True``.  Several solids of
+different friction in one SDF collider (:meth:`SdfCollider.union`) keep their own: the friction of the solid
+nearest each node (smallest SDF) is sampled next to the SDF, and the grid update reads it per node.
 """
 
 from __future__ import annotations
@@ -150,11 +152,55 @@ class SdfCollider:
     velocity: Sequence[float] = (0.0, 0.0, 0.0)
     moving: bool = False
     _params: np.ndarray = field(init=False, repr=False)
+    _parts: tuple = field(default=(), init=False, repr=False)
 
     def __post_init__(self) -> None:
         _mode(self.mode)
+        if not self.friction >= 0:
+            raise ValueError(f"collider friction must be >= 0, got {self.friction}")
         self.velocity = np.asarray(self.velocity, dtype=np.float64).reshape(3)
         self._params = np.array([MODES[self.mode], self.friction, *self.velocity], dtype=np.float32)
+
+    @classmethod
+    def union(
+        cls,
+        sdfs: Sequence[Callable[[np.ndarray, float], np.ndarray]],
+        frictions: Sequence[float],
+        mode: str = "separate",
+        velocity: Sequence[float] = (0.0, 0.0, 0.0),
+        moving: bool = False,
+    ) -> SdfCollider:
+        """One collider of several solids (SDF the minimum of theirs), each with its own Coulomb friction: at a
+        node the friction of the solid whose SDF is smallest there (:meth:`sample`). With equal frictions it is
+        the plain collider of that friction (no per-node field)."""
+        sdfs, frictions = list(sdfs), [float(f) for f in frictions]
+        if not sdfs or len(sdfs) != len(frictions):
+            raise ValueError(f"union needs one friction per solid, got {len(sdfs)} solids, {len(frictions)} frictions")
+        if any(not f >= 0 for f in frictions):
+            raise ValueError(f"collider frictions must be >= 0, got {frictions}")
+
+        def sdf(points, t):
+            return np.min([np.asarray(s(points, t), dtype=np.float64) for s in sdfs], axis=0)
+
+        collider = cls(sdf, mode, frictions[0] if len(set(frictions)) == 1 else max(frictions), velocity, moving)
+        if len(set(frictions)) > 1:
+            collider._parts = tuple(zip(sdfs, frictions, strict=True))
+        return collider
+
+    @property
+    def per_node_friction(self) -> bool:
+        """The friction differs between the solids: :meth:`sample` returns it per point."""
+        return bool(self._parts)
+
+    def sample(self, points: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray | None]:
+        """(SDF (N,), friction (N,) or None) at ``points`` (N, 3): the friction of the solid with the smallest
+        SDF at each point, None when one friction holds everywhere (the kernel then reads ``friction``)."""
+        if not self._parts:
+            return np.asarray(self.sdf(points, t), dtype=np.float64), None
+        d = np.stack([np.asarray(s(points, t), dtype=np.float64) for s, _ in self._parts])
+        nearest = np.argmin(d, axis=0)  # the first of equal distances, as np.min takes it
+        mu = np.array([f for _, f in self._parts], dtype=np.float64)[nearest]
+        return d[nearest, np.arange(d.shape[1])], mu
 
     def params(self) -> np.ndarray:
         """(mode, friction, vx, vy, vz) for the kernel."""

@@ -31,6 +31,7 @@ class KernelOps:
         self._scratch = None
         self._threads = 1
         self._skipped = backend.xp.zeros(1, dtype=np.int32)
+        self._no_friction = backend.xp.zeros(1, dtype=np.float32)  # the pointer passed without a friction field
 
     def _module(self, source: str, defines: dict | None = None):
         return self.backend.module(source, defines)
@@ -99,8 +100,12 @@ class KernelOps:
         sdf,
         has_sdf: int,
         sdf_params,
+        sdf_friction=None,
     ) -> None:
-        """v_i = (mv)_i/m_i + Δt (g + f_ext/m_i) on nodes with mass (Eq. 29), then boundary conditions."""
+        """v_i = (mv)_i/m_i + Δt (g + f_ext/m_i) on nodes with mass (Eq. 29), then boundary conditions.
+
+        ``sdf_friction``: the SDF collider's Coulomb friction per node (nz, ny, nx), or None for its one friction
+        ``sdf_params[1]``."""
         nz, ny, nx = grid_m.shape
         g = [np.float32(c) for c in gravity]
         self._module("mpm_grid.cu").function("mpm_grid_update")(
@@ -122,6 +127,8 @@ class KernelOps:
             sdf,
             np.int32(has_sdf),
             sdf_params,
+            self._no_friction if sdf_friction is None else sdf_friction,
+            np.int32(sdf_friction is not None),
         )
 
     def g2p(self, x, v, C, F, tau, q, vc, saturation, grid_v, dx: float, dt: float, model: ConstitutiveModel) -> None:

@@ -165,8 +165,12 @@ class ReferenceOps:
         sdf,
         has_sdf: int,
         sdf_params,
+        sdf_friction=None,
     ) -> None:
-        """v_i = (mv)_i/m_i + Δt (g + f_ext/m_i) on nodes with mass (Eq. 29), then boundary conditions."""
+        """v_i = (mv)_i/m_i + Δt (g + f_ext/m_i) on nodes with mass (Eq. 29), then boundary conditions.
+
+        ``sdf_friction``: the SDF collider's Coulomb friction per node (nz, ny, nx), or None for its one friction
+        ``sdf_params[1]``."""
         nz, ny, nx = grid_m.shape
         m = grid_m.astype(np.float64).ravel()
         has = m > 0
@@ -206,7 +210,8 @@ class ReferenceOps:
             sel = (phi.ravel() <= 0) & has & (length > 0)
             normal = gvec[sel] / length[sel, None]
             p = np.asarray(sdf_params, dtype=np.float64)
-            vel[sel] = _apply_bc(vel[sel], normal, int(p[0]), float(p[1]), p[2:5])
+            mu = float(p[1]) if sdf_friction is None else np.asarray(sdf_friction, dtype=np.float64).ravel()[sel]
+            vel[sel] = _apply_bc(vel[sel], normal, int(p[0]), mu, p[2:5])
         grid_v[...] = vel.T.reshape(grid_v.shape)
 
     # ------------------------------------------------------------------ G2P, plasticity, advection (Eq. 30)
@@ -265,18 +270,20 @@ def _constitutive(F_trial: np.ndarray, q, vc, saturation, model: ConstitutiveMod
     return F_new, tau, q64, vc64
 
 
-def _apply_bc(vel: np.ndarray, normal: np.ndarray, mode: int, mu: float, v_obj: np.ndarray) -> np.ndarray:
-    """Sticky (0) / slip (1) / separate with Coulomb friction (2) on relative velocities (N, 3)."""
+def _apply_bc(vel: np.ndarray, normal: np.ndarray, mode: int, mu, v_obj: np.ndarray) -> np.ndarray:
+    """Sticky (0) / slip (1) / separate with Coulomb friction (2) on relative velocities (N, 3); ``mu`` one
+    friction or one per row (N,)."""
     rel = vel - v_obj
     if mode == 0:
         return np.broadcast_to(v_obj, vel.shape).copy()
     vn = np.einsum("na,na->n", rel, np.broadcast_to(normal, rel.shape))
     act = np.ones_like(vn, dtype=bool) if mode == 1 else vn < 0
     t = rel - vn[:, None] * normal
-    if mode == 2 and mu > 0:
+    mu = np.asarray(mu, dtype=np.float64)
+    if mode == 2 and np.any(mu > 0):
         vt = np.linalg.norm(t, axis=1)
         scale = np.where(vt > 0, np.maximum(0.0, 1.0 + mu * vn / np.where(vt > 0, vt, 1.0)), 0.0)
-        t = t * scale[:, None]
+        t = t * np.where(mu > 0, scale, 1.0)[:, None]  # no friction: the kernel skips the scaling
     return v_obj + np.where(act[:, None], t, rel)
 
 

@@ -55,7 +55,8 @@ class SandSolver:
     gravity: m/s², default (0, 0, −9.81) (z up).
     walls: :class:`DomainWalls` (default: every face separating, friction 0.5, 2 node layers).
     colliders: analytic :class:`Collider` list; moving ones are advanced by Δt·velocity every step.
-    sdf_collider: optional :class:`SdfCollider` sampled on the nodes.
+    sdf_collider: optional :class:`SdfCollider` sampled on the nodes (with the per-node friction of a
+        :meth:`SdfCollider.union` of solids of different friction).
     saturation: per-particle saturation S_r,p (P,) driving the cohesion (default 0 = dry).
     cfl: particle CFL number C_v (Δt ≤ C_v dx / max|v_p|); elastic_cfl: C_e (Δt ≤ C_e dx / c_p).
     cfl_check_every: check the particle CFL every this many steps (0 = never; a violation raises).
@@ -146,6 +147,8 @@ class SandSolver:
 
         self._walls = be.asarray(pack_walls(self.walls), f32)
         self._sdf = xp.zeros(self.shape if sdf_collider else (1,), dtype=f32)
+        self._sdf_friction = None
+        """Per-node friction of the SDF collider (None: its one ``friction``, read from ``_sdf_params``)."""
         self._sdf_params = be.asarray(sdf_collider.params() if sdf_collider else np.zeros(5), f32)
         self._upload_colliders()
         if sdf_collider is not None:
@@ -298,6 +301,7 @@ class SandSolver:
             self._sdf,
             int(self.sdf_collider is not None),
             self._sdf_params,
+            sdf_friction=self._sdf_friction,
         )
 
     def g2p(self) -> None:
@@ -423,8 +427,9 @@ class SandSolver:
 
     def _sample_sdf(self) -> None:
         pts = node_positions(self.shape, self.dx)
-        phi = np.asarray(self.sdf_collider.sdf(pts, self.time), dtype=np.float64).reshape(self.shape)
-        self._sdf = self.backend.asarray(phi, np.float32)
+        phi, mu = self.sdf_collider.sample(pts, self.time)
+        self._sdf = self.backend.asarray(np.asarray(phi, dtype=np.float64).reshape(self.shape), np.float32)
+        self._sdf_friction = None if mu is None else self.backend.asarray(mu.reshape(self.shape), np.float32)
 
     def __repr__(self) -> str:
         return (
