@@ -27,6 +27,7 @@ Conventions (stated once):
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -48,6 +49,7 @@ __all__ = [
     "build_fluid",
     "build_sand",
     "build_scheduler",
+    "check_run",
     "memory_estimate",
     "refuse_unsupported",
     "retention_flags",
@@ -89,6 +91,47 @@ def refuse_unsupported(scene: Scene) -> None:
         raise CouplingUnavailableError(
             f"scene {scene.name!r} needs what the coupling module does not do yet: " + "; ".join(problems)
         )
+
+
+def check_run(scene: Scene, available: tuple[float, str] | None = None) -> dict[str, float]:
+    """Raise what :class:`couplekit.simulation.Simulation` refuses a scene for before it allocates anything,
+    with the same messages, so that ``couplekit validate`` reports what ``couplekit run`` would refuse:
+    :func:`refuse_unsupported` (CouplingUnavailableError), then the memory estimate against ``available``
+    memory (bytes, what; default the host's, :func:`couplekit.simulation.available_memory`: ``run`` on the cuda
+    backend compares with free GPU memory instead) as InsufficientMemoryError, whose ``estimate`` holds the
+    estimate. Returns the estimate.
+
+    A scene whose grids alone (fluid and sand grid, no particles) exceed the memory is refused on that bound
+    when it has a sand jet on a face of more than ``LIMITS['max_outlet_face_cells']`` cells: the full estimate
+    would lay out the jet's emission sites to count them, gigabytes before the comparison."""
+    from .backend import get_backend
+    from .faces import face_plane_shape
+    from .scene.model import LIMITS
+    from .simulation import InsufficientMemoryError, _gib, available_memory
+
+    refuse_unsupported(scene)
+    avail, what = available if available is not None else available_memory(get_backend("numpy"))
+    shape = scene.domain.shape
+    big_jet = any(
+        i.sand_fraction > 0
+        and math.prod(face_plane_shape(shape, solver_face(i.face))) > LIMITS["max_outlet_face_cells"]
+        for i in scene.inflows
+    )
+    if big_jet:  # a lower bound: the scene without the sand of its jets
+        import dataclasses
+
+        jetless = tuple(dataclasses.replace(i, sand_fraction=0.0) for i in scene.inflows)
+        est = memory_estimate(dataclasses.replace(scene, inflows=jetless))
+    else:
+        est = memory_estimate(scene)
+    if est["total"] > 0.9 * avail:  # Simulation.__init__'s test and message
+        exc = InsufficientMemoryError(
+            f"scene {scene.name!r} needs about {_gib(est['total'])} but only {_gib(avail)} of {what} is free: "
+            "use a coarser domain.dx, fewer sand.particles_per_cell, or a larger device"
+        )
+        exc.estimate = est
+        raise exc
+    return est
 
 
 def assemble(

@@ -3,13 +3,19 @@
 ``couplekit info [--selfcheck] [--backend B]``: version, backend chosen and why, host compiler, nvcc,
 CuPy/GPU status, kernel cache; ``--selfcheck`` also builds and runs the self-check kernels against NumPy.
 
-``couplekit validate SCENE``: check a scene file (nothing is allocated); exit 0 when valid, 2 when not.
+``couplekit validate SCENE``: check a scene file (nothing is allocated); exit 0 when valid, 2 when not, 3 when
+``run`` refuses it on any machine (a memory estimate beyond 16 TiB; ``run``'s message). What ``run`` refuses on
+this machine (the estimate against the host's available memory, as ``run`` compares it on the cpu and numpy
+backends; on cuda it compares with free GPU memory) or for now (a coupling switch) is noted, exit 0.
 
 ``couplekit run SCENE [--frames N] [--out DIR] [--backend B] [--resume CKPT] [--scheduler SPEC]``: run a scene
 with a progress bar, writing ParaView/PLY/PNG outputs, diagnostics and checkpoints (``--scheduler`` replaces
 the scene's ``[scheduler]`` table, e.g. ``subcycle:8``). Exit codes: 0 done, 1 NaN/Inf (the report names
 step, field and cell; ``last_good.h5`` is kept), 2 invalid scene, 3 refused (coupled scene,
 not enough memory), 130 interrupted by Ctrl-C (``interrupted.h5`` written; resume with ``--resume``).
+
+A closed standard output (``couplekit validate scene.toml | head -1``) ends the command quietly, exit 141
+(128 + SIGPIPE, as a shell reports a process ended by a closed pipe).
 
 ``couplekit sweep SWEEP [--out DIR] [--address HOST:PORT] [--workers N] [--threads N]``: run a sweep file (a
 base scene and a grid of dotted-key values, docs/sweeps.md) on Dask; exit 0 when every point finished, 1 when
@@ -62,10 +68,14 @@ def _cmd_info(args: argparse.Namespace) -> int:
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
-    from .assembly import CouplingUnavailableError, memory_estimate, refuse_unsupported
+    """Exit 0 valid, 2 invalid, 3 refused (``run``'s message and exit code) when the memory estimate exceeds what
+    any machine holds; what ``run`` refuses on this machine only (its memory) or for now (a coupling switch) is
+    noted with ``run``'s message, exit 0: the same file validates alike on every host."""
+    from .assembly import CouplingUnavailableError, check_run
     from .scene import Scene, SceneError
-    from .simulation import _gib
+    from .simulation import InsufficientMemoryError, _gib
 
+    any_machine = 2.0**44  # 16 TiB: more than the memory of any single host or device couplekit runs on
     try:
         scene = Scene.load(args.scene)
     except SceneError as exc:
@@ -77,15 +87,24 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     units = scene.units()
     if scene.has_fluid:
         print(f"fastest expected flow {speed:.3g} m/s ({why}): lattice Mach {units.mach(speed):.3g}")
-    est = memory_estimate(scene)
-    print(
-        f"memory estimate: {_gib(est['total'])}"
-        + (f", about {est['particle_count']:,.0f} particles at most" if est["particle_count"] else "")
-    )
+    est, note = None, None
     try:
-        refuse_unsupported(scene)
+        est = check_run(scene)
     except CouplingUnavailableError as exc:
-        print(f"note: `run` refuses this scene: {exc}")
+        note = f"note: `run` refuses this scene: {exc}"
+    except InsufficientMemoryError as exc:
+        est = exc.estimate
+        if est["total"] > any_machine:
+            print(f"refused: {exc}", file=sys.stderr)
+            return 3
+        note = f"note: `run` refuses this scene on this machine: {exc}"
+    if est is not None:
+        print(
+            f"memory estimate: {_gib(est['total'])}"
+            + (f", about {est['particle_count']:,.0f} particles at most" if est["particle_count"] else "")
+        )
+    if note is not None:
+        print(note)
     return 0
 
 
@@ -93,6 +112,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from .scene import Scene, SceneError
     from .simulation import CouplingUnavailableError, InsufficientMemoryError, Simulation, with_scheduler
 
+    for name in ("frames", "threads"):
+        if getattr(args, name) is not None and getattr(args, name) < 1:
+            print(f"error: --{name} must be 1 or more, got {getattr(args, name)}", file=sys.stderr)
+            return 2
     try:
         scene = Scene.load(args.scene)
         if args.scheduler is not None:
@@ -227,9 +250,41 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of the ``couplekit`` command."""
-    args = build_parser().parse_args(argv)
-    return int(args.func(args))
+    """Entry point of the ``couplekit`` command. A closed standard output or error (the reader of a pipe
+    left, ``| head -1``) ends it quietly with exit 141; a broken pipe of anything else is raised."""
+    try:
+        args = build_parser().parse_args(argv)
+        code = int(args.func(args))
+        sys.stdout.flush()  # a pipe's last block is written here, not at exit, so a closed pipe is caught here
+        return code
+    except BrokenPipeError:
+        if not _closed_output():
+            raise
+        return 141
+
+
+def _closed_output() -> bool:
+    """Whether stdout or stderr is a pipe whose reader has gone (poll reports an error on its write end); each
+    such stream is pointed at os.devnull, so that the interpreter's last flush at exit does not fail again."""
+    import os
+    import select
+
+    closed = False
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            fd = stream.fileno()
+        except (AttributeError, OSError, ValueError):  # not a file (e.g. a test's StringIO)
+            continue
+        if hasattr(select, "poll"):
+            poller = select.poll()
+            poller.register(fd, select.POLLOUT)
+            if not any(event & (select.POLLERR | select.POLLHUP) for _, event in poller.poll(0)):
+                continue
+        closed = True  # (without poll, a broken pipe reaching here is taken to be this stream's)
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, fd)
+        os.close(devnull)
+    return closed
 
 
 if __name__ == "__main__":

@@ -7,7 +7,18 @@ in the repository matches.
 from __future__ import annotations
 
 from .model import LIMITS
-from .schema import BODY_KEYS, GEOMETRY_COMMON_KEYS, GEOMETRY_KEYS, INFLOW_KEYS, REQUIRED, SECTIONS, Key
+from .schema import (
+    BODY_KEYS,
+    GEOMETRY_COMMON_KEYS,
+    GEOMETRY_KEYS,
+    INFLOW_KEYS,
+    MAX_DEPTH,
+    MAX_MAGNITUDE,
+    MIN_MAGNITUDE,
+    REQUIRED,
+    SECTIONS,
+    Key,
+)
 
 __all__ = ["render"]
 
@@ -17,7 +28,8 @@ A scene is a TOML file in SI units. `couplekit validate SCENE` checks it; `coupl
 in Python, `couplekit.Scene.load(path)`. A scene is refused before anything is allocated when a key is
 unknown, has the wrong type or an out-of-range value, when geometry lies outside the domain, when an inflow
 sits on a periodic face, or when the time step breaks the lattice Mach or MPM limits; the message names the
-dotted key (e.g. `bodies[0].geometry.radius`) and the fix, and lists every problem at once.
+dotted key (e.g. `bodies[0].geometry.radius`) and the fix, and lists every problem at once (the full list:
+'What validate and run refuse', at the end).
 
 Conventions: z is up (gravity defaults to (0, 0, -9.81) m/s²); the domain is the box [0, size_x] × [0, size_y]
 × [0, size_z]; cell (i, j, k) is centred at ((i + ½) dx, (j + ½) dx, (k + ½) dx); one grid serves the LBM and
@@ -108,6 +120,45 @@ scene without sand takes only `lockstep`.
 Geometry: water and sand bodies must lie inside the domain, sand at least `sand.wall_layers` cells (default
 {LIMITS["sand_wall_cells"]}) from every face (the MPM walls take that many node layers); an obstacle must meet
 the domain.
+
+## What validate and run refuse
+
+`couplekit validate` and `couplekit run` read a scene through the same checks, before anything is allocated;
+no input, however broken, gives a traceback. Every problem names the dotted key and the fix, and all of them
+are listed at once (exit 2):
+
+- **The file:** not readable, not UTF-8 text (a binary file: key `(file)`), not TOML, or nested too deeply to
+  read (`(syntax)`); any table or array nested more than {MAX_DEPTH} deep (the key where it happens).
+- **Types:** a table given as a value (`fluid = 3`), a value of the wrong type, an unknown key or table (with
+  the closest name), a missing required key.
+- **Numbers:** every number, also each component of a vector, each height of a height grid and each height
+  read from a height file, must be finite (no `nan`, `inf`) and 0 or between {MIN_MAGNITUDE:g} and
+  {MAX_MAGNITUDE:g} in magnitude (so no product or quotient the checks and solvers form overflows or divides by
+  zero), integers at most 2⁶³ − 1, and each within its key's range. A value that fails is not used by any later
+  check (`dx = 0` is reported, never divided by).
+- **The grid:** `dx` or `resolution`, a whole number of cubic cells, at least 5 and at most
+  {LIMITS["max_cells_per_axis"]} cells per axis (the kernels index an axis with 32-bit integers).
+- **Geometry:** every body's shape is built as the solvers build it; any error of a mesh or height-file
+  reader (a file that is not a mesh, a mesh meshio cannot read, non-finite vertices, an open, non-watertight
+  mesh, whose inside is undefined; a surface that would need more than 2³¹ samples) is a problem of
+  `bodies[i].geometry` (or of its `file`).
+- **Seeding:** every sand body gets particles: no particle is seeded inside an obstacle, and a body thinner
+  than the particle spacing dx / k (k³ = `sand.particles_per_cell`) or wholly inside obstacles is refused
+  naming `bodies[i].geometry` (its seeding lattice is searched block by block, so this is cheap).
+- **Speeds:** `time.max_speed`, which the time-step checks trust when given, must be at least every speed the
+  scene gives itself: each body's and each inflow's velocity.
+- **Time step, boundaries, inflows, outlets, stirring, scheduler:** the checks above ('Time-step checks',
+  'Schedulers', the tables' notes).
+
+What `run` refuses for a reason outside the file is refused after validation, with exit 3 and the message
+`refused: ...`: a scene whose memory estimate (`couplekit.assembly.memory_estimate`) exceeds 90 % of the
+available memory (on the cpu and numpy backends the host's MemAvailable, on cuda the free GPU memory), and an
+effect the coupling cannot switch off yet (`effects.drag` or `effects.buoyancy` = false with sand and a
+fluid). `validate` reports both with `run`'s message (`couplekit.assembly.check_run`, against the host's
+available memory): it refuses, exit 3, a scene no machine holds (an estimate beyond 16 TiB, e.g. a 10¹⁵-cell
+grid), and notes, exit 0, what `run` refuses on this machine only or for now, so that a file validates alike
+on every host. `run --frames` and `--threads` must be 1 or more (exit 2). A closed standard output
+(`couplekit validate scene.toml | head -1`) ends either command quietly, exit 141.
 """
 
 
@@ -182,7 +233,8 @@ def render() -> str:
         "sphere": "Ball.",
         "cylinder": "Capped cylinder.",
         "heightfield": "The solid under a surface z = h(x, y), down to `base`; rows of the grid run along y, columns along x.",
-        "mesh": "A closed triangle mesh. Inside: parity of +x ray crossings (orientation-independent); "
+        "mesh": "A closed triangle mesh (an open one, with edges of one triangle only, is refused: its inside is "
+        "undefined). Inside: parity of +x ray crossings (orientation-independent); "
         "distance: exact point–triangle distance to candidate triangles found through dense surface samples.",
     }
     for gtype, keys in GEOMETRY_KEYS.items():
