@@ -109,6 +109,8 @@ def _cmd_validate(args: argparse.Namespace) -> int:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
+    from .io.checkpoint import CheckpointError
+    from .io.outputs import OutputFolderError, default_output, prepare_output
     from .scene import Scene, SceneError
     from .simulation import CouplingUnavailableError, InsufficientMemoryError, Simulation, with_scheduler
 
@@ -124,6 +126,12 @@ def _cmd_run(args: argparse.Namespace) -> int:
                       file=sys.stderr)  # fmt: skip
                 return 2
             scene = with_scheduler(scene, args.scheduler)
+        # the output folder before anything is allocated: a used one is refused unless resumed or overwritten
+        out = prepare_output(
+            args.out or scene.outputs.directory or default_output(scene.name),
+            resume=args.resume is not None,
+            overwrite=args.overwrite,
+        )
         if args.resume:
             sim = Simulation.load(args.resume, backend=args.backend, threads=args.threads)
             if sim.scene.to_dict() != scene.to_dict():
@@ -137,13 +145,13 @@ def _cmd_run(args: argparse.Namespace) -> int:
     except (CouplingUnavailableError, InsufficientMemoryError) as exc:
         print(f"refused: {exc}", file=sys.stderr)
         return 3
-    except (BackendUnavailableError, ValueError) as exc:
+    except (BackendUnavailableError, CheckpointError, OutputFolderError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("interrupted before the run started; nothing to save", file=sys.stderr)
         return 130
-    result = sim.run(frames=args.frames, out=args.out, progress=not args.no_progress)
+    result = sim.run(frames=args.frames, out=out, progress=not args.no_progress)
     if result.status == "interrupted":
         print(f"interrupted: checkpoint {result['checkpoint']}; continue with --resume {result['checkpoint']}")
         return 130
@@ -229,6 +237,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="replace the scene's [scheduler]: lockstep, subcycle[:K|auto][:hold|linear] or multirate:M",
     )
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
+    run.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the outputs of an earlier run in the output folder (else such a folder is refused)",
+    )
     run.set_defaults(func=_cmd_run)
 
     sweep = sub.add_parser("sweep", help="run a parameter sweep of a scene on Dask (docs/sweeps.md)")

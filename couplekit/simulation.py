@@ -349,19 +349,26 @@ class Simulation:
 
     # ------------------------------------------------------------------------------------ NaN / Inf
     def _solver_arrays(self) -> list[tuple[str, str, np.ndarray, str]]:
+        """(solver, name, host array, layout) of every array :meth:`check_finite` reads: the fluid's fields and
+        its populations (the state a restart continues from, padded with ghosts), every particle array."""
         arrays = []
         if self.fluid is not None:
             for name, a in self.fluid.fields().items():
                 if a.dtype.kind == "f":
                     arrays.append(("fluid", name, a, "cell (x, y, z)"))
+            for name in ("f", "h"):
+                a = getattr(self.fluid, name)
+                if a is not None:
+                    arrays.append(("fluid", name, self.backend.to_host(a), "padded cell (x, y, z)"))
         if self.sand is not None:
-            p = self.sand.particles()
-            for name in ("x", "v", "F"):
-                arrays.append(("sand", name, p[name], "particle"))
+            for name, a in self.sand.particles().items():
+                if a.dtype.kind == "f" and a.ndim >= 1 and a.shape[-1] == self.sand.n_particles:
+                    arrays.append(("sand", name, a, "particle"))
         return arrays
 
     def check_finite(self) -> None:
-        """Raise :class:`SimulationDiverged` naming the field and cell (or particle) of a NaN/Inf."""
+        """Raise :class:`SimulationDiverged` naming the field and cell (or particle) of a NaN/Inf in any fluid
+        field or population or any particle array."""
         for solver, name, a, where in self._solver_arrays():
             bad = ~np.isfinite(a)
             if bad.any():
@@ -371,7 +378,9 @@ class Simulation:
                     index: tuple = (int(idx[-1]),)
                 else:
                     z, y, x = (int(i) for i in idx[-3:])
-                    index = (x, y, z)
+                    shift = 1 if where.startswith("padded") else 0  # padded arrays: interior cell i at i + 1
+                    index = (x - shift, y - shift, z - shift)
+                    where = "cell (x, y, z)"
                 raise SimulationDiverged(self.step_count, solver, name, index, value, where)
 
     def _states(self) -> dict[str, dict[str, np.ndarray]]:
@@ -448,14 +457,33 @@ class Simulation:
     def load(
         cls, path: str | Path, backend: str | Backend | None = "auto", threads: int | None = None, log=print
     ) -> Simulation:
-        """Rebuild the scene of a checkpoint and restore its state (bitwise on the backend that wrote it)."""
-        from .io.checkpoint import load_checkpoint
+        """Rebuild the scene of a checkpoint and restore its state (bitwise on the backend that wrote it).
+
+        Refused with :class:`couplekit.io.CheckpointError` naming the file and the defect: a damaged or foreign
+        file (:func:`couplekit.io.load_checkpoint` verifies every dataset's checksum), a stored scene this
+        couplekit refuses, a state that does not fit the scene, or a state holding NaN/Inf (a restart from it
+        would diverge at once; use an earlier checkpoint)."""
+        from .io.checkpoint import CheckpointError, load_checkpoint
+        from .scene import SceneError
 
         scene_dict, states, meta = load_checkpoint(path)
-        sim = cls(
-            Scene.from_dict(scene_dict, source_name=f"scene of {path}"), backend=backend, threads=threads, log=log
-        )
-        sim._load_states(states, int(meta["step"]))
+        try:
+            scene = Scene.from_dict(scene_dict, source_name=f"scene of {path}")
+        except SceneError as exc:
+            raise CheckpointError(f"{path}: the scene it stores is refused by this couplekit:\n{exc}") from None
+        sim = cls(scene, backend=backend, threads=threads, log=log)
+        try:
+            sim._load_states(states, int(meta["step"]))
+        except (KeyError, ValueError, TypeError) as exc:
+            what = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
+            raise CheckpointError(f"{path}: its state does not fit its scene: {what}") from None
+        try:
+            sim.check_finite()
+        except SimulationDiverged as exc:
+            raise CheckpointError(
+                f"{path}: the checkpoint holds a non-finite value ({exc}); a restart would diverge at once: "
+                "resume from an earlier checkpoint"
+            ) from None
         if meta.get("backend") != sim.backend.name and log:
             log(f"note: checkpoint written by the {meta.get('backend')} backend, resumed on {sim.backend.name}")
         return sim
@@ -505,6 +533,7 @@ class Simulation:
         progress: bool = True,
         stream=None,
         stop: Callable[[], bool] | None = None,
+        overwrite: bool = False,
     ) -> RunResult:
         """Simulate until ``frames`` frames are complete (default ``time.frames``), writing outputs into
         ``out`` (default ``outputs.directory`` or ``runs/<name>``).
@@ -512,16 +541,22 @@ class Simulation:
         Each frame: step, NaN/Inf check, outputs, diagnostics line, progress bar; checkpoints every
         ``outputs.checkpoint_every`` frames and at the end (``checkpoint.h5``). Ctrl-C (SIGINT) or ``stop()``
         returning True ends the run cleanly between steps with ``interrupted.h5``. On NaN/Inf the last good
-        state is written to ``last_good.h5`` and the report to ``diverged.txt``.
+        state (the last one that passed the check) is written to ``last_good.h5`` and the report to
+        ``diverged.txt``.
+
+        The folder is checked first (:func:`couplekit.io.outputs.prepare_output`): one holding an earlier run's
+        outputs is refused unless this run resumes from a checkpoint (it appends) or ``overwrite`` deletes them.
         """
         from .io import DiagnosticsLog, PvdIndex
+        from .io.outputs import default_output, prepare_output
         from .io.progress import ProgressBar
 
         sc = self.scene
         total = int(frames if frames is not None else sc.time.frames)
-        out = Path(out or sc.outputs.directory or Path("runs") / sc.name)
-        out.mkdir(parents=True, exist_ok=True)
         resumed = self.step_count > 0
+        out = prepare_output(
+            out or sc.outputs.directory or default_output(sc.name), resume=resumed, overwrite=overwrite
+        )
         indexes = {"fields": PvdIndex(out / "fields.pvd"), "particles": PvdIndex(out / "particles.pvd")}
         log_file = DiagnosticsLog(out / "diagnostics.jsonl", append=resumed) if sc.outputs.diagnostics else None
         self._log(f"effects on: {', '.join(k for k, v in self.effects.items() if v)}")
@@ -539,8 +574,8 @@ class Simulation:
         steps_done = 0
         chunk = max(1, min(self.steps_per_frame, 10))
         try:
+            self.check_finite()  # a state from a checkpoint too: the last good state must be a checked one
             if self.step_count == 0:
-                self.check_finite()
                 self.write_frame(out, indexes, log_file)
             good, good_step = self._states(), self.step_count
             while self.frame < total:

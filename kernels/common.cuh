@@ -21,6 +21,8 @@
 //                                        partials are combined in thread order, so for a fixed thread count
 //                                        the result is bitwise reproducible.
 // Atomics: atomic_add(float*|double*|int*|unsigned int*, value).
+// CK_NANF: a quiet float NaN (to mark a result that cannot be computed, e.g. a particle whose position is not
+// finite: it must stay visibly non-finite, never be turned into a valid-looking number).
 // Tables:  CONSTANT float W[27] = {...};   (__constant__ on CUDA, static constexpr on the host)
 //
 // Build variants: a kernel file whose code depends on -D flags lists the values each flag takes in a
@@ -36,6 +38,7 @@
 #define CONSTANT __constant__ const
 #define RESTRICT __restrict__
 #define CK_ON_GPU 1
+#define CK_NANF __int_as_float(0x7fc00000)
 
 #define CK_THREAD_INDEX ((long long)blockIdx.x * (long long)blockDim.x + (long long)threadIdx.x)
 #define CK_THREAD_STRIDE ((long long)blockDim.x * (long long)gridDim.x)
@@ -81,6 +84,7 @@ DEVICE double ck_warp_sum(double v) {
 #define CONSTANT static constexpr
 #define RESTRICT __restrict__
 #define CK_ON_GPU 0
+#define CK_NANF __builtin_nanf("")
 #define CK_MAX_THREADS 1024
 
 #define CK_PRAGMA(x) _Pragma(#x)

@@ -26,6 +26,12 @@
 #define CK_RETENTION 0
 #endif
 
+// Is the 3x3x3 stencil of a particle at grid coordinates (X, Y, Z) = x / dx - 1/2 inside the grid?  False for a
+// position that is not finite: such a particle reads and writes nothing (P2G's rule, kernels/mpm_p2g.cu).
+DEVICE bool coupling_inside(const float X, const float Y, const float Z, const int nx, const int ny, const int nz) {
+    return X >= 0.5f && X < (float)nx - 1.5f && Y >= 0.5f && Y < (float)ny - 1.5f && Z >= 0.5f && Z < (float)nz - 1.5f;
+}
+
 DEVICE int coupling_bspline(const float X, float w[3]) {
     const int base = (int)floorf(X - 0.5f);
     const float f = X - (float)base;  // in [0.5, 1.5)
@@ -47,10 +53,12 @@ KERNEL void coupling_bound_water_p2g(const long long n, const float* RESTRICT x 
     const float inv_cell = inv_dx * inv_dx * inv_dx;
 #if CK_ON_GPU
     FOR_EACH(p, n) {
+        const float X = x[p] * inv_dx - 0.5f, Y = x[np + p] * inv_dx - 0.5f, Z = x[2 * np + p] * inv_dx - 0.5f;
+        if (!coupling_inside(X, Y, Z, nx, ny, nz)) continue;
         float wx[3], wy[3], wz[3];
-        const int bx = coupling_bspline(x[p] * inv_dx - 0.5f, wx);
-        const int by = coupling_bspline(x[np + p] * inv_dx - 0.5f, wy);
-        const int bz = coupling_bspline(x[2 * np + p] * inv_dx - 0.5f, wz);
+        const int bx = coupling_bspline(X, wx);
+        const int by = coupling_bspline(Y, wy);
+        const int bz = coupling_bspline(Z, wz);
         const float q = r[p] * vol[p] * inv_cell;
         for (int c = 0; c < 3; ++c)
             for (int b = 0; b < 3; ++b) {
@@ -70,10 +78,12 @@ KERNEL void coupling_bound_water_p2g(const long long n, const float* RESTRICT x 
         for (long long k = 0; k < ncell; ++k) g[k] = 0.f;
         CK_PRAGMA(omp for schedule(static))
         for (long long p = 0; p < np; ++p) {
+            const float X = x[p] * inv_dx - 0.5f, Y = x[np + p] * inv_dx - 0.5f, Z = x[2 * np + p] * inv_dx - 0.5f;
+            if (!coupling_inside(X, Y, Z, nx, ny, nz)) continue;
             float wx[3], wy[3], wz[3];
-            const int bx = coupling_bspline(x[p] * inv_dx - 0.5f, wx);
-            const int by = coupling_bspline(x[np + p] * inv_dx - 0.5f, wy);
-            const int bz = coupling_bspline(x[2 * np + p] * inv_dx - 0.5f, wz);
+            const int bx = coupling_bspline(X, wx);
+            const int by = coupling_bspline(Y, wy);
+            const int bz = coupling_bspline(Z, wz);
             const float q = r[p] * vol[p] * inv_cell;
             for (int c = 0; c < 3; ++c)
                 for (int b = 0; b < 3; ++b) {
@@ -114,10 +124,15 @@ KERNEL void coupling_particle_moisture(const long long n, const float* RESTRICT 
     const float cell = dx * dx * dx;
 #endif
     FOR_EACH(p, n) {
+        const float X = x[p] * inv_dx - 0.5f, Y = x[np + p] * inv_dx - 0.5f, Z = x[2 * np + p] * inv_dx - 0.5f;
+        if (!coupling_inside(X, Y, Z, nx, ny, nz)) {
+            saturation[p] = CK_NANF;  // no grid to read: visibly not a number (the finiteness check names it)
+            continue;
+        }
         float wx[3], wy[3], wz[3];
-        const int bx = coupling_bspline(x[p] * inv_dx - 0.5f, wx);
-        const int by = coupling_bspline(x[np + p] * inv_dx - 0.5f, wy);
-        const int bz = coupling_bspline(x[2 * np + p] * inv_dx - 0.5f, wz);
+        const int bx = coupling_bspline(X, wx);
+        const int by = coupling_bspline(Y, wy);
+        const int bz = coupling_bspline(Z, wz);
         float s = 0.f;
 #if CK_RETENTION
         float dr = 0.f;
@@ -146,7 +161,6 @@ KERNEL void coupling_particle_moisture(const long long n, const float* RESTRICT 
         r[p] += masked ? retain[p] * dr : dr;
 #endif
     }
-    (void)nz;
 #if !CK_RETENTION
     (void)r;
     (void)d_bound;

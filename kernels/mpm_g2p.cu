@@ -9,7 +9,10 @@
 //
 // Safety net: positions are clamped to [dx, (n - 1) dx) per axis so the 3x3x3 stencil of the next P2G
 // stays inside the grid (the domain walls keep sand well inside this band; the clamp only matters for a
-// broken setup).  n = number of particles.  CUDA: one thread per particle.  Host: batches of
+// broken setup). A particle whose position is not finite, or whose stencil would leave the grid, gathers
+// nothing (no memory outside the grid is read, whatever the values): its velocity and affine matrix become NaN
+// and its position stays NaN (the clamp lets NaN through), so the simulation's finiteness check names it;
+// clamping NaN into the domain once hid a diverged particle in a corner.  n = number of particles.  CUDA: one thread per particle.  Host: batches of
 // MPM_G2P_BATCH particles through `omp simd` loops, one particle per SIMD lane (see the kernel body);
 // the constitutive update after the SVD restates mpm_constitutive (mpm_model.cuh) in vectorisable form,
 // pinned to it by tests/sand/test_g2p_batched.py.
@@ -47,12 +50,12 @@ MPM_INLINE int mpm_bspline_g(const float X, float w[3], float& f) {
     return base;
 }
 
-// clamp with selects (fminf / fmaxf do not vectorise: NaN rules)
+// clamp with selects (fminf / fmaxf do not vectorise, and they turn NaN into the bound): NaN passes through
 MPM_INLINE float mpm_clamp_axis(const float p, const int ncell, const float dx) {
     const float lo = dx;
     const float hi = ((float)ncell - 1.f) * dx * (1.f - 1e-6f);
-    const float a = p > lo ? p : lo;
-    return a < hi ? a : hi;
+    const float a = p < lo ? lo : p;
+    return a > hi ? hi : a;
 }
 
 // Stage a: gather v_p, C_p of particle p from the grid (Eq. 30, APIC) and form the trial
@@ -68,10 +71,14 @@ MPM_INLINE void mpm_g2p_transfer(const long long p, const long long np, const fl
     const float* RESTRICT gvy = grid_v + ncell;
     const float* RESTRICT gvz = grid_v + 2 * ncell;
     const float xp = x[p], yp = x[np + p], zp = x[2 * np + p];
+    const float Xg = xp * inv_dx - 0.5f, Yg = yp * inv_dx - 0.5f, Zg = zp * inv_dx - 0.5f;
+    // the stencil inside the grid (false for NaN): else gather at node 1 and poison the result below
+    const bool inside = Xg >= 0.5f && Xg < (float)nx - 1.5f && Yg >= 0.5f && Yg < (float)ny - 1.5f && Zg >= 0.5f &&
+                        Zg < (float)nz - 1.5f;
     float wx[3], wy[3], wz[3], fx, fy, fz;
-    const int bx = mpm_bspline_g(xp * inv_dx - 0.5f, wx, fx);
-    const int by = mpm_bspline_g(yp * inv_dx - 0.5f, wy, fy);
-    const int bz = mpm_bspline_g(zp * inv_dx - 0.5f, wz, fz);
+    const int bx = mpm_bspline_g(inside ? Xg : 1.f, wx, fx);
+    const int by = mpm_bspline_g(inside ? Yg : 1.f, wy, fy);
+    const int bz = mpm_bspline_g(inside ? Zg : 1.f, wz, fz);
     float ux = 0.f, uy = 0.f, uz = 0.f;
     float B00 = 0.f, B01 = 0.f, B02 = 0.f, B10 = 0.f, B11 = 0.f, B12 = 0.f, B20 = 0.f, B21 = 0.f, B22 = 0.f;
     MPM_UNROLL
@@ -102,6 +109,10 @@ MPM_INLINE void mpm_g2p_transfer(const long long p, const long long np, const fl
                 B22 += gz * dz;
             }
         }
+    }
+    if (!inside) {
+        ux = uy = uz = CK_NANF;
+        B00 = B01 = B02 = B10 = B11 = B12 = B20 = B21 = B22 = CK_NANF;
     }
     // C = (4/dx^2) B_dx, with B_dx accumulated in units of dx: C = 4/dx * B
     const float k = 4.f * inv_dx;

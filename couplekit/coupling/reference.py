@@ -70,9 +70,14 @@ def bspline_stencil(x: np.ndarray, dx: float, shape: tuple[int, int, int]) -> tu
     """Node linear indices (P, 27) and quadratic B-spline weights N_i(x_p) (P, 27) of particles x (3, P).
 
     N(s) = ¾ − s² for |s| < ½, ½(3/2 − |s|)² for ½ ≤ |s| < 3/2, s = x/dx − ½ − i (node i at (i + ½) dx).
+    A particle whose stencil would leave the grid (or whose position is not finite) gets node 1's stencil and
+    zero weights: it reads and writes nothing (kernels/coupling_moisture.cu).
     """
     nz, ny, nx = shape
     X = x.astype(np.float64) / dx - 0.5
+    with np.errstate(invalid="ignore"):
+        ok = np.all((X >= 0.5) & (X < np.array([nx, ny, nz], np.float64)[:, None] - 1.5), axis=0)
+    X = np.where(ok, X, 1.0)
     base = np.floor(X - 0.5).astype(np.int64)  # (3, P)
     offs = np.arange(3)
     nodes = base[:, :, None] + offs  # (3, P, 3)
@@ -82,7 +87,7 @@ def bspline_stencil(x: np.ndarray, dx: float, shape: tuple[int, int, int]) -> tu
     a, b, c = np.meshgrid(offs, offs, offs, indexing="ij")
     a, b, c = c.ravel(), b.ravel(), a.ravel()
     index = nodes[0][:, a] + nx * (nodes[1][:, b] + ny * nodes[2][:, c])
-    weight = w1[0][:, a] * w1[1][:, b] * w1[2][:, c]
+    weight = np.where(ok[:, None], w1[0][:, a] * w1[1][:, b] * w1[2][:, c], 0.0)
     return index, weight
 
 
@@ -325,7 +330,8 @@ class ReferenceOps:
         fraction ε_r (see :meth:`fractions`); then r_p += retain_p Σ_i dR_i / ε_r,i N_i(x_p): the bound water
         goes to the retentive particles only, and Σ_p r_p V_p still grows by V_cell Σ_i dR_i."""
         index, w = bspline_stencil(x, dx, water.shape)
-        saturation[...] = (w * water.astype(np.float64).ravel()[index]).sum(axis=1)
+        lost = ~w.any(axis=1)  # outside the grid or not finite (bspline_stencil): saturation NaN, r unchanged
+        saturation[...] = np.where(lost, np.nan, (w * water.astype(np.float64).ravel()[index]).sum(axis=1))
         if self.retention:
             if retentive is None:
                 vol = grid_vol.astype(np.float64).ravel() / dx**3

@@ -1,15 +1,23 @@
 """HDF5 checkpoints: the scene, the solver states and the run counters, for an exact restart.
 
-Layout: attribute ``format`` = "couplekit-checkpoint", ``version`` = 1, ``scene`` (the scene dict as JSON),
-``meta`` (JSON: step, frame, time, backend, ...); one group per solver (``fluid``, ``sand``, ``coupler``, and
-``emission`` for the accumulators of sand-carrying inflows, :mod:`couplekit.sand.emission`) holding its
-:meth:`state` arrays as datasets, stored without compression or conversion so a restart is bitwise. The sand
-group's particle count is the one at the checkpoint (jets add particles as a run goes on). The file
-is written to a temporary name and renamed, so a crash never leaves a half-written checkpoint in place.
+Layout: attribute ``format`` = "couplekit-checkpoint", ``version`` = 2, ``scene`` (the scene dict as JSON),
+``meta`` (JSON: step, frame, time, backend, ...), ``checksum`` (SHA-256 of the scene and meta text); one group
+per solver (``fluid``, ``sand``, ``coupler``, ``emission`` for the accumulators of sand-carrying inflows,
+:mod:`couplekit.sand.emission`, and ``scheduler`` for a multi-rate scheduler's state) holding its
+:meth:`state` arrays as datasets, stored without compression or conversion so a restart is bitwise, each with
+a ``sha256`` attribute of its dtype, shape and bytes. The sand group's particle count is the one at the
+checkpoint (jets add particles as a run goes on). The file is written to a temporary name and renamed, so a
+crash never leaves a half-written checkpoint in place.
+
+:func:`load_checkpoint` verifies everything it reads and refuses a defective file with a
+:class:`CheckpointError` naming the file and what is wrong: not HDF5, not a couplekit checkpoint, another
+version, the scene or metadata missing or not JSON, a dataset whose bytes do not match its checksum (a file
+changed after it was written). Version-1 checkpoints (before checksums) still load, unverified.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 from collections.abc import Mapping
@@ -18,14 +26,28 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["save_checkpoint", "load_checkpoint", "CheckpointError", "FORMAT"]
+__all__ = ["save_checkpoint", "load_checkpoint", "CheckpointError", "FORMAT", "dataset_checksum"]
 
 FORMAT = "couplekit-checkpoint"
-VERSION = 1
+VERSION = 2
+READABLE = (1, 2)
+"""Versions :func:`load_checkpoint` reads (1: no checksums)."""
 
 
 class CheckpointError(ValueError):
-    """A file that is not a readable couplekit checkpoint."""
+    """A file that is not a readable, intact couplekit checkpoint (the message names the file and the defect)."""
+
+
+def dataset_checksum(a: np.ndarray) -> str:
+    """SHA-256 (hex) of an array's dtype, shape and C-order bytes."""
+    a = np.ascontiguousarray(a)
+    h = hashlib.sha256(f"{a.dtype.str}{a.shape}".encode())
+    h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def _text_checksum(scene: str, meta: str) -> str:
+    return hashlib.sha256((scene + "\0" + meta).encode()).hexdigest()
 
 
 def save_checkpoint(
@@ -36,21 +58,43 @@ def save_checkpoint(
 
     path = Path(path)
     tmp = path.with_name(path.name + ".tmp")
+    scene_text, meta_text = json.dumps(scene), json.dumps(dict(meta))
     with h5py.File(tmp, "w") as f:
         f.attrs["format"] = FORMAT
         f.attrs["version"] = VERSION
-        f.attrs["scene"] = json.dumps(scene)
-        f.attrs["meta"] = json.dumps(dict(meta))
+        f.attrs["scene"] = scene_text
+        f.attrs["meta"] = meta_text
+        f.attrs["checksum"] = _text_checksum(scene_text, meta_text)
         for solver, state in states.items():
             g = f.create_group(solver)
             for name, arr in state.items():
-                g.create_dataset(name, data=np.asarray(arr))
+                a = np.asarray(arr)
+                ds = g.create_dataset(name, data=a)
+                ds.attrs["sha256"] = dataset_checksum(a)
     os.replace(tmp, path)
     return path
 
 
+def _attr_text(f, path, name: str) -> str:
+    if name not in f.attrs:
+        raise CheckpointError(f"{path}: the checkpoint has no {name!r} attribute (a damaged or foreign file)")
+    value = f.attrs[name]
+    return value.decode() if isinstance(value, bytes) else str(value)
+
+
+def _json(text: str, path, name: str) -> dict:
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise CheckpointError(f"{path}: the checkpoint's {name} is not valid JSON ({exc})") from None
+    if not isinstance(value, dict):
+        raise CheckpointError(f"{path}: the checkpoint's {name} is not a table (got {type(value).__name__})")
+    return value
+
+
 def load_checkpoint(path: str | Path) -> tuple[dict, dict[str, dict[str, np.ndarray]], dict]:
-    """(scene dict, states, meta) of a checkpoint written by :func:`save_checkpoint`."""
+    """(scene dict, states, meta) of a checkpoint written by :func:`save_checkpoint`, verified (module
+    docstring); raises :class:`CheckpointError` naming the file and the defect."""
     import h5py
 
     try:
@@ -60,9 +104,36 @@ def load_checkpoint(path: str | Path) -> tuple[dict, dict[str, dict[str, np.ndar
     with f:
         if f.attrs.get("format") != FORMAT:
             raise CheckpointError(f"{path}: not a couplekit checkpoint (format attribute {f.attrs.get('format')!r})")
-        if int(f.attrs["version"]) != VERSION:
-            raise CheckpointError(f"{path}: checkpoint version {f.attrs['version']} (this couplekit reads {VERSION})")
-        scene = json.loads(f.attrs["scene"])
-        meta = json.loads(f.attrs["meta"])
-        states = {name: {k: np.array(ds[()]) for k, ds in g.items()} for name, g in f.items()}
+        try:
+            version = int(f.attrs["version"])
+        except (KeyError, TypeError, ValueError):
+            raise CheckpointError(f"{path}: the checkpoint has no readable version attribute") from None
+        if version not in READABLE:
+            raise CheckpointError(f"{path}: checkpoint version {version} (this couplekit reads {READABLE})")
+        scene_text, meta_text = _attr_text(f, path, "scene"), _attr_text(f, path, "meta")
+        if version >= 2 and _attr_text(f, path, "checksum") != _text_checksum(scene_text, meta_text):
+            raise CheckpointError(f"{path}: the scene or metadata was changed after the checkpoint was written")
+        scene, meta = _json(scene_text, path, "scene"), _json(meta_text, path, "metadata")
+        if "step" not in meta:
+            raise CheckpointError(f"{path}: the checkpoint's metadata has no step count")
+        states: dict[str, dict[str, np.ndarray]] = {}
+        for name, g in f.items():
+            if not isinstance(g, h5py.Group):
+                raise CheckpointError(f"{path}: {name!r} is not a group of solver arrays")
+            states[name] = {}
+            for k, ds in g.items():
+                try:
+                    a = np.array(ds[()])
+                except OSError as exc:
+                    raise CheckpointError(f"{path}: dataset {name}/{k} cannot be read ({exc})") from None
+                if version >= 2:
+                    want = ds.attrs.get("sha256")
+                    if want is None:
+                        raise CheckpointError(f"{path}: dataset {name}/{k} has no checksum")
+                    if dataset_checksum(a) != (want.decode() if isinstance(want, bytes) else str(want)):
+                        raise CheckpointError(
+                            f"{path}: dataset {name}/{k} does not match its checksum: the file was changed or "
+                            "damaged after it was written; resume from another checkpoint"
+                        )
+                states[name][k] = a
     return scene, states, meta

@@ -34,10 +34,22 @@ def bspline_weights(X: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return base, w, d
 
 
-def _stencil(x: np.ndarray, dx: float, shape: tuple[int, int, int]):
-    """Node linear indices (P, 27), weights w_ip (P, 27) and offsets x_i − x_p (P, 27, 3) of each particle."""
+def inside_grid(x: np.ndarray, dx: float, shape: tuple[int, int, int]) -> np.ndarray:
+    """(P,) bool: the particle's 3×3×3 stencil lies inside the grid (x/dx − ½ in [½, n − 3/2) on every axis);
+    False for a position that is not finite. Such a particle scatters and gathers nothing (kernels/mpm_p2g.cu,
+    mpm_g2p.cu)."""
     nz, ny, nx = shape
-    X = x.astype(np.float64) / dx - 0.5  # grid coordinates (3, P)
+    X = x.astype(np.float64) / dx - 0.5
+    with np.errstate(invalid="ignore"):
+        return np.all((X >= 0.5) & (X < np.array([nx, ny, nz], np.float64)[:, None] - 1.5), axis=0)
+
+
+def _stencil(x: np.ndarray, dx: float, shape: tuple[int, int, int]):
+    """Node linear indices (P, 27), weights w_ip (P, 27) and offsets x_i − x_p (P, 27, 3) of each particle.
+    A particle outside the grid (:func:`inside_grid`) gets the stencil of node 1 and zero weights."""
+    nz, ny, nx = shape
+    ok = inside_grid(x, dx, shape)
+    X = np.where(ok, x.astype(np.float64) / dx - 0.5, 1.0)  # grid coordinates (3, P)
     bases, ws, ds = zip(*(bspline_weights(X[a]) for a in range(3)), strict=True)
     a, b, c = np.meshgrid(np.arange(3), np.arange(3), np.arange(3), indexing="ij")
     a, b, c = a.ravel(), b.ravel(), c.ravel()  # 27 offsets (x, y, z)
@@ -45,7 +57,7 @@ def _stencil(x: np.ndarray, dx: float, shape: tuple[int, int, int]):
     iy = bases[1][:, None] + b
     iz = bases[2][:, None] + c
     index = ix + nx * (iy + ny * iz)
-    w = ws[0][:, a] * ws[1][:, b] * ws[2][:, c]
+    w = np.where(ok[:, None], ws[0][:, a] * ws[1][:, b] * ws[2][:, c], 0.0)
     offset = np.stack([ds[0][:, a], ds[1][:, b], ds[2][:, c]], axis=-1) * dx
     return index, w, offset
 
@@ -222,7 +234,11 @@ class ReferenceOps:
         gv = grid_v.astype(np.float64).reshape(3, -1)[:, index]  # (3, P, 27)
         v_new = np.einsum("pk,apk->pa", w, gv)  # v_p = Σ w_ip v_i  (Eq. 30)
         C_new = 4.0 / dx**2 * np.einsum("pk,apk,pkb->pab", w, gv, off)  # APIC: B_p D_p⁻¹, D_p = dx²/4 I
+        lost = ~inside_grid(x, dx, (nz, ny, nx))  # outside the grid or not finite: stays visibly non-finite
         F_trial = np.einsum("pab,pbc->pac", np.eye(3) + dt * C_new, _mat(F))  # F_trial = (I + Δt ∇v) F
+        F_trial[lost] = _mat(F)[lost]  # a lost particle's deformation is not updated (its v, C, x are NaN)
+        v_new[lost] = np.nan
+        C_new[lost] = np.nan
         F_new, tau_new, q_new, vc_new = _constitutive(F_trial, q, vc, saturation, model)
         F[...] = F_new.reshape(-1, 9).T
         C[...] = C_new.reshape(-1, 9).T

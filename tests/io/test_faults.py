@@ -1,0 +1,217 @@
+"""Faults in checkpoints, states and output folders are refused with a message naming the file and the defect,
+before anything is computed; a used output folder is never silently mixed with another run."""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from couplekit.cli import main
+from couplekit.io import CheckpointError, load_checkpoint
+from couplekit.io.outputs import OutputFolderError, default_output, prepare_output, run_files
+from couplekit.scene import Scene
+from couplekit.simulation import Simulation
+
+sys.path.insert(0, str(Path(__file__).parents[1] / "scene"))
+from sim_scenes import tiny_coupled, tiny_sand  # noqa: E402
+
+
+TINY = """
+[domain]
+size = [0.06, 0.06, 0.06]
+dx = 0.005
+[time]
+dt = 2e-4
+frame_duration = 4e-4
+frames = 1
+[sand]
+youngs_modulus = 1e5
+[outputs]
+preview = false
+[[bodies]]
+kind = "sand"
+[bodies.geometry]
+type = "box"
+min = [0.02, 0.02, 0.02]
+max = [0.04, 0.04, 0.04]
+"""
+
+
+@pytest.fixture(scope="module")
+def checkpoint(tmp_path_factory) -> Path:
+    """A coupled checkpoint after 3 steps (fluid, sand, coupler groups)."""
+    sim = Simulation(Scene.from_dict(tiny_coupled()), backend="cpu", threads=1, log=None)
+    sim.step(3)
+    return sim.save(tmp_path_factory.mktemp("ckpt") / "c.h5")
+
+
+def _copy(src: Path, dst: Path) -> Path:
+    dst.write_bytes(src.read_bytes())
+    return dst
+
+
+def _refused(path: Path, *words: str) -> CheckpointError:
+    with pytest.raises(CheckpointError) as err:
+        Simulation.load(path, backend="cpu", threads=1, log=None)
+    text = str(err.value)
+    assert str(path) in text and all(w in text for w in words), text
+    return err.value
+
+
+# ------------------------------------------------------------------ checkpoints
+def test_an_intact_checkpoint_verifies_and_restarts(checkpoint):
+    scene, states, meta = load_checkpoint(checkpoint)
+    assert meta["step"] == 3 and {"fluid", "sand", "coupler"} <= set(states)
+    assert Simulation.load(checkpoint, backend="cpu", threads=1, log=None).step_count == 3
+
+
+def test_flipped_bytes_inside_a_dataset_are_caught(checkpoint, tmp_path):
+    """A single changed float in the populations (written back through h5py, as a disk error or a careless edit
+    would leave it) no longer matches the dataset's checksum."""
+    path = _copy(checkpoint, tmp_path / "flipped.h5")
+    with h5py.File(path, "r+") as f:
+        ds = f["fluid"]["f"]
+        a = ds[()]
+        a.reshape(-1)[1234] = np.nextafter(a.reshape(-1)[1234], np.float32(1.0))
+        ds[...] = a
+    _refused(path, "fluid/f", "checksum")
+
+
+def test_a_missing_dataset_is_named(checkpoint, tmp_path):
+    path = _copy(checkpoint, tmp_path / "missing.h5")
+    with h5py.File(path, "r+") as f:
+        del f["sand"]["x"]
+    _refused(path, "does not fit", "x")
+    path = _copy(checkpoint, tmp_path / "no_coupler.h5")
+    with h5py.File(path, "r+") as f:
+        del f["coupler"]
+    _refused(path, "coupler")
+
+
+@pytest.mark.parametrize("attr", ["scene", "meta"])
+def test_missing_or_changed_scene_and_metadata(checkpoint, tmp_path, attr):
+    path = _copy(checkpoint, tmp_path / f"no_{attr}.h5")
+    with h5py.File(path, "r+") as f:
+        del f.attrs[attr]
+    _refused(path, f"no {attr!r} attribute")
+    path = _copy(checkpoint, tmp_path / f"changed_{attr}.h5")
+    with h5py.File(path, "r+") as f:
+        f.attrs[attr] = "{not json"
+    _refused(path, "changed after")
+
+
+def test_metadata_that_is_not_json_is_named_in_an_unchecksummed_file(checkpoint, tmp_path):
+    """A version-1 checkpoint (no checksums, before this session) still loads; its metadata is still parsed
+    with a message naming the file."""
+    path = _copy(checkpoint, tmp_path / "v1.h5")
+    with h5py.File(path, "r+") as f:
+        f.attrs["version"] = 1
+        del f.attrs["checksum"]
+    assert Simulation.load(path, backend="cpu", threads=1, log=None).step_count == 3
+    with h5py.File(path, "r+") as f:
+        f.attrs["meta"] = "[1, 2"
+    _refused(path, "metadata is not valid JSON")
+
+
+def test_files_that_are_not_checkpoints(tmp_path):
+    junk = tmp_path / "junk.h5"
+    junk.write_bytes(os.urandom(4096))
+    _refused(junk, "not a readable HDF5 file")
+    other = tmp_path / "other.h5"
+    with h5py.File(other, "w") as f:
+        f.create_dataset("x", data=np.zeros(3))
+    _refused(other, "not a couplekit checkpoint")
+
+
+@pytest.mark.parametrize(
+    ("group", "name", "index"), [("fluid", "f", (5, 3, 3, 3)), ("sand", "x", (2, 7)), ("sand", "v", (0, 1))]
+)
+def test_a_state_holding_nan_is_refused_before_it_runs(checkpoint, tmp_path, group, name, index):
+    """NaN in the populations or in one particle's position or velocity (a position is what the scatter kernels
+    index memory with): the restart is refused, naming the field, before any step."""
+    scene, states, meta = load_checkpoint(checkpoint)
+    states[group][name][index] = np.nan
+    from couplekit.io import save_checkpoint
+
+    path = save_checkpoint(tmp_path / f"nan_{group}_{name}.h5", scene, states, meta)
+    _refused(path, "non-finite", repr(name))
+
+
+def test_a_cli_resume_from_a_bad_checkpoint_exits_2(checkpoint, tmp_path, capsys):
+    scene_file = tmp_path / "scene.toml"
+    scene_file.write_text(TINY)
+    junk = tmp_path / "junk.h5"
+    junk.write_bytes(b"nope")
+    assert main(["run", str(scene_file), "--resume", str(junk), "--out", str(tmp_path / "r"), "--no-progress"]) == 2
+    assert "not a readable HDF5 file" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------ output folders
+def test_output_folder_under_a_file_or_a_file_itself(tmp_path):
+    f = tmp_path / "a_file"
+    f.write_text("x")
+    with pytest.raises(OutputFolderError, match="is a file, not a folder"):
+        prepare_output(f / "run")
+    with pytest.raises(OutputFolderError, match="is a file; choose another --out"):
+        prepare_output(f)
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root writes into read-only folders")
+def test_output_folder_that_cannot_be_written(tmp_path):  # pragma: no cover - CI runs as root
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o500)
+    try:
+        with pytest.raises(OutputFolderError, match="cannot"):
+            prepare_output(ro / "run")
+    finally:
+        ro.chmod(0o700)
+
+
+def test_a_used_folder_is_refused_resumed_or_overwritten(tmp_path):
+    """A second run into a used folder is refused (naming the checkpoint to resume from and --overwrite); a run
+    resumed from that folder's checkpoint appends to it; overwrite deletes the earlier run's files and only
+    them."""
+    d = tiny_sand(frames=2)
+    out = tmp_path / "run"
+    first = Simulation(Scene.from_dict(d), backend="cpu", threads=1, log=None)
+    assert first.run(out=out, progress=False).status == "done"
+    assert any(p.name == "checkpoint.h5" for p in run_files(out))
+    (out / "notes.txt").write_text("mine")
+    second = Simulation(Scene.from_dict(d), backend="cpu", threads=1, log=None)
+    with pytest.raises(OutputFolderError, match=r"earlier run .*--resume .*checkpoint.h5.*--overwrite"):
+        second.run(out=out, progress=False)
+    resumed = Simulation.load(out / "checkpoint.h5", backend="cpu", threads=1, log=None)
+    assert resumed.run(frames=3, out=out, progress=False).status == "done"
+    lines = (out / "diagnostics.jsonl").read_text().splitlines()
+    assert len(lines) == 4  # frames 0, 1, 2 of the first run and frame 3 of the resumed one
+    before = {p.name for p in run_files(out)}
+    prepare_output(out, overwrite=True)
+    assert run_files(out) == [] and (out / "notes.txt").read_text() == "mine" and "checkpoint.h5" in before
+
+
+@pytest.mark.parametrize("name", ["../../x", "a/b", "..", ""])
+def test_scene_names_cannot_escape_runs(name):
+    with pytest.raises(OutputFolderError, match="not a plain folder name"):
+        default_output(name)
+    assert default_output("ok_name-1.5") == Path("runs") / "ok_name-1.5"
+
+
+def test_cli_refuses_a_used_folder_before_building_and_overwrites_on_request(tmp_path, capsys, monkeypatch):
+    scene_file = tmp_path / "scene.toml"
+    scene_file.write_text(TINY)
+    out = tmp_path / "out"
+    assert main(["run", str(scene_file), "--out", str(out), "--no-progress"]) == 0
+    built = []
+    monkeypatch.setattr(
+        Simulation, "__init__", lambda *a, **k: built.append(1) or (_ for _ in ()).throw(AssertionError)
+    )
+    assert main(["run", str(scene_file), "--out", str(out), "--no-progress"]) == 2
+    assert "holds the outputs of an earlier run" in capsys.readouterr().err and not built  # refused before building
+    monkeypatch.undo()
+    assert main(["run", str(scene_file), "--out", str(out), "--no-progress", "--overwrite"]) == 0
