@@ -244,14 +244,20 @@ def test_auto_takes_the_fewest_substeps_the_limits_allow():
 
 
 def test_auto_beyond_its_cap_stops_naming_the_key():
-    """A block much faster than the scene says (time.max_speed = 0.1 m/s passes validation with max_substeps
-    = 2): thrown at 16 m/s it needs 3 substeps from the start (refused when the solvers are built); thrown at
-    12.2 m/s under 500 m/s² it needs 3 after two steps (refused then). Both times SubstepLimitError names
-    scheduler.max_substeps."""
+    """With max_substeps = 2: a block thrown at 16 m/s needs 3 substeps of the 4e-4 s step at once, which the
+    scene checker refuses naming scheduler.max_substeps (and a time.max_speed below the body's own speed is
+    refused too); a block thrown at 12.2 m/s under 500 m/s² passes (2 substeps) but needs 3 after two steps,
+    and the run stops with SubstepLimitError naming scheduler.max_substeps and the count it needs."""
+    from couplekit.scene import SceneError
+
     d = _falling_block(max_substeps=2, max_speed=0.1)
     d["bodies"][0]["velocity"] = [0.0, 0.0, -16.0]
-    with pytest.raises(SubstepLimitError, match="scheduler.max_substeps = 2"):
+    with pytest.raises(SceneError, match="time.max_speed"):
         _sim(d)
+    d["time"]["max_speed"] = 16.0
+    with pytest.raises(SceneError, match="scheduler.max_substeps"):
+        _sim(d)
+    d = _falling_block(max_substeps=2, max_speed=12.2)
     d["bodies"][0]["velocity"] = [0.0, 0.0, -12.2]
     d["domain"]["gravity"] = [0.0, 0.0, -500.0]
     sim = _sim(d)
