@@ -475,6 +475,15 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
     n_before = len(problems)
 
     sc = read_table(data.get("scene", {}), "scene", SECTIONS["scene"], problems)
+    name = sc.get("name")
+    if isinstance(name, str) and (name in ("", ".", "..") or "/" in name or "\\" in name):
+        problems.append(
+            Problem(
+                "scene.name",
+                f"{name!r} is not a plain folder name: the default output folder runs/<name> would lie elsewhere",
+                "use letters, digits, '-', '_' and '.' (no '/', '\\' or '..'); set outputs.directory for the folder",
+            )
+        )
     dom_raw = data.get("domain", {})
     dom_raw = dict(dom_raw) if isinstance(dom_raw, dict) else dom_raw
     boundary_raw = dom_raw.pop("boundary", {}) if isinstance(dom_raw, dict) else {}

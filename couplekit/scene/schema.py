@@ -164,7 +164,12 @@ _FACE_DOC = "boundary of the {face} face: 'wall' (no-slip, sand slides with wall
 
 SECTIONS: dict[str, list[Key]] = {
     "scene": [
-        Key("name", "str", "scene", "a short name; the default output folder is runs/<name>"),
+        Key(
+            "name",
+            "str",
+            "scene",
+            "a short name, a plain folder name (no '/', '\\' or '..'); the default output folder is runs/<name>",
+        ),
         Key("description", "str", "", "free text, e.g. which figure of which paper the scene reproduces"),
     ],
     "domain": [
