@@ -58,6 +58,15 @@ MPM_INLINE float mpm_clamp_axis(const float p, const int ncell, const float dx) 
     return a > hi ? hi : a;
 }
 
+// A grid coordinate brought into the band where the 3x3x3 stencil stays inside the grid: the same value inside
+// it, a bound outside it, and 0.5 for NaN (the comparisons fail), so the gather's indices are valid whatever
+// the position (the caller poisons the result of a particle that was outside). Selects, as mpm_clamp_axis.
+MPM_INLINE float mpm_stencil_coord(const float X, const int ncell) {
+    const float hi = (float)ncell - 1.5f - 1e-3f;
+    const float a = X > 0.5f ? X : 0.5f;
+    return a < hi ? a : hi;
+}
+
 // Stage a: gather v_p, C_p of particle p from the grid (Eq. 30, APIC) and form the trial
 // F = (I + dt C) F_p.  Reads x, F of particle p (SoA, stride np); writes the advected position, v, C at
 // [k * ldo] of xo, vo, Co and the trial F (row-major) at [k * ld] of ft.  Node indices are int: grids
@@ -72,13 +81,15 @@ MPM_INLINE void mpm_g2p_transfer(const long long p, const long long np, const fl
     const float* RESTRICT gvz = grid_v + 2 * ncell;
     const float xp = x[p], yp = x[np + p], zp = x[2 * np + p];
     const float Xg = xp * inv_dx - 0.5f, Yg = yp * inv_dx - 0.5f, Zg = zp * inv_dx - 0.5f;
-    // the stencil inside the grid (false for NaN): else gather at node 1 and poison the result below
-    const bool inside = Xg >= 0.5f && Xg < (float)nx - 1.5f && Yg >= 0.5f && Yg < (float)ny - 1.5f && Zg >= 0.5f &&
-                        Zg < (float)nz - 1.5f;
+    // the stencil inside the grid (false for NaN): else gather within the band and poison the result below
+    // bitwise & (no short-circuit: no branch in the `omp simd` loop; a select on the stencil coordinate, or a
+    // branch, stopped the host's vectoriser and made G2P 4x slower)
+    const bool inside = (Xg >= 0.5f) & (Xg < (float)nx - 1.5f) & (Yg >= 0.5f) & (Yg < (float)ny - 1.5f) &
+                        (Zg >= 0.5f) & (Zg < (float)nz - 1.5f);
     float wx[3], wy[3], wz[3], fx, fy, fz;
-    const int bx = mpm_bspline_g(inside ? Xg : 1.f, wx, fx);
-    const int by = mpm_bspline_g(inside ? Yg : 1.f, wy, fy);
-    const int bz = mpm_bspline_g(inside ? Zg : 1.f, wz, fz);
+    const int bx = mpm_bspline_g(mpm_stencil_coord(Xg, nx), wx, fx);
+    const int by = mpm_bspline_g(mpm_stencil_coord(Yg, ny), wy, fy);
+    const int bz = mpm_bspline_g(mpm_stencil_coord(Zg, nz), wz, fz);
     float ux = 0.f, uy = 0.f, uz = 0.f;
     float B00 = 0.f, B01 = 0.f, B02 = 0.f, B10 = 0.f, B11 = 0.f, B12 = 0.f, B20 = 0.f, B21 = 0.f, B22 = 0.f;
     MPM_UNROLL
@@ -110,10 +121,12 @@ MPM_INLINE void mpm_g2p_transfer(const long long p, const long long np, const fl
             }
         }
     }
-    if (!inside) {
-        ux = uy = uz = CK_NANF;
-        B00 = B01 = B02 = B10 = B11 = B12 = B20 = B21 = B22 = CK_NANF;
-    }
+    // a select and products, not a branch: the host batches this loop with `omp simd` (a branch here made G2P
+    // 4.9x slower); 1 * x is x bitwise, NaN * x is NaN
+    const float keep = inside ? 1.f : CK_NANF;
+    ux *= keep, uy *= keep, uz *= keep;
+    B00 *= keep, B01 *= keep, B02 *= keep, B10 *= keep, B11 *= keep, B12 *= keep, B20 *= keep, B21 *= keep;
+    B22 *= keep;
     // C = (4/dx^2) B_dx, with B_dx accumulated in units of dx: C = 4/dx * B
     const float k = 4.f * inv_dx;
     const float c00 = k * B00, c01 = k * B01, c02 = k * B02, c10 = k * B10, c11 = k * B11, c12 = k * B12;
