@@ -20,7 +20,6 @@ from couplekit.simulation import Simulation
 sys.path.insert(0, str(Path(__file__).parents[1] / "scene"))
 from sim_scenes import tiny_coupled, tiny_sand  # noqa: E402
 
-
 TINY = """
 [domain]
 size = [0.06, 0.06, 0.06]
