@@ -18,27 +18,7 @@ from couplekit.scene import Scene
 from couplekit.simulation import Simulation
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "scene"))
-from sim_scenes import tiny_coupled, tiny_sand  # noqa: E402
-
-TINY = """
-[domain]
-size = [0.06, 0.06, 0.06]
-dx = 0.005
-[time]
-dt = 2e-4
-frame_duration = 4e-4
-frames = 1
-[sand]
-youngs_modulus = 1e5
-[outputs]
-preview = false
-[[bodies]]
-kind = "sand"
-[bodies.geometry]
-type = "box"
-min = [0.02, 0.02, 0.02]
-max = [0.04, 0.04, 0.04]
-"""
+from sim_scenes import TINY_SAND_TOML, tiny_coupled, tiny_sand  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -143,7 +123,7 @@ def test_a_state_holding_nan_is_refused_before_it_runs(checkpoint, tmp_path, gro
 
 def test_a_cli_resume_from_a_bad_checkpoint_exits_2(checkpoint, tmp_path, capsys):
     scene_file = tmp_path / "scene.toml"
-    scene_file.write_text(TINY)
+    scene_file.write_text(TINY_SAND_TOML)
     junk = tmp_path / "junk.h5"
     junk.write_bytes(b"nope")
     assert main(["run", str(scene_file), "--resume", str(junk), "--out", str(tmp_path / "r"), "--no-progress"]) == 2
@@ -203,7 +183,7 @@ def test_scene_names_cannot_escape_runs(name):
 
 def test_cli_refuses_a_used_folder_before_building_and_overwrites_on_request(tmp_path, capsys, monkeypatch):
     scene_file = tmp_path / "scene.toml"
-    scene_file.write_text(TINY)
+    scene_file.write_text(TINY_SAND_TOML)
     out = tmp_path / "out"
     assert main(["run", str(scene_file), "--out", str(out), "--no-progress"]) == 0
     built = []

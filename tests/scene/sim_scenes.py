@@ -54,3 +54,30 @@ def tiny_coupled(retention: bool = True) -> dict:
     )
     d["sand"] = {"density": 1500.0, "retention": retention}
     return d
+
+
+TINY_SAND_TOML = """
+[domain]
+size = [0.06, 0.06, 0.06]
+dx = 0.005
+
+[time]
+dt = 2e-4
+frame_duration = 1e-3
+frames = 2
+
+[sand]
+youngs_modulus = 1e5
+
+[outputs]
+preview = false
+
+[[bodies]]
+kind = "sand"
+velocity = [0.0, 0.0, -0.5]
+[bodies.geometry]
+type = "box"
+min = [0.02, 0.02, 0.03]
+max = [0.04, 0.04, 0.045]
+"""
+"""A tiny sand-only scene file (2 frames of 5 steps) for the command-line tests."""

@@ -8,7 +8,7 @@ import copy
 
 import pytest
 from couplekit.schedulers import spec_table
-from sim_scenes import tiny_coupled, tiny_fluid, tiny_sand
+from sim_scenes import TINY_SAND_TOML, tiny_coupled, tiny_fluid, tiny_sand
 
 from couplekit.cli import main
 from couplekit.scene import Scene, SceneError
@@ -110,38 +110,12 @@ def test_simulation_takes_a_scheduler_and_validates_it():
         with_scheduler(Scene.from_dict(tiny_fluid()), {"kind": "multirate", "sand_every": 2})
 
 
-TINY_SAND = """
-[domain]
-size = [0.06, 0.06, 0.06]
-dx = 0.005
-
-[time]
-dt = 2e-4
-frame_duration = 1e-3
-frames = 2
-
-[sand]
-youngs_modulus = 1e5
-
-[outputs]
-preview = false
-
-[[bodies]]
-kind = "sand"
-velocity = [0.0, 0.0, -0.5]
-[bodies.geometry]
-type = "box"
-min = [0.02, 0.02, 0.03]
-max = [0.04, 0.04, 0.045]
-"""
-
-
 def test_cli_run_with_a_scheduler(tmp_path, capsys):
     """`couplekit run --scheduler subcycle:2` runs the scene sub-cycled (the cost summary names it) and keeps
     the scheduler in the checkpoint; a bad spec exits 2 naming what works; --scheduler with --resume is
     refused (the checkpoint keeps its own scheduler)."""
     path = tmp_path / "scene.toml"
-    path.write_text(TINY_SAND)
+    path.write_text(TINY_SAND_TOML)
     assert main(["run", str(path), "--out", str(tmp_path / "run"), "--no-progress", "--scheduler", "subcycle:2"]) == 0
     out = capsys.readouterr().out
     assert "subcycle" in out and "sand steps per step" in out
