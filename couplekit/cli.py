@@ -68,9 +68,9 @@ def _cmd_info(args: argparse.Namespace) -> int:
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
-    """Exit 0 valid, 2 invalid, 3 refused (``run``'s message and exit code) when the memory estimate exceeds what
-    any machine holds; what ``run`` refuses on this machine only (its memory) or for now (a coupling switch) is
-    noted with ``run``'s message, exit 0: the same file validates alike on every host."""
+    """Exit 0 valid, 2 invalid, 3 refused with ``run``'s message and exit code: an effect the coupling cannot
+    switch off yet, or a memory estimate beyond what any machine holds.  What ``run`` refuses on this machine
+    only (its memory) is noted with ``run``'s message, exit 0: the same file validates alike on every host."""
     from .assembly import CouplingUnavailableError, check_run
     from .scene import Scene, SceneError
     from .simulation import InsufficientMemoryError, _gib
@@ -81,23 +81,24 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     except SceneError as exc:
         print(exc, file=sys.stderr)
         return 2
-    print(f"{args.scene}: valid")
-    print(scene.summary())
-    speed, why = scene.expected_max_speed()
-    units = scene.units()
-    if scene.has_fluid:
-        print(f"fastest expected flow {speed:.3g} m/s ({why}): lattice Mach {units.mach(speed):.3g}")
     est, note = None, None
     try:
         est = check_run(scene)
-    except CouplingUnavailableError as exc:
-        note = f"note: `run` refuses this scene: {exc}"
+    except CouplingUnavailableError as exc:  # a property of the scene: refused as run refuses it
+        print(f"refused: {exc}", file=sys.stderr)
+        return 3
     except InsufficientMemoryError as exc:
         est = exc.estimate
         if est["total"] > any_machine:
             print(f"refused: {exc}", file=sys.stderr)
             return 3
         note = f"note: `run` refuses this scene on this machine: {exc}"
+    print(f"{args.scene}: valid")
+    print(scene.summary())
+    speed, why = scene.expected_max_speed()
+    units = scene.units()
+    if scene.has_fluid:
+        print(f"fastest expected flow {speed:.3g} m/s ({why}): lattice Mach {units.mach(speed):.3g}")
     if est is not None:
         print(
             f"memory estimate: {_gib(est['total'])}"

@@ -174,6 +174,7 @@ class Simulation:
         self.units = sc.units()
         self.steps_per_frame = sc.time.steps_per_frame
         self.step_count = 0
+        self._resumed = False  # set by load(): run() then appends to an output folder instead of refusing it
         self.fluid = self.sand = self.coupler = self.scheduler = self.emitter = None
         self._timing = bool(timing)
         self._rebuild()
@@ -482,6 +483,7 @@ class Simulation:
             ) from None
         if meta.get("backend") != sim.backend.name and log:
             log(f"note: checkpoint written by the {meta.get('backend')} backend, resumed on {sim.backend.name}")
+        sim._resumed = True  # run() appends to the folder even for a checkpoint of step 0 (Ctrl-C before a step)
         return sim
 
     # ------------------------------------------------------------------------------------ run
@@ -549,7 +551,7 @@ class Simulation:
 
         sc = self.scene
         total = int(frames if frames is not None else sc.time.frames)
-        resumed = self.step_count > 0
+        resumed = self.step_count > 0 or self._resumed
         out = prepare_output(
             out or sc.outputs.directory or default_output(sc.name), resume=resumed, overwrite=overwrite
         )

@@ -61,9 +61,10 @@ def test_validate_notes_what_run_refuses(tmp_path, capsys):
     d["effects"] = {"drag": False}
     bad = tmp_path / "bad.toml"
     bad.write_text(_toml(d))
-    assert main(["validate", str(bad)]) == 0
-    out = capsys.readouterr().out
-    assert "`run` refuses this scene" in out and "effects.drag = false" in out
+    assert main(["validate", str(bad)]) == 3  # refused as run refuses it (exit 3, run's message)
+    captured = capsys.readouterr()
+    assert "refused:" in captured.err and "effects.drag = false" in captured.err
+    assert "valid" not in captured.out
 
 
 @pytest.mark.parametrize("name", ["fig08_sand_densities_small.toml"])

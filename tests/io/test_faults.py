@@ -174,6 +174,22 @@ def test_a_used_folder_is_refused_resumed_or_overwritten(tmp_path):
     assert run_files(out) == [] and (out / "notes.txt").read_text() == "mine" and "checkpoint.h5" in before
 
 
+def test_a_run_resumed_from_a_checkpoint_of_step_0_appends(tmp_path):
+    """Ctrl-C before the first step leaves interrupted.h5 of step 0 beside the run's diagnostics: resuming it is
+    a resume (found when a slow machine interrupted the CLI test before its first step)."""
+    d = tiny_sand(frames=2)
+    out = tmp_path / "run"
+    first = Simulation(Scene.from_dict(d), backend="cpu", threads=1, log=None)
+    assert first.run(out=out, progress=False, stop=lambda: True).status == "interrupted"
+    assert first.step_count == 0 and (out / "interrupted.h5").exists()
+    resumed = Simulation.load(out / "interrupted.h5", backend="cpu", threads=1, log=None)
+    assert resumed.step_count == 0
+    assert resumed.run(frames=1, out=out, progress=False).status == "done"
+    fresh = Simulation(Scene.from_dict(d), backend="cpu", threads=1, log=None)
+    with pytest.raises(OutputFolderError):  # a fresh run is still refused there
+        fresh.run(out=out, progress=False)
+
+
 @pytest.mark.parametrize("name", ["../../x", "a/b", "..", ""])
 def test_scene_names_cannot_escape_runs(name):
     with pytest.raises(OutputFolderError, match="not a plain folder name"):
