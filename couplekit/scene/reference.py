@@ -40,8 +40,8 @@ What runs: fluid-only scenes (one or two phases, water bodies, obstacles, inflow
 scenes (sand bodies, obstacles), and both together, coupled as in the paper's Algorithm 1 (drag, buoyancy,
 the phase-field source term, water retention) in lockstep or with the sand at its own rate (`[scheduler]`),
 with a density and a `retention` setting per sand body, and water jets carrying sand (MPM particles emitted
-at the inflow: `inflows[i].sand_fraction`, `sand_start`, `sand_ramp`). These validate but `run` refuses them for now, naming the key:
-`effects.drag` or `effects.buoyancy` = false with sand and a fluid.
+at the inflow: `inflows[i].sand_fraction`, `sand_start`, `sand_ramp`). Refused for now by `validate` and `run` alike (exit 3),
+naming the key: `effects.drag` or `effects.buoyancy` = false with sand and a fluid.
 
 Example (the demo, `examples/sand_drop_small.toml`):
 
@@ -154,10 +154,11 @@ What `run` refuses for a reason outside the file is refused after validation, wi
 `refused: ...`: a scene whose memory estimate (`couplekit.assembly.memory_estimate`) exceeds 90 % of the
 available memory (on the cpu and numpy backends the host's MemAvailable, on cuda the free GPU memory), and an
 effect the coupling cannot switch off yet (`effects.drag` or `effects.buoyancy` = false with sand and a
-fluid). `validate` reports both with `run`'s message (`couplekit.assembly.check_run`, against the host's
-available memory): it refuses, exit 3, a scene no machine holds (an estimate beyond 16 TiB, e.g. a 10¹⁵-cell
-grid), and notes, exit 0, what `run` refuses on this machine only or for now, so that a file validates alike
-on every host. `run --frames` and `--threads` must be 1 or more (exit 2). A closed standard output
+fluid). `validate` runs the same check (`couplekit.assembly.check_run`, against the host's available memory)
+and refuses, with `run`'s message and exit 3, the coupling switch and a scene no machine holds (an estimate
+beyond 16 TiB, e.g. a 10¹⁵-cell grid); what `run` refuses on this machine only, for its memory, it notes with
+`run`'s message and exit 0, so that a file validates alike on every host (a paper-scale scene validates on a
+laptop before it runs on a GPU). `run --frames` and `--threads` must be 1 or more (exit 2). A closed standard output
 (`couplekit validate scene.toml | head -1`) ends either command quietly, exit 141.
 """
 
