@@ -52,7 +52,7 @@ def _toml(d: dict) -> str:
     return "\n".join(out) + "\n"
 
 
-def test_validate_notes_what_run_refuses(tmp_path, capsys):
+def test_validate_and_run_refuse_the_coupling_switch_alike(tmp_path, capsys):
     ok = tmp_path / "ok.toml"
     ok.write_text(_toml(tiny_coupled()))
     assert main(["validate", str(ok)]) == 0
