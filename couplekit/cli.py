@@ -208,6 +208,25 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_schema(args: argparse.Namespace) -> int:
+    """Print the scene JSON Schema, or write it to ``--out`` (exit 0; 2 when the file cannot be written)."""
+    from pathlib import Path
+
+    from .scene.jsonschema import render_json
+
+    text = render_json()
+    if args.out is None:
+        sys.stdout.write(text)
+        return 0
+    try:
+        Path(args.out).write_text(text, encoding="utf-8")
+    except OSError as exc:
+        print(f"error: cannot write {args.out}: {exc.strerror}; give a writable file path", file=sys.stderr)
+        return 2
+    print(f"wrote {args.out}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``couplekit`` command."""
     parser = argparse.ArgumentParser(prog="couplekit", description=__doc__.split("\n")[0])
@@ -260,6 +279,13 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--backend", default=None, metavar="B", help="auto, cuda, cpu or numpy (overrides the file)")
     sweep.add_argument("--no-progress", action="store_true", help="no line per finished point")
     sweep.set_defaults(func=_cmd_sweep)
+
+    schema = sub.add_parser(
+        "schema",
+        help="print the scene JSON Schema (for TOML editors: Taplo, Even Better TOML; docs/scene-schema.md)",
+    )
+    schema.add_argument("--out", default=None, metavar="FILE", help="write it to FILE instead of standard output")
+    schema.set_defaults(func=_cmd_schema)
     return parser
 
 

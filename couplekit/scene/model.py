@@ -42,6 +42,7 @@ from .schema import (
     GEOMETRY_COMMON_KEYS,
     GEOMETRY_KEYS,
     INFLOW_KEYS,
+    OUTLET_KEYS,
     REQUIRED,
     SECTIONS,
     TOP_LEVEL,
@@ -1088,8 +1089,8 @@ def _face_too_large(domain: Domain, face: str) -> bool:
 
 def _check_outlet_keys(inf: Inflow, key: str, problems: list[Problem]) -> None:
     """The keys each shape takes: none for 'face'; center + size for 'rect'; center + radius for 'disc'."""
-    given = {k for k in ("center", "size", "radius") if getattr(inf, k) is not None}
-    needs = {"face": set(), "rect": {"center", "size"}, "disc": {"center", "radius"}}[inf.shape]
+    given = {k for k in {k for keys in OUTLET_KEYS.values() for k in keys} if getattr(inf, k) is not None}
+    needs = set(OUTLET_KEYS[inf.shape])
     for k in sorted(needs - given):
         problems.append(Problem(f"{key}.{k}", f"an outlet with shape = {inf.shape!r} needs {k}", f"add {k} = ..."))
     for k in sorted(given - needs):

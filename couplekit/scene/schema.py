@@ -32,6 +32,7 @@ __all__ = [
     "GEOMETRY_KEYS",
     "GEOMETRY_COMMON_KEYS",
     "INFLOW_KEYS",
+    "OUTLET_KEYS",
     "FACES",
     "BOUNDARY_KINDS",
     "FIELD_NAMES",
@@ -739,6 +740,9 @@ INFLOW_KEYS: list[Key] = [
     ),
 ]
 """Keys of one ``[[inflows]]`` entry."""
+
+OUTLET_KEYS: dict[str, tuple[str, ...]] = {"face": (), "rect": ("center", "size"), "disc": ("center", "radius")}
+"""The shape keys each ``[[inflows]]`` ``shape`` takes (all of them, and no other of center, size, radius)."""
 
 TOP_LEVEL = (
     "scene",
