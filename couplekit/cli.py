@@ -286,6 +286,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     schema.add_argument("--out", default=None, metavar="FILE", help="write it to FILE instead of standard output")
     schema.set_defaults(func=_cmd_schema)
+
+    from .cli_help import add_help_texts
+
+    add_help_texts(parser, sub)  # descriptions, examples and exit codes (couplekit/cli_help.py)
     return parser
 
 
