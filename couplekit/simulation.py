@@ -587,6 +587,8 @@ class Simulation:
                     n = min(chunk, target - self.step_count)
                     self.step(n)
                     steps_done += n
+                    if bar is not None and steps_done == n:  # the first steps loaded or compiled the kernels
+                        bar.warmed(steps_done)
                 try:
                     self.check_finite()
                 except SimulationDiverged as exc:
