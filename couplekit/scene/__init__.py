@@ -7,7 +7,8 @@
 * :mod:`.model` — the :class:`Scene` dataclasses and the cross-key checks (grid, boundaries, time step);
 * :mod:`.geometry` — box, sphere, cylinder, transforms, unions, sampling an SDF on the grid;
 * :mod:`.mesh` — triangle meshes (OBJ/STL/PLY via meshio) and height fields as SDFs;
-* :mod:`.reference` — renders ``docs/scene-reference.md`` from the schema.
+* :mod:`.reference` — renders ``docs/scene-reference.md`` from the schema;
+* :mod:`.jsonschema` — the schema as JSON Schema for TOML editors (``couplekit schema``).
 """
 
 from __future__ import annotations

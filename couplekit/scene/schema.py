@@ -1,10 +1,11 @@
 """The scene file schema: every key, its type, default, unit, admissible range and documentation.
 
 The schema is data (:data:`SECTIONS`, :data:`BODY_KEYS`, :data:`GEOMETRY_KEYS`, :data:`INFLOW_KEYS`), read by
-two consumers: :func:`read_table`, which checks one TOML table against a key list (unknown key, wrong type,
+three consumers: :func:`read_table`, which checks one TOML table against a key list (unknown key, wrong type,
 out-of-range value, missing required key) and collects :class:`Problem` records naming the dotted key and the
-fix; and :mod:`couplekit.scene.reference`, which renders ``docs/scene-reference.md`` from the same data, so
-the documentation cannot drift from what is validated.
+fix; :mod:`couplekit.scene.reference`, which renders ``docs/scene-reference.md`` from the same data, so
+the documentation cannot drift from what is validated; and :mod:`couplekit.scene.jsonschema`, which renders
+it as JSON Schema for editors (``couplekit schema``, ``docs/scene.schema.json``).
 
 Conventions: SI units; z is up (gravity defaults to (0, 0, -9.81)); the domain is the box
 [0, size_x] × [0, size_y] × [0, size_z]; cell (i, j, k) has its centre at ((i + ½) dx, (j + ½) dx, (k + ½) dx).

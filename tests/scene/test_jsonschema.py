@@ -16,14 +16,17 @@ from couplekit.scene import Scene, SceneError
 from couplekit.scene.jsonschema import render_json, scene_json_schema
 from couplekit.scene.schema import INFLOW_KEYS, OUTLET_KEYS, SECTIONS
 
-jsonschema = pytest.importorskip("jsonschema", reason="the test extra installs jsonschema")
-
 ROOT = Path(__file__).resolve().parents[2]
 SCENE_FILES = sorted((ROOT / "examples").glob("*.toml")) + sorted((ROOT / "benchmarks" / "scenes").glob("*.toml"))
 
 
+def _jsonschema():
+    return pytest.importorskip("jsonschema", reason="the test extra installs jsonschema")
+
+
 @pytest.fixture(scope="module")
 def validator():
+    jsonschema = _jsonschema()
     schema = scene_json_schema()
     jsonschema.Draft202012Validator.check_schema(schema)  # a schema error fails here, not as a verdict
     return jsonschema.Draft202012Validator(schema)
@@ -189,3 +192,13 @@ def test_cli_schema_prints_and_writes(tmp_path, capsys):
     assert out.read_text(encoding="utf-8") == render_json()
     assert main(["schema", "--out", str(tmp_path / "missing" / "x.json")]) == 2
     assert "cannot write" in capsys.readouterr().err
+
+
+def test_draft_7_validators_give_the_same_verdicts():
+    """The schema uses only keywords that mean the same in draft 7, for editors whose validator predates 2020-12."""
+    jsonschema = _jsonschema()
+    schema = scene_json_schema()
+    new, old = jsonschema.Draft202012Validator(schema), jsonschema.Draft7Validator(schema)
+    scenes = [tomllib.loads(p.read_text(encoding="utf-8")) for p in SCENE_FILES]
+    scenes += [_scene(path, value) for path, value in SCHEMA_REFUSES + VALIDATE_ONLY]
+    assert [old.is_valid(d) for d in scenes] == [new.is_valid(d) for d in scenes]
