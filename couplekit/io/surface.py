@@ -7,8 +7,10 @@ well-kept library, not by couplekit. Conventions:
   ((i + ½) dx, (j + ½) dx, (k + ½) dx) (plus ``origin``), as in the .vti fields (:mod:`couplekit.io.vtk`).
 * **Closed water bodies**: φ is padded with one layer of air (φ = 0) outside the domain before contouring, so
   the mesh is the whole boundary of the water: the free surface *and* the faces where the water meets the
-  domain walls (at the wall planes x = 0, x = size_x, ..., exactly, since φ = ½ lies half-way between the
-  last cell centre, φ ≈ 1, and the padding, φ = 0). A pool is a closed box-like mesh whose top is the free
+  domain walls, on the wall planes x = 0, x = size_x, ...: φ = ½ is interpolated between the padding, φ = 0
+  half a cell outside, and the last cell centre, φ_c, so the wall lies ½/φ_c − ½ cells inside the face (0.004
+  cells where φ_c = 0.992; more only within the interface width of the free surface, where the mesh rounds
+  the edge between wall and free surface). A pool is a closed box-like mesh whose top is the free
   surface; a drop in the air is a closed sphere-like mesh. Every water body is a closed, watertight, consistently
   oriented manifold, which is what renderers need for refraction and volume shading. This holds for periodic
   and open faces too (the water is closed at the face; the mesh does not continue periodically).
