@@ -275,14 +275,21 @@ class Simulation:
         return out
 
     def particles(self) -> dict[str, np.ndarray]:
-        """Host NumPy particle arrays: x, v (3, P) in m and m/s; saturation, friction_angle, mass, volume (P,).
-        Empty when the scene has no sand."""
+        """Host NumPy particle arrays: x, v (3, P) in m and m/s; saturation, friction_angle, mass, volume (P,);
+        wetness (P,) in [0, 1] (:func:`couplekit.coupling.wetness.wetness`); with retention moisture (P,).
+        Every name, unit and meaning: docs/outputs.md. Empty when the scene has no sand."""
         if self.sand is None:
             return {}
         p = self.sand.particles()
         out = {k: p[k] for k in ("x", "v", "saturation", "friction_angle", "mass", "volume") if k in p}
         if self.coupler is not None and self.coupler.retention:
             out["moisture"] = self.backend.to_host(self.coupler.moisture_ratio)
+        if "saturation" in out:
+            from .coupling.wetness import wetness
+            from .sand import EPS_MAX
+
+            eps_max = self.coupler.params.eps_max if self.coupler is not None else EPS_MAX
+            out["wetness"] = wetness(out["saturation"], eps_max)
         return out
 
     def diagnostics(self) -> dict[str, float]:
@@ -504,6 +511,8 @@ class Simulation:
                 indexes["particles"].add(t, write_particles_vtp(out / f"particles_{frame:04d}.vtp", parts["x"], extra))
         if o.ply and parts:
             write_particles_ply(out / f"particles_{frame:04d}.ply", parts["x"], extra)
+        if o.surface and (o.surface_format or o.vtk):
+            self._write_surface(out, indexes, frame, t)
         if o.preview and frame % o.preview_every == 0 and not self._preview_failed:
             try:
                 render_preview(
@@ -523,6 +532,24 @@ class Simulation:
         if log_file is not None:
             log_file.write(self.diagnostics())
         self.scheduler.frame_sand_steps()  # the next frame's substep statistics start here
+
+    def _write_surface(self, out: Path, indexes: dict, frame: int, t: float) -> None:
+        """The water surface mesh of this frame (``outputs.surface``; :mod:`couplekit.io.surface`):
+        surface_NNNN.<fmt> for each of ``outputs.surface_format`` and, with ``outputs.vtk``, surface_NNNN.vtp
+        indexed by surface.pvd. Nothing without a phase field (no fluid or a single-phase one)."""
+        from .io import PvdIndex
+        from .io.surface import water_surface, write_surface
+
+        if self.fluid is None or not self.fluid.two_phase:
+            return
+        f = self.fluid.fields()
+        mesh = water_surface(f["phi"], self.scene.domain.dx, f["solid"])
+        for fmt in self.scene.outputs.surface_format:
+            write_surface(out / f"surface_{frame:04d}.{fmt}", mesh)
+        if self.scene.outputs.vtk:
+            if "surface" not in indexes:
+                indexes["surface"] = PvdIndex(out / "surface.pvd")
+            indexes["surface"].add(t, write_surface(out / f"surface_{frame:04d}.vtp", mesh))
 
     def run(
         self,

@@ -22,10 +22,19 @@ RUN_FILES = (
     "fields.pvd",
     "particles.pvd",
     "summary.png",
+    "surface.pvd",
 )
 """Files a run writes under fixed names."""
 
-RUN_PATTERNS = ("fields_*.vti", "particles_*.vtp", "particles_*.ply", "surface_*.ply", "preview_*.png")
+RUN_PATTERNS = (
+    "fields_*.vti",
+    "particles_*.vtp",
+    "particles_*.ply",
+    "surface_*.ply",
+    "surface_*.obj",
+    "surface_*.vtp",
+    "preview_*.png",
+)
 """The per-frame files a run writes."""
 
 

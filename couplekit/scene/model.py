@@ -317,6 +317,10 @@ class Outputs:
     preview_every: int
     checkpoint_every: int
     diagnostics: bool
+    surface: bool = True
+    """Write the water surface mesh of every frame (two-phase fluids; :mod:`couplekit.io.surface`)."""
+    surface_format: tuple[str, ...] = ("ply",)
+    """Renderer formats of the surface meshes ('ply', 'obj'); the ParaView .vtp comes with ``vtk``."""
 
 
 @dataclass(frozen=True)
@@ -761,6 +765,8 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
         out["preview_every"],
         out["checkpoint_every"],
         out["diagnostics"],
+        surface=out["surface"],
+        surface_format=tuple(out["surface_format"]),
     )
     effects = Effects(**eff)
     has_sand = any(b.kind == "sand" for b in bodies) or any(i.sand_fraction > 0 for i in inflows)

@@ -463,6 +463,22 @@ SECTIONS: dict[str, list[Key]] = {
             "ParaView series: fields_NNNN.vti (image data), particles_NNNN.vtp (poly data), .pvd indexes",
         ),
         Key("ply", "bool", True, "particle PLY sequence particles_NNNN.ply (Blender)"),
+        Key(
+            "surface",
+            "bool",
+            True,
+            "water surface (φ = ½) of every frame as a closed triangle mesh with outward normals (docs/outputs.md): "
+            "surface_NNNN.ply / .obj (per surface_format) beside the particles, and with vtk surface_NNNN.vtp indexed by "
+            "surface.pvd; two-phase fluids only (skipped without a phase field)",
+        ),
+        Key(
+            "surface_format",
+            "strs",
+            ["ply"],
+            "renderer formats of the surface meshes: 'ply' (binary, vertex normals) and/or 'obj' (text, vn normals); "
+            "[] writes only the ParaView .vtp",
+            choices=("ply", "obj"),
+        ),
         Key("preview", "bool", True, "PNG preview of every preview_every-th frame, rendered off-screen"),
         Key("preview_every", "int", 1, "frames between previews", "", lo=1),
         Key(

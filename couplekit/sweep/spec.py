@@ -46,9 +46,14 @@ CASE_KEYS = ("name", "set", "grid")
 BACKENDS = ("auto", "cuda", "cpu", "numpy")
 FINAL_STATUSES = ("done", "diverged", "invalid")
 """Statuses a resumed sweep does not run again ("error" and "interrupted" points run again)."""
-OUTPUT_DEFAULTS: dict[str, Any] = {"outputs.preview": False, "outputs.vtk": False, "outputs.ply": False}
-"""Applied to the base scene of every point before the sweep's own overrides: a sweep writes no PNG, VTK or
-PLY files unless its ``set``/``grid``/``reference`` turn them on."""
+OUTPUT_DEFAULTS: dict[str, Any] = {
+    "outputs.preview": False,
+    "outputs.vtk": False,
+    "outputs.ply": False,
+    "outputs.surface": False,
+}
+"""Applied to the base scene of every point before the sweep's own overrides: a sweep writes no PNG, VTK,
+PLY or surface-mesh files unless its ``set``/``grid``/``reference`` turn them on."""
 REFERENCE_ID = "reference"
 """The id (and name and case) of the reference point."""
 
