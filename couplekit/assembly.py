@@ -15,6 +15,10 @@ Conventions (stated once):
   balance (sand weight ϱ ε V_cell g against the buoyancy ρ_f ε V_cell g): sand lighter than water rises, as
   paper Fig. 8's 950 kg/m³ ball does. (With V_p = (dx/k)³, ε would clamp at ε_max while the mass stayed
   ϱ V_cell, and the neutral density would be 0.64 ρ_w.)
+* **Saturation and walls.** A body's ``saturation`` is its particles' initial saturation (dry: 0); sand-only
+  scenes keep it, coupled ones start a retaining body with the bound water r_p = S / ε0
+  (:func:`initial_moisture`). The sand's walls are ``[sand.walls]`` per face, 'separate' with
+  ``sand.wall_friction`` where it names none (:func:`sand_walls`).
 * **Initial pressure** (``fluid.initial_pressure``): hydrostatic when gravity lies along one non-periodic axis
   (:func:`couplekit.fluid.hydrostatic.hydrostatic_pressure`), so water at rest stays at rest instead of ringing
   with the pressure wave of a start from p = 0: ``"resting"`` carries the weight of water resting on the floor

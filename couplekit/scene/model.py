@@ -17,6 +17,9 @@ before anything is allocated:
   problem of ``bodies[i].geometry``); geometry inside the domain (sand at least two cells from each face,
   where the MPM walls are); files exist; what each body kind needs ([fluid] for water and inflows, sand keys
   only on sand bodies); every sand body gets particles outside the obstacles (:func:`_check_seeding`);
+* sand: ``[sand.walls]`` names only faces, takes ``friction`` only on 'separate' faces; ``bodies[i].saturation``
+  on sand bodies only, at most the pore volume 1 − ε0 and, with a fluid, only on a body that retains water,
+  within its capacity (r = S / ε0 ≤ r_max); ``sand.grain_diameter`` at most ``dx``;
 * ``time.max_speed`` at least every velocity the scene gives (bodies, inflows);
 * time step: the lattice Mach number of the fastest expected flow (:class:`couplekit.units.Units`), the
   relaxation time of both viscosities, weak compressibility under gravity, the capillary time-step limit,
