@@ -629,7 +629,8 @@ BODY_KEYS: list[Key] = [
         "gives the full sand.cohesion, e.g. 0.1 with the defaults). Default: dry (0). Sand-only scenes keep it "
         "(no water changes it). With a fluid the coupler recomputes every particle's saturation from the water "
         "each step, so the body must retain water (bodies[i].retention or sand.retention): it starts holding "
-        "S as bound water (moisture ratio r = S / sand.packing_fraction, at most sand.max_moisture). At most "
+        "S as bound water (moisture ratio r = S / sand.packing_fraction, at most sand.max_moisture; the coupler "
+        "then reads S inside the body, less at its surface, where the nodes are partly filled). At most "
         "1 − sand.packing_fraction (the pores full)",
         "",
         lo=0.0,
