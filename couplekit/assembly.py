@@ -15,6 +15,10 @@ Conventions (stated once):
   balance (sand weight ϱ ε V_cell g against the buoyancy ρ_f ε V_cell g): sand lighter than water rises, as
   paper Fig. 8's 950 kg/m³ ball does. (With V_p = (dx/k)³, ε would clamp at ε_max while the mass stayed
   ϱ V_cell, and the neutral density would be 0.64 ρ_w.)
+* **Saturation and walls.** A body's ``saturation`` is its particles' initial saturation (dry: 0); sand-only
+  scenes keep it, coupled ones start a retaining body with the bound water r_p = S / ε0
+  (:func:`initial_moisture`). The sand's walls are ``[sand.walls]`` per face, 'separate' with
+  ``sand.wall_friction`` where it names none (:func:`sand_walls`).
 * **Initial pressure** (``fluid.initial_pressure``): hydrostatic when gravity lies along one non-periodic axis
   (:func:`couplekit.fluid.hydrostatic.hydrostatic_pressure`), so water at rest stays at rest instead of ringing
   with the pressure wave of a start from p = 0: ``"resting"`` carries the weight of water resting on the floor
@@ -50,9 +54,11 @@ __all__ = [
     "build_sand",
     "build_scheduler",
     "check_run",
+    "initial_moisture",
     "memory_estimate",
     "refuse_unsupported",
     "retention_flags",
+    "sand_walls",
 ]
 
 
@@ -317,7 +323,7 @@ def build_sand(scene: Scene, backend: Backend, log: Callable[[str], Any]):
     (:class:`~couplekit.scene.geometry.Difference`; validation refuses a body left without particles). Each
     obstacle keeps its own friction: the SDF collider of all of them samples, per grid node, the friction of the
     obstacle nearest the node (:meth:`~couplekit.sand.boundaries.SdfCollider.union`)."""
-    from .sand.boundaries import DomainWalls, SdfCollider, Wall
+    from .sand.boundaries import SdfCollider
     from .sand.params import SandParams
     from .sand.seeding import seed_sdf
     from .sand.solver import SandSolver, TimeStepError
@@ -329,6 +335,8 @@ def build_sand(scene: Scene, backend: Backend, log: Callable[[str], Any]):
     flags = retention_flags(scene)
     if not scene.has_fluid and any(flags):
         log("note: water retention has no effect in a sand-only scene (no water to retain)")
+    if not scene.has_fluid and sd.grain_diameter is not None:
+        log("note: sand.grain_diameter has no effect in a sand-only scene (it sets the fluid's drag on the sand)")
     h0, h1, h2, h3 = sd.hardening
     s1, s2, s3 = sd.cohesion_saturation
     params = SandParams(
@@ -345,7 +353,7 @@ def build_sand(scene: Scene, backend: Backend, log: Callable[[str], Any]):
         cohesion_s3=s3,
         hardening=eff.hardening,
     )
-    xs, vols, vels, dens, retains = [], [], [], [], []
+    xs, vols, vels, dens, retains, sats = [], [], [], [], [], []
     size = np.asarray(dom.size)
     obstacles = [b for b in scene.bodies if b.kind == "obstacle"]
     solids = [b.geometry.solver_shape(dom) for b in obstacles]
@@ -365,12 +373,12 @@ def build_sand(scene: Scene, backend: Backend, log: Callable[[str], Any]):
         vels.append(np.repeat(np.asarray(b.velocity, np.float64)[:, None], seeded.count, axis=1))
         dens.append(np.full(seeded.count, b.density or sd.density))  # per-body grain density
         retains.append(np.full(seeded.count, flags[i]))
+        sats.append(np.full(seeded.count, b.saturation or 0.0))  # bodies[*].saturation, dry by default
     retentive = np.concatenate(retains) if retains else np.zeros(0, bool)
     if not xs:  # the sand only enters through inflows (couplekit.sand.emission)
         xs, vols, vels, dens = [np.zeros((3, 0))], [np.zeros(0)], [np.zeros((3, 0))], [np.zeros(0)]
-    walls = DomainWalls.from_dict(
-        {wall_face(f): Wall("separate", sd.wall_friction) for f in dom.boundary}, bound=sd.wall_layers
-    )
+    saturation = _initial_saturation(scene, sats, params, log)
+    walls = sand_walls(scene)
     collider = None
     if obstacles:
         frictions = [b.friction if b.friction is not None else sd.wall_friction for b in obstacles]
@@ -380,7 +388,7 @@ def build_sand(scene: Scene, backend: Backend, log: Callable[[str], Any]):
     # with substeps = "auto" the scheduler sets the sand's step every step; it starts at the smallest it may take
     dt = scene.time.dt / sch.max_substeps if auto else sand_step(sch.kind, scene.time.dt, sch.substeps, sch.sand_every)
     try:
-        sand = _sand_solver(SandSolver, backend, scene, dt, params, xs, vols, vels, dens, walls, collider)
+        sand = _sand_solver(SandSolver, backend, scene, dt, params, xs, vols, vels, dens, walls, collider, saturation)
     except TimeStepError as exc:
         if not auto:
             raise
@@ -391,7 +399,45 @@ def build_sand(scene: Scene, backend: Backend, log: Callable[[str], Any]):
     return sand, retentive
 
 
-def _sand_solver(SandSolver, backend, scene, dt, params, xs, vols, vels, dens, walls, collider):
+def sand_walls(scene: Scene):
+    """The sand's :class:`~couplekit.sand.boundaries.DomainWalls` of ``scene``: per face the kind and friction
+    of ``[sand.walls]``, 'separate' with ``sand.wall_friction`` on the faces it does not name (every face, as
+    before the table existed, when it is absent)."""
+    from .sand.boundaries import DomainWalls, Wall
+
+    sd = scene.sand
+    faces = {}
+    for f in scene.domain.boundary:
+        w = sd.walls.get(f)
+        faces[wall_face(f)] = Wall("separate", sd.wall_friction) if w is None else Wall(w.kind, w.friction)
+    return DomainWalls.from_dict(faces, bound=sd.wall_layers)
+
+
+def _initial_saturation(scene: Scene, sats: list, params, log: Callable[[str], Any]) -> np.ndarray | None:
+    """The seeded particles' saturation (``bodies[*].saturation``), None when every body is dry (the solver's
+    default, zeros). With a fluid the coupler recomputes it every step; the body retains water and starts
+    holding it as bound water (:func:`initial_moisture`)."""
+    if not any(b.saturation for b in scene.bodies if b.kind == "sand"):
+        return None
+    if not params.cohesion_on():
+        log(
+            "note: bodies[*].saturation has no effect: the sand is cohesionless (effects.cohesion = false or "
+            "sand.cohesion = 0), and saturation acts through the cohesion only"
+        )
+    return np.concatenate(sats)
+
+
+def initial_moisture(scene: Scene, sand) -> np.ndarray | float:
+    """Initial moisture ratio r_p of the coupler's retention (paper 000 Eq. 58): a body seeded with saturation
+    S holds it as bound water, r_p = S / ε0 (ε0 = ``sand.packing_fraction``: bound water R = r ε of a packed
+    node, so the coupler's saturation R + ε̃ φ starts at S in dry air); 0 (dry) without saturation."""
+    if not any(b.saturation for b in scene.bodies if b.kind == "sand"):
+        return 0.0
+    s = sand.backend.to_host(sand.saturation).astype(np.float64)
+    return np.where(np.isfinite(s), s, 0.0) / scene.sand.packing_fraction
+
+
+def _sand_solver(SandSolver, backend, scene, dt, params, xs, vols, vels, dens, walls, collider, saturation=None):
     sd, dom = scene.sand, scene.domain
     return SandSolver(
         backend,
@@ -409,6 +455,7 @@ def _sand_solver(SandSolver, backend, scene, dt, params, xs, vols, vels, dens, w
         cfl=sd.cfl,
         elastic_cfl=sd.elastic_cfl,
         allow_empty=scene.emits_sand,
+        saturation=saturation,
     )
 
 
@@ -421,9 +468,15 @@ def build_coupler(scene: Scene, sand, fluid, units: Units, retentive: np.ndarray
 
     sd = scene.sand
     retention = any(retention_flags(scene))
-    params = CouplingParams(retention=retention, r_max=sd.max_moisture, absorption_rate=sd.absorption_rate)
+    params = CouplingParams(
+        retention=retention,
+        r_max=sd.max_moisture,
+        absorption_rate=sd.absorption_rate,
+        grain_diameter=sd.grain_diameter,
+    )
     flags = retentive if retention and retentive is not None and retentive.size == sand.n_particles else None
-    return SandFluidCoupler(sand, fluid, units, params, retentive=flags)
+    moisture = initial_moisture(scene, sand) if retention else 0.0
+    return SandFluidCoupler(sand, fluid, units, params, moisture=moisture, retentive=flags)
 
 
 def build_scheduler(scene: Scene, fluid, sand, coupler, *, timing: bool = True, warm_up_steps: int = 1):

@@ -23,11 +23,13 @@ from typing import Any
 from .. import __version__
 from .schema import (
     BODY_KEYS,
+    FACES,
     GEOMETRY_COMMON_KEYS,
     GEOMETRY_KEYS,
     INFLOW_KEYS,
     OUTLET_KEYS,
     REQUIRED,
+    SAND_WALL_KEYS,
     SECTIONS,
     TOP_LEVEL,
     Key,
@@ -48,6 +50,8 @@ _TABLE_TEXT = {
     "scheduler": "How the fluid and the sand are stepped (default: lockstep).",
     "fluid": "Present: the scene has a fluid (LBM two-phase water and air).",
     "sand": 'Material of the sand bodies (used when a body has kind = "sand").',
+    "sand.walls": "The sand's wall on each face of the box (faces not named use sand.wall_friction).",
+    "sand.walls.face": "How the sand meets this face of the box.",
     "outputs": "What each frame writes, and where.",
     "effects": "Switches for ablations.",
     "stirring": "A swirling body force on the water (paper Fig. 11).",
@@ -176,6 +180,15 @@ def scene_json_schema() -> dict[str, Any]:
         elif name == "domain":
             boundary = _table(SECTIONS["domain.boundary"], _TABLE_TEXT["domain.boundary"])
             properties[name] = _table(SECTIONS[name], _TABLE_TEXT[name], {"boundary": boundary})
+        elif name == "sand":
+            wall = _table(SAND_WALL_KEYS, _TABLE_TEXT["sand.walls.face"])
+            walls = {
+                "type": "object",
+                "description": _TABLE_TEXT["sand.walls"],
+                "properties": {face: wall for face in FACES},
+                "additionalProperties": False,
+            }
+            properties[name] = _table(SECTIONS[name], _TABLE_TEXT[name], {"walls": walls})
         elif name in SECTIONS:
             properties[name] = _table(SECTIONS[name], _TABLE_TEXT.get(name, f"The [{name}] table."))
         else:

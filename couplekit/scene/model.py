@@ -17,6 +17,9 @@ before anything is allocated:
   problem of ``bodies[i].geometry``); geometry inside the domain (sand at least two cells from each face,
   where the MPM walls are); files exist; what each body kind needs ([fluid] for water and inflows, sand keys
   only on sand bodies); every sand body gets particles outside the obstacles (:func:`_check_seeding`);
+* sand: ``[sand.walls]`` names only faces, takes ``friction`` only on 'separate' faces; ``bodies[i].saturation``
+  on sand bodies only, at most the pore volume 1 − ε0 and, with a fluid, only on a body that retains water,
+  within its capacity (r = S / ε0 ≤ r_max); ``sand.grain_diameter`` at most ``dx``;
 * ``time.max_speed`` at least every velocity the scene gives (bodies, inflows);
 * time step: the lattice Mach number of the fastest expected flow (:class:`couplekit.units.Units`), the
   relaxation time of both viscosities, weak compressibility under gravity, the capillary time-step limit,
@@ -44,6 +47,7 @@ from .schema import (
     INFLOW_KEYS,
     OUTLET_KEYS,
     REQUIRED,
+    SAND_WALL_KEYS,
     SECTIONS,
     TOP_LEVEL,
     Problem,
@@ -60,6 +64,7 @@ __all__ = [
     "Time",
     "Fluid",
     "Sand",
+    "SandWall",
     "Body",
     "Geometry",
     "Inflow",
@@ -141,6 +146,15 @@ class Fluid:
 
 
 @dataclass(frozen=True)
+class SandWall:
+    """The sand's domain wall on one face (``[sand.walls]``): ``kind`` 'separate' (Coulomb ``friction``),
+    'slip' or 'sticky' (couplekit.sand.boundaries)."""
+
+    kind: str = "separate"
+    friction: float = 0.5
+
+
+@dataclass(frozen=True)
 class Sand:
     density: float
     youngs_modulus: float
@@ -164,6 +178,11 @@ class Sand:
     """Node layers of the MPM domain walls; sand keeps this many cells from each face."""
     periodic_walls: bool = False
     """Periodic faces allowed with sand (the sand meets a wall there)."""
+    walls: dict[str, SandWall] = field(default_factory=dict)
+    """The sand's wall on every face (scene names x_min … z_max); faces not in ``[sand.walls]`` are 'separate'
+    with ``wall_friction``."""
+    grain_diameter: float | None = None
+    """Drag option: None for paper 000's one-ball drag area, a grain diameter (m) for the grains' area."""
 
     @property
     def particles_per_axis(self) -> int:
@@ -269,6 +288,8 @@ class Body:
     density: float | None = None
     retention: bool | None = None
     friction: float | None = None
+    saturation: float | None = None
+    """Sand bodies: initial saturation of the particles (None: dry)."""
 
 
 @dataclass(frozen=True)
@@ -497,7 +518,12 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
     bnd = read_table(boundary_raw, "domain.boundary", SECTIONS["domain.boundary"], problems)
     tim = read_table(data.get("time", {}), "time", SECTIONS["time"], problems)
     flu = read_table(data["fluid"], "fluid", SECTIONS["fluid"], problems) if "fluid" in data else None
-    snd = read_table(data.get("sand", {}), "sand", SECTIONS["sand"], problems)
+    snd_raw = data.get("sand", {})
+    walls_raw = None
+    if isinstance(snd_raw, dict) and "walls" in snd_raw:  # [sand.walls]: a table of faces, read by _sand_walls
+        snd_raw = dict(snd_raw)
+        walls_raw = snd_raw.pop("walls")
+    snd = read_table(snd_raw, "sand", SECTIONS["sand"], problems)
     out = read_table(data.get("outputs", {}), "outputs", SECTIONS["outputs"], problems)
     eff = read_table(data.get("effects", {}), "effects", SECTIONS["effects"], problems)
     sch_raw = data.get("scheduler", {})
@@ -597,6 +623,8 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
 
     # ---- sand material
     sand = _sand(snd, problems)
+    if sand is not None:
+        sand = _with_sand_walls(sand, walls_raw, problems)
 
     # ---- bodies
     bodies, body_ids = [], []  # the bodies that were read, and their index in [[bodies]]
@@ -684,6 +712,8 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
                     "remove it; sand friction on walls is sand.wall_friction",
                 )
             )
+        if b.saturation is not None:
+            _check_saturation(b, i, sand, fluid, problems)
         if b.kind == "obstacle" and any(b.velocity):
             problems.append(
                 Problem(f"bodies[{i}].velocity", "obstacles are fixed", "remove velocity from the obstacle")
@@ -730,6 +760,9 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
                     )
                 )
                 break
+
+    if sand is not None and sand.grain_diameter is not None and domain is not None:
+        _check_grain_diameter(sand, domain, problems)
 
     # ---- scheduler
     has_sand_content = any(b.kind == "sand" for b in bodies) or sand_jet
@@ -862,7 +895,8 @@ def _fluid(flu: dict, raw: dict, domain: Domain | None, tim: dict, problems: lis
 
 
 def _sand(snd: dict, problems: list[Problem]) -> Sand | None:
-    if any(v is None for v in snd.values() if not isinstance(v, bool)):
+    optional = {k.name for k in SECTIONS["sand"] if k.default is None}  # None = not given (grain_diameter)
+    if any(v is None for k, v in snd.items() if not isinstance(v, bool) and k not in optional):
         return None
     ppc = snd["particles_per_cell"]
     k = round(ppc ** (1 / 3))
@@ -905,7 +939,121 @@ def _sand(snd: dict, problems: list[Problem]) -> Sand | None:
         snd["packing_fraction"],
         snd["wall_layers"],
         snd["periodic_walls"],
+        grain_diameter=snd.get("grain_diameter"),
     )
+
+
+def _with_sand_walls(sand: Sand, raw: Any, problems: list[Problem]) -> Sand:
+    """``sand`` with the walls of the ``[sand.walls]`` table ``raw`` (None: not given): one entry per face
+    (``x_min = { kind = "slip" }``, ``z_min = { friction = 0.3 }``), every face resolved (a face not given,
+    or without ``friction``, takes ``sand.wall_friction``); problems for unknown faces, bad entries and a
+    friction on a face that is not 'separate'."""
+    import dataclasses
+    import difflib
+
+    given: dict[str, dict] = {}
+    if raw is not None and not isinstance(raw, dict):
+        problems.append(
+            Problem(
+                "sand.walls",
+                f"must be a table of faces, got {show(raw)}",
+                'write [sand.walls] with lines like z_min = { friction = 0.3 } or x_min = { kind = "slip" }',
+            )
+        )
+    elif raw is not None:
+        for face, entry in raw.items():
+            if face not in FACES:
+                close = difflib.get_close_matches(face, FACES, n=1) if isinstance(face, str) else []
+                problems.append(
+                    Problem(
+                        f"sand.walls.{face if isinstance(face, str) else show(face)}",
+                        "unknown face",
+                        f"did you mean {close[0]!r}?" if close else f"use the faces {', '.join(FACES)}",
+                    )
+                )
+                continue
+            n = len(problems)
+            v = read_table(entry, f"sand.walls.{face}", SAND_WALL_KEYS, problems)
+            if len(problems) > n:
+                continue
+            if v["kind"] != "separate" and v["friction"] is not None:
+                problems.append(
+                    Problem(
+                        f"sand.walls.{face}.friction",
+                        f"a {v['kind']!r} face has no Coulomb friction (only 'separate' faces do)",
+                        f"remove friction, or set kind = 'separate' on sand.walls.{face}",
+                    )
+                )
+                continue
+            given[face] = v
+    walls = {}
+    for face in FACES:
+        v = given.get(face, {})
+        kind, friction = v.get("kind", "separate"), v.get("friction")
+        if kind != "separate":
+            friction = 0.0  # slip and sticky faces have no Coulomb friction
+        elif friction is None:
+            friction = sand.wall_friction
+        walls[face] = SandWall(kind, friction)
+    return dataclasses.replace(sand, walls=walls)
+
+
+def _check_saturation(body: Body, index: int, sand: Sand | None, fluid: Fluid | None, problems: list[Problem]) -> None:
+    """``bodies[index].saturation``: on sand bodies only; at most the pore volume 1 − ε0; with a fluid, only on
+    a body that retains water, within its retention capacity (the coupler recomputes the saturation from the
+    water each step: the body starts holding it as bound water, r = S / ε0 ≤ r_max)."""
+    key = f"bodies[{index}].saturation"
+    if body.kind != "sand":
+        problems.append(Problem(key, f"only sand bodies take saturation (this body is {body.kind!r})", "remove it"))
+        return
+    if sand is None:
+        return
+    s, eps0 = body.saturation, sand.packing_fraction
+    if s > 1.0 - eps0 + 1e-12:
+        problems.append(
+            Problem(
+                key,
+                f"{s:g} is more water than the pores hold (1 − sand.packing_fraction = {1.0 - eps0:g})",
+                f"set it to at most {1.0 - eps0:g} (the cohesion peaks on [S1, S2] of sand.cohesion_saturation)",
+            )
+        )
+        return
+    if fluid is None or s == 0:
+        return
+    retains = body.retention if body.retention is not None else sand.retention
+    if not retains:
+        problems.append(
+            Problem(
+                key,
+                "with a fluid the coupler recomputes every particle's saturation from the water each step, so a "
+                "body that does not retain water would lose it after the first step",
+                f"set bodies[{index}].retention = true (the body then starts holding S as bound water), or remove "
+                "saturation",
+            )
+        )
+    elif s / eps0 > sand.max_moisture * (1 + 1e-12):
+        problems.append(
+            Problem(
+                key,
+                f"{s:g} is above the body's retention capacity: bound water r = S / sand.packing_fraction = "
+                f"{s / eps0:.4g} > sand.max_moisture = {sand.max_moisture:g}",
+                f"set it to at most {sand.max_moisture * eps0:.4g}, or raise sand.max_moisture",
+            )
+        )
+
+
+def _check_grain_diameter(sand: Sand, domain: Domain, problems: list[Problem]) -> None:
+    """The grain-area drag (``sand.grain_diameter``) needs many grains per cell: d ≤ dx."""
+    if sand.grain_diameter > domain.dx:
+        problems.append(
+            Problem(
+                "sand.grain_diameter",
+                f"{sand.grain_diameter:g} m is larger than a cell (domain.dx = {domain.dx:g} m): the grain-area "
+                "drag counts the grains of a node, which needs many grains per cell",
+                "give the grain diameter (e.g. 2e-4 for fine sand), at most domain.dx, or remove it for the "
+                "paper's drag area",
+            )
+        )
 
 
 def _body(raw: Any, path: str, base_dir: Path, source: dict | None, problems: list[Problem]) -> Body | None:
@@ -927,7 +1075,10 @@ def _body(raw: Any, path: str, base_dir: Path, source: dict | None, problems: li
     geo = _geometry(geo_raw, f"{path}.geometry", base_dir, source.get("geometry") if source else None, problems)
     if geo is None or v["kind"] is None or v["velocity"] is None:
         return None
-    return Body(v["kind"], v["name"] or path, geo, tuple(v["velocity"]), v["density"], v["retention"], v["friction"])
+    return Body(
+        v["kind"], v["name"] or path, geo, tuple(v["velocity"]), v["density"], v["retention"], v["friction"],
+        v["saturation"],
+    )  # fmt: skip
 
 
 def _geometry(raw: Any, path: str, base_dir: Path, source: dict | None, problems: list[Problem]) -> Geometry | None:

@@ -16,6 +16,7 @@ from .schema import (
     MAX_MAGNITUDE,
     MIN_MAGNITUDE,
     REQUIRED,
+    SAND_WALL_KEYS,
     SECTIONS,
     Key,
 )
@@ -163,6 +164,25 @@ laptop before it runs on a GPU). `run --frames` and `--threads` must be 1 or mor
 """
 
 
+_SAND_WALLS = """## [sand.walls]
+
+Optional: the sand's domain wall per face, one entry per face named as in `[domain.boundary]` (`x_min`, `x_max`,
+`y_min`, `y_max`, `z_min`, `z_max`). A face not named is `kind = "separate"` with `sand.wall_friction` (so a
+scene without the table is unchanged). These walls act on the sand only; the fluid's boundary is
+`[domain.boundary]`. Example: a floor of friction 0.3 and two frictionless symmetry planes:
+
+```toml
+[sand.walls]
+z_min = { friction = 0.3 }
+x_min = { kind = "slip" }
+y_min = { kind = "slip" }
+```
+
+Keys of one face:
+
+"""
+
+
 def _default(key: Key) -> str:
     if key.default is REQUIRED:
         return "**required**"
@@ -219,6 +239,8 @@ def render() -> str:
     }
     for name, keys in SECTIONS.items():
         parts.append(f"## [{name}]\n\n{notes.get(name, '')}\n\n{_table(keys)}\n")
+        if name == "sand":
+            parts.append(_SAND_WALLS + _table(SAND_WALL_KEYS) + "\n")
     parts.append(
         "## [[bodies]]\n\nAny number of bodies; each has a `kind` and a `[bodies.geometry]` table (below).\n"
         "Water bodies set the initial liquid (φ = 1 inside, a tanh profile of width ξ across the surface); sand\n"

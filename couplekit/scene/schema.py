@@ -34,6 +34,8 @@ __all__ = [
     "GEOMETRY_COMMON_KEYS",
     "INFLOW_KEYS",
     "OUTLET_KEYS",
+    "SAND_WALL_KEYS",
+    "SAND_WALL_KINDS",
     "FACES",
     "BOUNDARY_KINDS",
     "FIELD_NAMES",
@@ -403,7 +405,14 @@ SECTIONS: dict[str, list[Key]] = {
             "jitter", "float", 0.5, "random displacement of seeded particles, in sub-cell spacings", "", lo=0.0, hi=1.0
         ),
         Key("seed", "int", 0, "random seed of the jitter", "", lo=0),
-        Key("wall_friction", "float", 0.5, "Coulomb friction of sand on domain walls and obstacles", "", lo=0.0),
+        Key(
+            "wall_friction",
+            "float",
+            0.5,
+            "Coulomb friction of sand on domain walls and obstacles; a face of [sand.walls] may override it",
+            "",
+            lo=0.0,
+        ),
         Key(
             "wall_layers",
             "int",
@@ -451,6 +460,19 @@ SECTIONS: dict[str, list[Key]] = {
             "",
             lo=0.0,
             hi=0.56,
+        ),
+        Key(
+            "grain_diameter",
+            "float",
+            None,
+            "drag option of the coupling (CouplingParams.grain_diameter): none (default) takes paper 000 §4.3's "
+            "drag area, one ball holding all of a node's sand (a node settles like a sphere of diameter "
+            "(6 ε dx³/π)^(1/3), so the settling speed grows like √dx); a grain diameter d takes the total "
+            "cross-section of the node's grains, A = 1.5 ε dx³ / d (a node settles like one grain of diameter d, at "
+            "any dx). At most domain.dx (a cell must hold many grains); scenes with a fluid only",
+            "m",
+            lo=0.0,
+            lo_open=True,
         ),
     ],
     "outputs": [
@@ -616,8 +638,48 @@ BODY_KEYS: list[Key] = [
     Key(
         "friction", "float", None, "obstacles: Coulomb friction of sand on it (default sand.wall_friction)", "", lo=0.0
     ),
+    Key(
+        "saturation",
+        "float",
+        None,
+        "sand bodies: initial water saturation S of its particles (pore water per volume, paper 000 §4.2), so "
+        "the sand is cohesive from step 0 without any water: c_C(S) of sand.cohesion_saturation (S in [S1, S2] "
+        "gives the full sand.cohesion, e.g. 0.1 with the defaults). Default: dry (0). Sand-only scenes keep it "
+        "(no water changes it). With a fluid the coupler recomputes every particle's saturation from the water "
+        "each step, so the body must retain water (bodies[i].retention or sand.retention): it starts holding "
+        "S as bound water (moisture ratio r = S / sand.packing_fraction, at most sand.max_moisture; the coupler "
+        "then reads S inside the body, less at its surface, where the nodes are partly filled). At most "
+        "1 − sand.packing_fraction (the pores full)",
+        "",
+        lo=0.0,
+        hi=1.0,
+    ),
 ]
 """Keys of one ``[[bodies]]`` entry (its shape is the ``geometry`` sub-table)."""
+
+SAND_WALL_KINDS = ("separate", "slip", "sticky")
+"""Kinds of a sand domain wall (couplekit.sand.boundaries.MODES)."""
+
+SAND_WALL_KEYS: list[Key] = [
+    Key(
+        "kind",
+        "choice",
+        "separate",
+        "how the sand meets this face (couplekit.sand.boundaries): 'separate' (default: Coulomb friction "
+        "`friction`, the sand may leave the wall), 'slip' (frictionless, and the sand cannot leave the wall: "
+        "the normal velocity is always removed; a symmetry plane), 'sticky' (no-slip: the sand stops on it)",
+        choices=SAND_WALL_KINDS,
+    ),
+    Key(
+        "friction",
+        "float",
+        None,
+        "Coulomb friction μ of a 'separate' face (default sand.wall_friction); 0 = frictionless, the sand may lift off",
+        "",
+        lo=0.0,
+    ),
+]
+"""Keys of one face of ``[sand.walls]`` (``x_min = { friction = 0.3 }``): the sand's domain wall on that face."""
 
 GEOMETRY_COMMON_KEYS: list[Key] = [
     Key("type", "choice", REQUIRED, "the shape", choices=("box", "sphere", "cylinder", "heightfield", "mesh")),

@@ -202,3 +202,25 @@ def test_draft_7_validators_give_the_same_verdicts():
     scenes = [tomllib.loads(p.read_text(encoding="utf-8")) for p in SCENE_FILES]
     scenes += [_scene(path, value) for path, value in SCHEMA_REFUSES + VALIDATE_ONLY]
     assert [old.is_valid(d) for d in scenes] == [new.is_valid(d) for d in scenes]
+
+
+@pytest.mark.parametrize(
+    ("walls", "valid"),
+    [
+        ({"z_min": {"friction": 0.3}, "x_min": {"kind": "slip"}}, True),
+        ({"z_mn": {"friction": 0.3}}, False),  # no such face
+        ({"z_min": {"kind": "glue"}}, False),  # no such kind
+        ({"z_min": {"friction": -0.1}}, False),  # out of range
+        ({"z_min": {"fricton": 0.3}}, False),  # no such key
+    ],
+)
+def test_sand_walls_per_face(validator, walls, valid):
+    """[sand.walls]: the schema and validate give the same verdict per face entry."""
+    d = sand_scene()
+    d.setdefault("sand", {})["walls"] = walls
+    assert validator.is_valid(d) == valid
+    if valid:
+        Scene.from_dict(d)
+    else:
+        with pytest.raises(SceneError):
+            Scene.from_dict(d)
