@@ -154,6 +154,7 @@ class Simulation:
         sc = self.scene
         self._log = log or (lambda s: None)
         self._preview_failed = False
+        self._preview_scale: tuple[float, float] | None = None  # the run's fixed sand-speed colours (preview_scale)
         self.coupled = sc.has_fluid and sc.has_sand
         refuse_unsupported(sc)
         self.backend = backend if isinstance(backend, Backend) else get_backend(backend, threads=threads)
@@ -507,6 +508,18 @@ class Simulation:
         return sim
 
     # ------------------------------------------------------------------------------------ run
+    def preview_scale(self) -> tuple[float, float]:
+        """(0, top) m/s: the sand-speed colour scale of every preview of this simulation, decided once from the
+        scene (:func:`couplekit.io.preview.preview_speed_range`: ``time.max_speed``, else the scene's speed
+        estimate) and logged, so that all frames share it."""
+        if self._preview_scale is None:
+            from .io.preview import preview_speed_range
+
+            self._preview_scale, why = preview_speed_range(self.scene)
+            if self.sand is not None or self.scene.emits_sand:
+                self._log(f"previews: sand speed coloured 0 to {self._preview_scale[1]:.3g} m/s in every frame ({why})")
+        return self._preview_scale
+
     def write_frame(self, out: Path, indexes: dict, log_file) -> None:
         """Write the outputs of the current frame (per the scene's [outputs])."""
         from .io import render_preview, write_fields_vti, write_particles_ply, write_particles_vtp
@@ -533,6 +546,7 @@ class Simulation:
                     self.fields(),
                     parts,
                     title=f"{self.scene.name}  frame {frame}  t = {t:.4g} s",
+                    speed_range=self.preview_scale(),
                 )
             except Exception as exc:  # a missing OpenGL/EGL library must not stop the simulation
                 self._preview_failed = True

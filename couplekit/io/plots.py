@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["RunLog", "RunLogError", "PANELS", "load_run", "plot_run", "compare_runs", "STAGE_PREFIX"]
+__all__ = ["RunLog", "RunLogError", "PANELS", "panels_for", "load_run", "plot_run", "compare_runs", "STAGE_PREFIX"]
 
 STAGE_PREFIX, STAGE_SUFFIX = "stage_", "_ms"
 """Per-frame stage costs are logged as ``stage_<name>_ms`` (mean ms per step over the frame's steps)."""
@@ -180,7 +180,9 @@ PANELS: tuple[Panel, ...] = (
 """The panels of :func:`plot_run` and :func:`compare_runs`, in order; the stage-cost panel comes last."""
 
 
-def _panels_for(runs: Sequence[RunLog]) -> list[Panel]:
+def panels_for(runs: Sequence[RunLog]) -> list[Panel]:
+    """The :data:`PANELS` drawn for ``runs``: those with a key some run logged (a ``varying`` one only when its
+    values change); the stage-cost panel is added after them when a run logged costs."""
     keys = set().union(*(r.keys() for r in runs))
     out = []
     for p in PANELS:
@@ -309,7 +311,7 @@ def plot_run(run_dir: str | Path, out: str | Path | None = None) -> list[Path]:
     then the stage costs per frame (stacked, ms per step). Raises :class:`RunLogError` (see :func:`load_run`);
     a truncated last log line is skipped and said so in the figure's title."""
     run = load_run(run_dir)
-    panels = _panels_for([run])
+    panels = panels_for([run])
     costs = _has_costs([run])
     n = len(panels) + int(costs)
     if n == 0:
@@ -343,7 +345,7 @@ def compare_runs(run_dirs: Sequence[str | Path], out: str | Path, labels: Sequen
     elif len(labels) != len(runs):
         raise RunLogError(f"{len(labels)} labels for {len(runs)} run folders: give one label per run")
     labels = list(labels)
-    panels = _panels_for(runs)
+    panels = panels_for(runs)
     costs = _has_costs(runs)
     n = len(panels) + int(costs)
     if n == 0:
