@@ -567,6 +567,7 @@ class Simulation:
         stream=None,
         stop: Callable[[], bool] | None = None,
         overwrite: bool = False,
+        summary: bool = True,
     ) -> RunResult:
         """Simulate until ``frames`` frames are complete (default ``time.frames``), writing outputs into
         ``out`` (default ``outputs.directory`` or ``runs/<name>``).
@@ -576,7 +577,8 @@ class Simulation:
         returning True ends the run cleanly between steps with ``interrupted.h5``. On NaN/Inf the last good
         state (the last one that passed the check) is written to ``last_good.h5`` and the report to
         ``diverged.txt``. At the end, also after a divergence or an interrupt, the diagnostics are drawn into
-        ``summary.png`` (:func:`couplekit.io.plots.plot_run`; a plotting failure is only a warning).
+        ``summary.png`` (:func:`couplekit.io.plots.plot_run`; a plotting failure is only a warning; not with
+        ``summary=False``, as sweep points run: their figures are drawn together by ``couplekit compare``).
 
         The folder is checked first (:func:`couplekit.io.outputs.prepare_output`): one holding an earlier run's
         outputs is refused unless this run resumes from a checkpoint (it appends) or ``overwrite`` deletes them.
@@ -654,7 +656,8 @@ class Simulation:
                 self._log(self.cost_summary())
             if log_file is not None:
                 log_file.close()
-                self._write_summary_plot(out)
+                if summary:
+                    self._write_summary_plot(out)
             if previous is not None:
                 signal.signal(signal.SIGINT, previous)
 

@@ -242,3 +242,9 @@ def test_a_preview_renders_with_a_fixed_scale(tmp_path):
     )  # fmt: skip
     img = _png(path)
     assert img.shape[:2] == (600, 800)
+
+
+def test_summary_false_writes_no_png(tmp_path):
+    """Sweep points run with summary=False: their folders hold no PNG unless the sweep turns outputs on."""
+    assert _sim(tiny_sand(frames=1)).run(out=tmp_path / "r", progress=False, summary=False).status == "done"
+    assert (tmp_path / "r" / "diagnostics.jsonl").is_file() and not list((tmp_path / "r").glob("*.png"))
