@@ -382,7 +382,12 @@ def compare_runs(run_dirs: Sequence[str | Path], out: str | Path, labels: Sequen
 
 
 def _stage_bars(runs: Sequence[RunLog], labels: Sequence[str], path: Path) -> Path:
-    """Mean ms per step of each stage over the frames, one bar per run (grouped by stage)."""
+    """Mean ms per step of each stage over the frames, one bar per run (grouped by stage); runs that logged no
+    stage costs (logs written before couplekit logged them) are named in the title, not drawn as zeros."""
+    without = [lab for r, lab in zip(runs, labels, strict=True) if not r.stage_names()]
+    kept = [(j, r, lab) for j, (r, lab) in enumerate(zip(runs, labels, strict=True)) if r.stage_names()]
+    colours = [f"C{j % 10}" for j, _, _ in kept]  # each run keeps its colour of compare.png
+    runs, labels = [r for _, r, _ in kept], [lab for _, _, lab in kept]
     names: list[str] = []
     for r in runs:
         names += [n for n in r.stage_names() if n not in names]
@@ -405,11 +410,11 @@ def _stage_bars(runs: Sequence[RunLog], labels: Sequence[str], path: Path) -> Pa
     h = 0.8 / len(runs)
     y = np.arange(len(names))
     for j, lab in enumerate(labels):
-        ax.barh(y + (j - (len(runs) - 1) / 2) * h, means[j], height=h, color=f"C{j % 10}", label=lab)
+        ax.barh(y + (j - (len(runs) - 1) / 2) * h, means[j], height=h, color=colours[j], label=lab)
     ax.set_yticks(y, names, fontsize=8)
     ax.invert_yaxis()
     ax.set_xlabel("mean ms per time step over the frames")
-    ax.set_title("Stage costs", fontsize=10)
+    ax.set_title("Stage costs" + (f" (no stage costs logged: {', '.join(without)})" if without else ""), fontsize=10)
     ax.grid(True, axis="x", alpha=0.3)
     ax.legend(fontsize=8, loc="lower right")
     fig.savefig(path, dpi=100)
