@@ -20,6 +20,13 @@ A closed standard output (``couplekit validate scene.toml | head -1``) ends the 
 ``couplekit sweep SWEEP [--out DIR] [--address HOST:PORT] [--workers N] [--threads N]``: run a sweep file (a
 base scene and a grid of dotted-key values, docs/sweeps.md) on Dask; exit 0 when every point finished, 1 when
 a point ended in an error, 2 for a malformed sweep file.
+
+``couplekit plot RUN_DIR [--out DIR_OR_PNG]``: draw the diagnostics of a run (``summary.png``, written into
+the run folder unless ``--out``; docs/outputs-plots.md). ``couplekit compare RUN_A RUN_B ... [--out DIR_OR_PNG]
+[--labels A B ...]``: overlay several runs (``compare.png`` and ``compare_stages.png``, default in the current
+folder). Both: exit 0 when the PNGs are written (a log whose last line was cut short by a crash is plotted up
+to it, with a note), 2 when a folder, its diagnostics.jsonl or the options are unusable (the message names
+the folder and the fix).
 """
 
 from __future__ import annotations
@@ -227,6 +234,50 @@ def _cmd_schema(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_plot(args: argparse.Namespace) -> int:
+    """``couplekit plot``: exit 0 when summary.png is written, 2 for an unusable run folder or log."""
+    from .io.plots import RunLogError, load_run, plot_run
+
+    try:
+        for note in load_run(args.run_dir).notes:
+            print(f"note: {note}", file=sys.stderr)
+        paths = plot_run(args.run_dir, out=args.out)
+    except RunLogError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"error: cannot write the plot to {args.out or args.run_dir}: {exc}; choose another --out",
+              file=sys.stderr)  # fmt: skip
+        return 2
+    for path in paths:
+        print(f"wrote {path}")
+    return 0
+
+
+def _cmd_compare(args: argparse.Namespace) -> int:
+    """``couplekit compare``: exit 0 when the PNGs are written, 2 for an unusable run folder, log or option."""
+    from .io.plots import RunLogError, compare_runs, load_run
+
+    if args.labels is not None and len(args.labels) != len(args.run_dirs):
+        print(f"error: {len(args.labels)} --labels for {len(args.run_dirs)} run folders: give one label per run",
+              file=sys.stderr)  # fmt: skip
+        return 2
+    try:
+        for run_dir in args.run_dirs:
+            for note in load_run(run_dir).notes:
+                print(f"note: {note}", file=sys.stderr)
+        paths = compare_runs(args.run_dirs, args.out, labels=args.labels)
+    except RunLogError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"error: cannot write the plots to {args.out}: {exc}; choose another --out", file=sys.stderr)
+        return 2
+    for path in paths:
+        print(f"wrote {path}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``couplekit`` command."""
     parser = argparse.ArgumentParser(prog="couplekit", description=__doc__.split("\n")[0])
@@ -286,6 +337,19 @@ def build_parser() -> argparse.ArgumentParser:
     )
     schema.add_argument("--out", default=None, metavar="FILE", help="write it to FILE instead of standard output")
     schema.set_defaults(func=_cmd_schema)
+
+    plot = sub.add_parser("plot", help="draw a run's diagnostics into summary.png (docs/outputs-plots.md)")
+    plot.add_argument("run_dir", metavar="RUN_DIR", help="a run's output folder (holds diagnostics.jsonl)")
+    plot.add_argument("--out", default=None, metavar="DIR_OR_PNG", help="where to write (default: RUN_DIR)")
+    plot.set_defaults(func=_cmd_plot)
+
+    compare = sub.add_parser("compare", help="overlay the diagnostics of several runs (compare.png)")
+    compare.add_argument("run_dirs", metavar="RUN_DIR", nargs="+", help="run output folders")
+    compare.add_argument(
+        "--out", default=".", metavar="DIR_OR_PNG", help="folder or .png path to write (default: the current folder)"
+    )
+    compare.add_argument("--labels", nargs="+", default=None, metavar="LABEL", help="legend label of each run")
+    compare.set_defaults(func=_cmd_compare)
 
     from .cli_help import add_help_texts
 

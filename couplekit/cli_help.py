@@ -49,6 +49,16 @@ EXIT_CODES: dict[str, dict[int, str]] = {
         130: "interrupted by Ctrl-C: finished points are kept, the same command resumes",
         141: _CLOSED,
     },
+    "plot": {
+        0: "summary.png written (a cut-short last line of the log is skipped, with a note)",
+        2: "no such run folder, no or unreadable diagnostics.jsonl, or the PNG cannot be written",
+        141: _CLOSED,
+    },
+    "compare": {
+        0: "compare.png and compare_stages.png written",
+        2: "a run folder or its log is unusable, --labels does not match the runs, or the PNGs cannot be written",
+        141: _CLOSED,
+    },
     "schema": {
         0: "printed, or written to --out",
         2: "the --out file cannot be written",
@@ -66,6 +76,7 @@ EXAMPLES: dict[str, list[tuple[str, str]]] = {
             "continue that run to frame 40",
         ),
         ("couplekit sweep examples/sweeps/tiny_substeps.toml", "a parameter sweep on a local Dask cluster"),
+        ("couplekit plot runs/sand_drop_small", "draw a run's diagnostics (summary.png)"),
         ("couplekit schema --out scene.schema.json", "the scene JSON Schema, for TOML editors"),
         ("couplekit info --selfcheck", "backend, compilers, GPU; build and check the kernels"),
     ],
@@ -91,6 +102,13 @@ EXAMPLES: dict[str, list[tuple[str, str]]] = {
         ("couplekit sweep examples/sweeps/tiny_substeps.toml --workers 2 --threads 1", "two points at a time"),
         ("couplekit sweep examples/sweeps/tiny_substeps.toml --address 10.0.0.5:8786", "on a cluster"),
     ],
+    "plot": [
+        ("couplekit plot runs/sand_drop_small", "(re)draw runs/sand_drop_small/summary.png"),
+        ("couplekit plot runs/sand_drop_small --out figures/drop.png", "write it elsewhere"),
+    ],
+    "compare": [
+        ("couplekit compare runs/a runs/b --labels lockstep subcycle:8 --out cmp/", "two runs overlaid"),
+    ],
     "schema": [
         ("couplekit schema > scene.schema.json", "print it"),
         ("couplekit schema --out docs/scene.schema.json", "regenerate the repository's copy"),
@@ -112,6 +130,11 @@ DESCRIPTIONS: dict[str, str] = {
     "[scheduler] table (e.g. subcycle:8). Ctrl-C stops between steps and writes interrupted.h5.",
     "sweep": "Run a sweep file (a base scene and a grid of dotted-key values, docs/sweeps.md) on Dask: one row\n"
     "per point in results.parquet. Finished points are kept: the same command resumes an interrupted sweep.",
+    "plot": "Draw the diagnostics of a run folder into summary.png: fluid volume drift, lattice speed and Mach,\n"
+    "speeds, kinetic energies, sand height and runout, free-surface height, stage costs per frame (a panel\n"
+    "only when the run logged its keys; docs/outputs-plots.md). 'run' draws it at the end of every run.",
+    "compare": "Overlay the diagnostics of several run folders (a scheduler sweep's points, two commits) in\n"
+    "compare.png, and their mean stage costs in compare_stages.png.",
     "schema": "Print the JSON Schema of scene files (draft 2020-12), generated from the keys 'validate' checks.\n"
     "TOML editors (Taplo, VS Code's Even Better TOML) then complete and check scene files: associate it\n"
     "with '#:schema path/to/scene.schema.json' on a scene's first line or a .taplo.toml rule\n"

@@ -154,6 +154,7 @@ class Simulation:
         sc = self.scene
         self._log = log or (lambda s: None)
         self._preview_failed = False
+        self._preview_scale: tuple[float, float] | None = None  # the run's fixed sand-speed colours (preview_scale)
         self.coupled = sc.has_fluid and sc.has_sand
         refuse_unsupported(sc)
         self.backend = backend if isinstance(backend, Backend) else get_backend(backend, threads=threads)
@@ -177,6 +178,7 @@ class Simulation:
         self._resumed = False  # set by load(): run() then appends to an output folder instead of refusing it
         self.fluid = self.sand = self.coupler = self.scheduler = self.emitter = None
         self._timing = bool(timing)
+        self._cost_mark: tuple[dict[str, float], int] = ({}, 0)  # stage totals at the last frame (frame_stage_costs)
         self._rebuild()
         self._sand_origin = self._sand_centroid()
 
@@ -258,6 +260,23 @@ class Simulation:
             line += f"; {self.scheduler.describe()}: {st['mean']:.3g} sand steps per step ({st['total']:.0f} in all)"
         return line
 
+    def frame_stage_costs(self) -> dict[str, float]:
+        """``stage_<name>_ms``: mean milliseconds per time step of each stage over the timed steps since the last
+        frame was written (the per-frame stage costs of the diagnostics log; empty before the first timed step of
+        a frame, and with ``timing=False``)."""
+        rep = self.cost_report()
+        marks, marked = self._cost_mark
+        if self.scheduler._timed_steps < marked:  # reset_timing() since the mark
+            marks, marked = {}, 0
+        n = self.scheduler._timed_steps - marked
+        if n <= 0:
+            return {}
+        return {f"stage_{s}_ms": 1e3 * (r["total"] - marks.get(s, 0.0)) / n for s, r in rep.items()}
+
+    def _mark_stage_costs(self) -> None:
+        """Start a new frame of :meth:`frame_stage_costs`."""
+        self._cost_mark = ({s: r["total"] for s, r in self.cost_report().items()}, self.scheduler._timed_steps)
+
     def fields(self) -> dict[str, np.ndarray]:
         """Host NumPy grid fields: velocity (m/s), pressure (lattice), density, phi, solid (fluid);
         sand_fraction, sand_velocity (m/s) (sand). Shapes (nz, ny, nx) and (3, nz, ny, nx)."""
@@ -296,7 +315,8 @@ class Simulation:
         """Floats: time, step, frame; fluid_volume, fluid_volume_drift, max_lattice_speed, mach, max_speed,
         momentum_x/y/z, kinetic_energy (fluid, lattice units); sand_mass, sand_momentum_x/y/z,
         sand_kinetic_energy, sand_max_speed (SI); step_seconds (wall time of the last step's stages, when
-        timed); with sand ``sand_dt`` (the sand's Δt, s) and ``sand_steps_per_step`` (sand steps per time
+        timed) and ``stage_<name>_ms`` (:meth:`frame_stage_costs`: each stage's mean ms per step over the
+        frame); with sand ``sand_dt`` (the sand's Δt, s) and ``sand_steps_per_step`` (sand steps per time
         step over the current frame: k sub-cycled, 1/m multi-rate, 1 lockstep) with ``substeps_min`` and
         ``substeps_max``.
 
@@ -311,6 +331,7 @@ class Simulation:
         times = self.stage_times()
         if times:
             out["step_seconds"] = float(sum(times.values()))
+        out.update(self.frame_stage_costs())
         total_ke = 0.0
         if self.fluid is not None:
             d = self.fluid.diagnostics()
@@ -494,6 +515,18 @@ class Simulation:
         return sim
 
     # ------------------------------------------------------------------------------------ run
+    def preview_scale(self) -> tuple[float, float]:
+        """(0, top) m/s: the sand-speed colour scale of every preview of this simulation, decided once from the
+        scene (:func:`couplekit.io.preview.preview_speed_range`: ``time.max_speed``, else the scene's speed
+        estimate) and logged, so that all frames share it."""
+        if self._preview_scale is None:
+            from .io.preview import preview_speed_range
+
+            self._preview_scale, why = preview_speed_range(self.scene)
+            if self.sand is not None or self.scene.emits_sand:
+                self._log(f"previews: sand speed coloured 0 to {self._preview_scale[1]:.3g} m/s in every frame ({why})")
+        return self._preview_scale
+
     def write_frame(self, out: Path, indexes: dict, log_file) -> None:
         """Write the outputs of the current frame (per the scene's [outputs])."""
         from .io import render_preview, write_fields_vti, write_particles_ply, write_particles_vtp
@@ -522,6 +555,7 @@ class Simulation:
                     self.fields(),
                     parts,
                     title=f"{self.scene.name}  frame {frame}  t = {t:.4g} s",
+                    speed_range=self.preview_scale(),
                 )
             except Exception as exc:  # a missing OpenGL/EGL library must not stop the simulation
                 self._preview_failed = True
@@ -532,6 +566,7 @@ class Simulation:
         if log_file is not None:
             log_file.write(self.diagnostics())
         self.scheduler.frame_sand_steps()  # the next frame's substep statistics start here
+        self._mark_stage_costs()  # and its stage costs
 
     def _write_surface(self, out: Path, indexes: dict, frame: int, t: float) -> None:
         """The water surface mesh of this frame (``outputs.surface``; :mod:`couplekit.io.surface`):
@@ -559,6 +594,7 @@ class Simulation:
         stream=None,
         stop: Callable[[], bool] | None = None,
         overwrite: bool = False,
+        summary: bool = True,
     ) -> RunResult:
         """Simulate until ``frames`` frames are complete (default ``time.frames``), writing outputs into
         ``out`` (default ``outputs.directory`` or ``runs/<name>``).
@@ -567,7 +603,9 @@ class Simulation:
         ``outputs.checkpoint_every`` frames and at the end (``checkpoint.h5``). Ctrl-C (SIGINT) or ``stop()``
         returning True ends the run cleanly between steps with ``interrupted.h5``. On NaN/Inf the last good
         state (the last one that passed the check) is written to ``last_good.h5`` and the report to
-        ``diverged.txt``.
+        ``diverged.txt``. At the end, also after a divergence or an interrupt, the diagnostics are drawn into
+        ``summary.png`` (:func:`couplekit.io.plots.plot_run`; a plotting failure is only a warning; not with
+        ``summary=False``, as sweep points run: their figures are drawn together by ``couplekit compare``).
 
         The folder is checked first (:func:`couplekit.io.outputs.prepare_output`): one holding an earlier run's
         outputs is refused unless this run resumes from a checkpoint (it appends) or ``overwrite`` deletes them.
@@ -647,8 +685,21 @@ class Simulation:
                 self._log(self.cost_summary())
             if log_file is not None:
                 log_file.close()
+                if summary:
+                    self._write_summary_plot(out)
             if previous is not None:
                 signal.signal(signal.SIGINT, previous)
+
+    def _write_summary_plot(self, out: Path) -> None:
+        """``summary.png`` of the run's diagnostics (:func:`couplekit.io.plots.plot_run`), also after a divergence
+        or an interrupt; a failure to plot is a warning, never the run's failure."""
+        try:
+            from .io.plots import plot_run
+
+            plot_run(out)
+        except Exception as exc:  # matplotlib missing or broken, a full disk: the run's own outputs are written
+            self._log(f"warning: summary.png not written ({type(exc).__name__}: {exc}); the diagnostics are in "
+                      f"{out / 'diagnostics.jsonl'}; draw them later with couplekit plot {out}")  # fmt: skip
 
     def __repr__(self) -> str:
         parts = [f"Simulation({self.scene.name!r}, backend={self.backend.name}, step={self.step_count}"]

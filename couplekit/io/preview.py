@@ -1,5 +1,11 @@
-"""PNG previews rendered off-screen with PyVista: the domain outline, the water surface (φ = ½), obstacles
-and sand particles coloured by speed.
+"""PNG previews rendered off-screen with PyVista: the domain outline with axes in metres, the water surface
+(φ = ½), obstacles, sand particles coloured by speed, a legend and a colour bar beside the box.
+
+The colour scale of the sand speed is fixed for a run, so frames can be compared: :func:`preview_speed_range`
+takes it from the scene (``time.max_speed`` when the scene gives it, otherwise the speed estimate every
+time-step check uses, :meth:`couplekit.scene.Scene.expected_max_speed`: body and inflow speeds plus free fall
+over the domain). A pile at rest is then drawn dark, not stretched to full contrast; particles faster than the
+scale are drawn in :data:`ABOVE_COLOUR` (and the legend says so).
 
 Headless rendering works through VTK's EGL (or OSMesa) render window; on Debian/Ubuntu the system libraries
 are ``libegl1 libegl-mesa0 libgl1`` (Mesa's software rasteriser is enough, no GPU or X server needed).
@@ -13,7 +19,30 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["render_preview"]
+__all__ = ["render_preview", "preview_speed_range", "ABOVE_COLOUR"]
+
+WATER_COLOUR, OBSTACLE_COLOUR, SAND_COLOUR = "#3a7bd5", "#888888", "#c2a46b"
+ABOVE_COLOUR = "#7b3294"
+"""Particles faster than the run's colour scale."""
+SPEED_COLOURS = (SAND_COLOUR, "#e08a2c", "#c0392b", "#5e0b15")
+"""The sand-speed colour map: sand at rest in the sand colour of the legend, faster ever redder and darker."""
+
+
+def _speed_cmap():
+    from matplotlib.colors import LinearSegmentedColormap
+
+    return LinearSegmentedColormap.from_list("sand_speed", SPEED_COLOURS)
+
+
+def preview_speed_range(scene) -> tuple[tuple[float, float], str]:
+    """((0, top) m/s, where top comes from): the sand-speed colour scale of every preview of a run of ``scene``,
+    ``time.max_speed`` if the scene sets it, else its speed estimate (:meth:`couplekit.scene.Scene.
+    expected_max_speed`). The same for every frame, so a pile at rest is not drawn in full contrast."""
+    top, why = scene.expected_max_speed()
+    top = float(top)
+    if not np.isfinite(top) or top <= 0.0:
+        return (0.0, 1.0), f"1 m/s (the scene's speed estimate {top!r} is unusable)"
+    return (0.0, top), why
 
 
 def _image(field: np.ndarray, dx: float):
@@ -33,9 +62,12 @@ def render_preview(
     particles: Mapping[str, np.ndarray] | None = None,
     title: str = "",
     window: tuple[int, int] = (800, 600),
+    speed_range: tuple[float, float] | None = None,
 ) -> Path:
     """Render a preview PNG of a frame. ``fields`` may hold ``phi``, ``solid``; ``particles`` ``x`` (3, P)
-    and ``v`` (3, P). Returns the path written."""
+    and ``v`` (3, P). ``speed_range``: the colour scale of the sand speed, m/s (a run passes
+    :func:`preview_speed_range`, the same for every frame); ``None`` scales to this frame's fastest particle.
+    Returns the path written."""
     if not os.environ.get("DISPLAY"):
         # without an X server go straight to EGL (VTK would try X first and print a warning)
         os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
@@ -44,19 +76,23 @@ def render_preview(
     fields, particles = fields or {}, particles or {}
     p = pv.Plotter(off_screen=True, window_size=list(window))
     p.set_background("white")
-    p.add_mesh(pv.Box(bounds=(0, size[0], 0, size[1], 0, size[2])).outline(), color="black")
+    bounds = (0.0, size[0], 0.0, size[1], 0.0, size[2])
+    p.add_mesh(pv.Box(bounds=bounds).outline(), color="black")
+    legend: list[list[str]] = []
     phi = fields.get("phi")
     if phi is not None and fields.get("solid") is not None:
         phi = np.where(np.asarray(fields["solid"], bool), 0.0, phi)  # no water surface drawn inside obstacles
     if phi is not None and np.nanmax(phi) > 0.5 > np.nanmin(phi):
         surf = _image(np.nan_to_num(phi), dx).contour([0.5], scalars="v")
         if surf.n_points:
-            p.add_mesh(surf, color="#3a7bd5", opacity=0.55, smooth_shading=True)
+            p.add_mesh(surf, color=WATER_COLOUR, opacity=0.55, smooth_shading=True)
+            legend.append(["water surface", WATER_COLOUR])
     solid = fields.get("solid")
     if solid is not None and np.any(solid) and not np.all(solid):
         surf = _image(np.asarray(solid, np.float32), dx).contour([0.5], scalars="v")
         if surf.n_points:
-            p.add_mesh(surf, color="#888888", opacity=0.2)  # see-through, so containers do not hide the scene
+            p.add_mesh(surf, color=OBSTACLE_COLOUR, opacity=0.2)  # see-through, so containers do not hide the scene
+            legend.append(["obstacles", OBSTACLE_COLOUR])
     x = particles.get("x")
     if x is not None and np.asarray(x).shape[1] > 0:
         x = np.asarray(x, dtype=np.float32)
@@ -64,16 +100,64 @@ def render_preview(
         v = particles.get("v")
         if v is not None:
             speed = np.linalg.norm(np.asarray(v, np.float32), axis=0)
-            cloud.point_data["speed (m/s)"] = speed
-            top = float(np.nanmax(speed)) if np.isfinite(speed).any() else 1.0
-            p.add_mesh(cloud, scalars="speed (m/s)", cmap="copper", clim=(0.0, max(top, 1e-6)), point_size=3)
+            if speed_range is None:
+                top = float(np.nanmax(speed)) if np.isfinite(speed).any() else 1.0
+                speed_range = (0.0, max(top, 1e-6))
+            clim = (float(speed_range[0]), max(float(speed_range[1]), float(speed_range[0]) + 1e-9))
+            cloud.point_data["sand speed (m/s)"] = speed
+            p.add_mesh(
+                cloud,
+                scalars="sand speed (m/s)",
+                cmap=_speed_cmap(),
+                render_points_as_spheres=True,
+                clim=clim,
+                above_color=ABOVE_COLOUR,
+                point_size=5,
+                scalar_bar_args=dict(
+                    title="sand speed (m/s)\n",
+                    vertical=True,
+                    position_x=0.86,
+                    position_y=0.12,
+                    width=0.05,
+                    height=0.6,
+                    n_labels=5,
+                    fmt="%.3g",
+                    color="black",
+                    title_font_size=14,
+                    label_font_size=12,
+                    above_label="",
+                ),
+            )
+            legend.append(["sand at rest (redder: faster)", SAND_COLOUR])
+            if np.nanmax(speed) > clim[1]:
+                legend.append([f"sand > {clim[1]:.3g} m/s", ABOVE_COLOUR])
         else:
-            p.add_mesh(cloud, color="#c2a46b", point_size=3)
+            p.add_mesh(cloud, color=SAND_COLOUR, point_size=5, render_points_as_spheres=True)
+            legend.append(["sand", SAND_COLOUR])
+    p.show_bounds(
+        bounds=bounds,
+        xtitle="x (m)",
+        ytitle="y (m)",
+        ztitle="z (m)",
+        n_xlabels=3,
+        n_ylabels=3,
+        n_zlabels=3,
+        fmt="%.3g",
+        font_size=12,
+        color="black",
+        location="outer",
+        bold=False,
+    )
+    if legend:
+        p.add_legend(labels=legend, bcolor="white", border=True, face="rectangle", loc="upper left",
+                     size=(0.26, 0.045 * len(legend)))  # fmt: skip
     if title:
-        p.add_text(title, font_size=10, color="black")
+        p.add_text(title, position="upper_edge", font_size=11, color="black")
     p.camera_position = "iso"
     p.camera.azimuth = 20
     p.reset_camera()
+    p.camera.zoom(0.92)
+    p.camera.SetWindowCenter(0.12, 0.0)  # the box left of the colour bar, below the title
     path = Path(path)
     p.screenshot(str(path))
     p.close()

@@ -101,7 +101,7 @@ def run_point(task: dict[str, Any]) -> dict[str, Any]:
         sim = Simulation(scene, backend=task["backend"], threads=task["threads"], log=None)
         setup = time.perf_counter() - t0
         t0 = time.perf_counter()
-        result = sim.run(frames=task["frames"], out=run_dir, progress=False)
+        result = sim.run(frames=task["frames"], out=run_dir, progress=False, summary=False)  # no PNG (spec.py)
         wall = time.perf_counter() - t0
         log = run_dir / "diagnostics.jsonl"
         return _record(
