@@ -130,17 +130,6 @@ LBM_INLINE void lbm_gradient(const float* RESTRICT s, const unsigned char* RESTR
 #undef LBM_DZ
 }
 
-// True when every one of the 26 neighbours of padded cell c is a stencil cell (no wall / inflow / solid
-// neighbour): where the mixture pressure update (Eq. 39) applies its porosity-slip term (lbm_pressure.cu).
-LBM_INLINE bool lbm_all_stencil(const unsigned char* RESTRICT flags, const long long c, const int px,
-                                   const long long pxy) {
-    bool all = true;
-#define LBM_ALL_STENCIL(q) all = all && LBM_STENCIL_CELL(flags[c + LBM_OFFSET(q, px, pxy)]);
-    LBM_FOR26(LBM_ALL_STENCIL)
-#undef LBM_ALL_STENCIL
-    return all;
-}
-
 // Link mask of a padded cell c for LBM_NB_MASK: bit 0 = c is FLUID (updated), bit j (1..26) = x + c_j is a
 // stencil cell.  LBM_FULL_MASK: a fluid cell whose every neighbour is a stencil cell.
 #define LBM_FULL_MASK 0x7ffffffu

@@ -15,12 +15,14 @@
 #endif
 
 // p <- p - cs2 rho [(1 - sum f) + (eps_s div v + (u - v).grad eps) / eps]   (Eq. 39, 1 - sum f ~ div u, Eq. 38;
-// u the velocity of Eq. 13 written by the last collision; the slip term (u - v).grad eps only in cells
-// whose neighbours are all fluid, and weighted by the water fraction phi in two-phase flow)
+// u the velocity of Eq. 13 written by the last collision; the slip term (u - v).grad eps only in the cells
+// of slip_cells (couplekit.fluid.grid.slip_cells: not in the 3 layers next to a wall), and weighted by the water
+// fraction phi in two-phase flow)
 KERNEL void lbm_macro_pressure(const long long n, const float* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
                                const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                                const float* RESTRICT vel /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
                                const float* RESTRICT phi, const float* RESTRICT eps, const float* RESTRICT sand_v,
+                               const unsigned char* RESTRICT slip_cells,
                                float* RESTRICT p /* size: (nx + 2) * (ny + 2) * (nz + 2) */, const int parity, const int nx,
                                const int ny, const int nz, const float rho_h, const float rho_l) {
     const int px = nx + 2;
@@ -52,12 +54,11 @@ KERNEL void lbm_macro_pressure(const long long n, const float* RESTRICT f /* siz
         lbm_gradient<0>(sand_v + 2 * N, flags, c, px, pxy, gvz);
         const float e = eps[c];
         const float div_v = gvx[0] + gvy[1] + gvz[2];
-        // the slip term only away from walls (every neighbour a stencil cell): next to a wall the gradient's
-        // wall rule cannot see that no fluid crosses the wall, and with it a porosity step there grows a
-        // grid-scale mode (reference docstring)
-        const float slip = lbm_all_stencil(flags, c, px, pxy) ? (ux - sand_v[c]) * ge[0] + (uy - sand_v[N + c]) * ge[1] +
-                                                                    (uz - sand_v[2 * N + c]) * ge[2]
-                                                              : 0.f;
+        // the slip term only in the cells of slip_cells, not in the SLIP_WALL_LAYERS = 3 layers next to a wall:
+        // there a porosity step grows a grid-scale mode (reference docstring)
+        const float slip = slip_cells[c] ? (ux - sand_v[c]) * ge[0] + (uy - sand_v[N + c]) * ge[1] +
+                                               (uz - sand_v[2 * N + c]) * ge[2]
+                                         : 0.f;
 #if CK_TWO_PHASE
         // weighted by the water fraction: in the light phase the slip's pressure, accelerated by 1/rho, pumped
         // the air through a sand ball at the interface upward (reference docstring)

@@ -257,6 +257,43 @@ def periodic_lists(shape: tuple[int, int, int], boundaries: Boundaries) -> tuple
     return idx, _wrap_index(shape, zz[ghost], yy[ghost], xx[ghost])
 
 
+SLIP_WALL_LAYERS = 3
+"""The layers of cells next to a wall, an inflow or a solid cell (along any of the 26 lattice directions) that
+get no porosity-slip term in the pressure update (Eq. 39; ``ReferenceOps.macro_pressure`` says why 3)."""
+
+
+def slip_cells(flags: np.ndarray, periodic: tuple[bool, bool, bool], layers: int = SLIP_WALL_LAYERS) -> np.ndarray:
+    """Padded uint8 mask of the fluid cells with no wall, inflow or solid cell within Chebyshev distance
+    ``layers`` (every cell there a stencil cell: fluid or outflow ghost), the cells where Eq. 39 keeps its slip
+    term (u − v)·∇ε.
+
+    ``periodic``: whether the x, y, z axes are periodic (their faces wrap; the other faces' ghost layer, a wall,
+    inflow or outflow, counts as extending outward). ``layers = 1`` gives the cells whose 26 neighbours are
+    all stencil cells."""
+    from scipy.ndimage import minimum_filter1d
+
+    d = int(layers)
+    stencil = ((flags == FLUID) | (flags == OUTFLOW)).astype(np.uint8)
+    ext = stencil
+    if d > 0:
+        for axis, wraps in zip((2, 1, 0), periodic, strict=True):  # x, y, z = array axes 2, 1, 0
+            if wraps:
+                inner = np.take(ext, np.arange(1, ext.shape[axis] - 1), axis=axis)
+                pad = [(0, 0)] * 3
+                pad[axis] = (d, d)
+                ext = np.pad(inner, pad, mode="wrap")
+            else:
+                pad = [(0, 0)] * 3
+                pad[axis] = (d - 1, d - 1)
+                ext = np.pad(ext, pad, mode="edge")
+        for axis in range(3):
+            ext = minimum_filter1d(ext, size=2 * d + 1, axis=axis, mode="nearest")
+        ext = ext[d - 1 : ext.shape[0] - d + 1, d - 1 : ext.shape[1] - d + 1, d - 1 : ext.shape[2] - d + 1]
+    out = np.zeros(flags.shape, np.uint8)
+    out[INTERIOR] = ext[INTERIOR] & (flags[INTERIOR] == FLUID)
+    return out
+
+
 def outflow_lists(shape: tuple[int, int, int], flags: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(ghost, src)``: padded indices (int64) of every OUTFLOW ghost and of its nearest interior cell."""
     nz, ny, nx = shape

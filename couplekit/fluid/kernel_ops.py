@@ -53,6 +53,7 @@ class KernelOps:
         self._links_flags = None  # the flags array the cached wall links belong to
         self._links = None
         self._dummy = backend.xp.zeros(1, dtype=np.float32)
+        self._dummy_mask = backend.xp.zeros(1, dtype=np.uint8)
 
     def defines(self) -> dict[str, int]:
         """The preprocessor flags of the collide kernel for this effect set."""
@@ -95,7 +96,9 @@ class KernelOps:
         nz, ny, nx = pz - 2, py - 2, px - 2
         return nx * ny * nz, nx, ny, nz
 
-    def macro_pressure(self, f, flags, velocity, phi, eps, sand_v, p, parity: int, rho_h: float, rho_l: float) -> None:
+    def macro_pressure(
+        self, f, flags, velocity, phi, eps, sand_v, slip, p, parity: int, rho_h: float, rho_l: float
+    ) -> None:
         """Eq. 39 pressure update in place (see ReferenceOps.macro_pressure)."""
         n, nx, ny, nz = self._interior(flags)
         if parity & 1:
@@ -108,6 +111,7 @@ class KernelOps:
             self._or_dummy(phi, self.two_phase),
             self._or_dummy(eps, self.mixture),
             self._or_dummy(sand_v, self.mixture),
+            slip if (self.mixture and slip is not None) else self._dummy_mask,
             p,
             np.int32(parity),
             np.int32(nx),

@@ -224,7 +224,9 @@ class ReferenceOps:
         return (rho_l * nu_l + (rho_h * nu_h - rho_l * nu_l) * ph) / self._density(phi, rho_h, rho_l)
 
     # ------------------------------------------------------------------------------------------ stages
-    def macro_pressure(self, f, flags, velocity, phi, eps, sand_v, p, parity: int, rho_h: float, rho_l: float) -> None:
+    def macro_pressure(
+        self, f, flags, velocity, phi, eps, sand_v, slip, p, parity: int, rho_h: float, rho_l: float
+    ) -> None:
         """Pressure update, Eq. 39, in place on the interior fluid cells of ``p``.
 
         p^{n+1} = p^n − c_s² ρ^{n+1} [(1 − Σ_j f_j) + (ε_s ∇·v + (u − v)·∇ε)/ε], with 1 − Σf ≈ ∇·u (Eq. 38),
@@ -240,12 +242,20 @@ class ReferenceOps:
         from round-off to NaN by step 1100; with the Eq. 13 velocity it stays at 1.5e-5 (round-off); the
         same profile away from walls was stable either way (tests/coupling/test_bed_wall_stability.py).
 
-        Why the slip term (u − v)·∇ε only in cells whose 26 neighbours are all stencil cells: next to a wall
-        the gradient's wall rule (a wall neighbour takes the centre value) cannot express that no fluid
-        crosses the wall, and with the Eq. 13 velocity the same column still grew (×2 per 200 steps from
-        step ~1000, a mode alternating in x at the floor), as did a porosity step next to the side walls'
-        edge; without the term in wall-adjacent cells both stay at round-off for 4000 steps.  The cost: the
-        pressure of a wall-adjacent cell does not see flow into a narrower pore there (its ∇·u still does).
+        Why the slip term (u − v)·∇ε only in the cells of ``slip`` (padded uint8 mask,
+        :func:`couplekit.fluid.grid.slip_cells`: not in the ``SLIP_WALL_LAYERS`` = 3 layers of cells next to a
+        wall, inflow or solid cell, along the 26 lattice directions): next to a wall the gradient's wall rule
+        (a wall neighbour takes the centre value) cannot express that no fluid crosses the wall, and with the
+        Eq. 13 velocity the same column still grew (×2 per 200 steps from step ~1000, a mode alternating in x
+        at the floor), as did a porosity step next to the side walls' edge; without the term in wall-adjacent
+        cells both stay at round-off for 4000 steps.  One cell is not enough where a bed's vertical edge
+        reaches within two cells of a wall, as the beds that scenes build do (ε = 1, 0.9, 0.49 from the
+        floor up): with the scene closures at ν_h = 1e-4 (the odd moments relaxing at r_o ≈ 0.02) the mode
+        grew ×2.5 per 250 steps to 1.4e-2 by step 3000 with the term dropped in the one layer next to the
+        walls, ×2.3 per 500 steps with it dropped in two layers, and stays at 1.8e-6 (round-off) for 4000
+        steps with it dropped in three (docs/fluid-stability.md, tests/coupling/test_bed_wall_stability.py).
+        The cost: the pressure of a cell in those three layers does not see flow into a narrower pore there
+        (its ∇·u still does).
 
         Why the slip term is weighted by the water fraction φ (two-phase): in the light phase the pressure it
         raises accelerates the fluid by ∇p/ρ with ρ down to ρ_l, and a sand ball falling through the air
@@ -266,22 +276,14 @@ class ReferenceOps:
             v = interior(sand_v).astype(np.float64)
             grad_e = isotropic_gradient(eps, flags)
             div_v = sum(isotropic_gradient(sand_v[d], flags)[d] for d in range(3))
-            slip = sum((u[d] - v[d]) * grad_e[d] for d in range(3))
-            slip = np.where(self._away_from_walls(flags), slip, 0.0)  # docstring: wall-adjacent cells
+            u_grad_e = sum((u[d] - v[d]) * grad_e[d] for d in range(3))
+            u_grad_e = np.where(interior(slip) != 0, u_grad_e, 0.0)  # docstring: not near walls
             if self.two_phase:
-                slip = np.clip(interior(phi).astype(np.float64), 0.0, 1.0) * slip  # docstring: light phase
-            divergence = divergence + ((1.0 - e) * div_v + slip) / e
+                u_grad_e = np.clip(interior(phi).astype(np.float64), 0.0, 1.0) * u_grad_e  # docstring: light phase
+            divergence = divergence + ((1.0 - e) * div_v + u_grad_e) / e
         fluid = interior(flags) == FLUID
         new = interior(p).astype(np.float64) - CS2 * rho * divergence
         interior(p)[fluid] = new[fluid]
-
-    @staticmethod
-    def _away_from_walls(flags: np.ndarray) -> np.ndarray:
-        """Interior cells whose 26 neighbours are all stencil cells (fluid or outflow ghosts)."""
-        ok = np.ones(interior(flags).shape, dtype=bool)
-        for j in range(1, 27):
-            ok &= stencil_cell(shifted(flags, C27[j]))
-        return ok
 
     def momentum(self, f, flags, velocity, out, parity: int) -> None:
         """out = Σ_j f_j c_j of the current populations (Eq. 13 without the force shift) on interior fluid

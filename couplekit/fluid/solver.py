@@ -33,6 +33,7 @@ from .grid import (
     INTERIOR,
     Boundaries,
     build_flags,
+    slip_cells,
     inflow_front_ramp,
     outflow_lists,
     padded_shape,
@@ -203,6 +204,11 @@ class FluidSolver:
 
         self.fluid_fraction = xp.ones(pshape, dtype=np.float32) if self.mixture else None
         self.sand_velocity = xp.zeros((3,) + pshape, dtype=np.float32) if self.mixture else None
+        # the cells where Eq. 39 keeps its porosity-slip term: not in the 3 layers next to a wall (grid.slip_cells)
+        self._slip_cells = None
+        if self.mixture:
+            periodic_axes = tuple(self.boundaries.face(a + "-").kind == "periodic" for a in "xyz")
+            self._slip_cells = backend.asarray(slip_cells(flags, periodic_axes))
         self.force = xp.zeros((3,) + pshape, dtype=np.float32) if self.external_force else None
 
         self.step_count = 0
@@ -323,8 +329,8 @@ class FluidSolver:
                 ops.halo_copy(self.fluid_fraction, self._ghost, self._image)
                 ops.halo_copy(self.sand_velocity, self._ghost, self._image)
             ops.macro_pressure(
-                self.f, self.flags, self.velocity, self.phi, self.fluid_fraction, self.sand_velocity, self.p,
-                parity, prm.rho_h, prm.rho_l,
+                self.f, self.flags, self.velocity, self.phi, self.fluid_fraction, self.sand_velocity,
+                self._slip_cells, self.p, parity, prm.rho_h, prm.rho_l,
             )  # fmt: skip
             ops.halo_copy(self.p, self._ghost, self._image)
             ops.pressure_filter(self.p, self.flags, self.pbar)

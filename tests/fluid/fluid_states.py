@@ -41,7 +41,7 @@ def random_state(seed: int, boundaries: Boundaries, shape=SHAPE, obstacle: bool 
     velocity = np.where(flags[None] == 0, rng.uniform(-0.05, 0.05, (3,) + pshape), wall_u)
     ghost, image = periodic_lists(shape, boundaries)
     out_ghost, out_src = outflow_lists(shape, flags)
-    return {
+    state = {
         "f": f.astype(np.float32),
         "flags": flags,
         "velocity": velocity.astype(np.float32),
@@ -57,6 +57,10 @@ def random_state(seed: int, boundaries: Boundaries, shape=SHAPE, obstacle: bool 
         "out_ghost": out_ghost,
         "out_src": out_src,
     }
+    # cells with the porosity-slip term of Eq. 39: a random half of the fluid cells (drawn last, so the other
+    # arrays are those of earlier versions), for the kernels must follow whatever mask they are given
+    state["slip"] = ((rng.random(pshape) < 0.5) & (flags == 0)).astype(np.uint8)
+    return state
 
 
 def _smooth_phi(rng, pshape) -> np.ndarray:

@@ -117,7 +117,16 @@ def test_pressure_and_filter_match_reference(cpu, effects, boundaries, parity):
     p0 = sk["p"].copy()
     for ops, s in ((ko, sk), (ro, sr)):
         ops.macro_pressure(
-            s["f"], s["flags"], s["velocity"], s["phi"], s["eps"], s["sand_v"], s["p"], parity, *PARAMS[:2]
+            s["f"],
+            s["flags"],
+            s["velocity"],
+            s["phi"],
+            s["eps"],
+            s["sand_v"],
+            s["slip"],
+            s["p"],
+            parity,
+            *PARAMS[:2],
         )
         ops.pressure_filter(s["p"], s["flags"], s["pbar"])
     # p ~ 1e-3 plus cs² ρ (1 − Σf) ~ 1e-3: float32 round-off of the 27-term sum ~ 27 · 6e-8
