@@ -33,11 +33,11 @@ from .grid import (
     INTERIOR,
     Boundaries,
     build_flags,
-    slip_cells,
     inflow_front_ramp,
     outflow_lists,
     padded_shape,
     periodic_lists,
+    slip_cells,
 )
 from .kernel_ops import KernelOps
 from .reference import ReferenceOps, equilibrium
