@@ -1,4 +1,5 @@
-"""The README's Python code runs, and every ``couplekit.…`` name it mentions imports.
+"""The README's Python code runs (and docs/units-and-conventions.md's), and every ``couplekit.…`` name the
+README mentions imports.
 
 * Every fenced ```` ```python ```` block of README.md is executed, in order, in one namespace, in a temporary
   folder holding a link to the repository's ``examples/`` (the blocks name scene files relative to the
@@ -79,26 +80,37 @@ def test_readme_names_import():
     assert not missing, "README names what does not import:\n" + "\n".join(missing)
 
 
-def test_readme_python_blocks_run(tmp_path, capsys):
-    blocks = python_blocks(README.read_text(encoding="utf-8"))
-    assert blocks, "README.md has no ```python block"
-    (tmp_path / "examples").symlink_to(ROOT / "examples", target_is_directory=True)
+def run_blocks(doc: Path, folder: Path) -> list[int]:
+    """Execute the ```python blocks of ``doc`` in order, in one namespace, in ``folder`` (with a link to the
+    repository's ``examples/``); returns the numbers (1-based) of the blocks skipped by :data:`SKIP_MARKER`."""
+    blocks = python_blocks(doc.read_text(encoding="utf-8"))
+    assert blocks, f"{doc.name} has no ```python block"
+    (folder / "examples").symlink_to(ROOT / "examples", target_is_directory=True)
     namespace: dict = {"__name__": "__readme__"}
     skipped = []
     cwd = os.getcwd()
-    os.chdir(tmp_path)
+    os.chdir(folder)
     try:
-        for i, code in enumerate(blocks):
+        for i, code in enumerate(blocks, start=1):
             if any(line.strip().startswith(SKIP_MARKER) for line in code.splitlines()):
                 skipped.append(i)
                 continue
             try:
-                exec(compile(code, f"README.md python block {i + 1}", "exec"), namespace)
+                exec(compile(code, f"{doc.name} python block {i}", "exec"), namespace)
             except Exception as exc:
-                raise AssertionError(f"README.md python block {i + 1} fails: {type(exc).__name__}: {exc}") from exc
+                raise AssertionError(f"{doc.name} python block {i} fails: {type(exc).__name__}: {exc}") from exc
     finally:
         os.chdir(cwd)
-    with capsys.disabled():
-        if skipped:
-            print(f"\nREADME python blocks skipped by {SKIP_MARKER!r}: {[i + 1 for i in skipped]}")
-    assert len(skipped) < len(blocks), "every README python block is skipped: the test would check nothing"
+    assert len(skipped) < len(blocks), f"every {doc.name} python block is skipped: the test would check nothing"
+    return skipped
+
+
+def test_readme_python_blocks_run(tmp_path, capsys):
+    skipped = run_blocks(README, tmp_path)
+    if skipped:
+        with capsys.disabled():
+            print(f"\nREADME python blocks skipped by {SKIP_MARKER!r}: {skipped}")
+
+
+def test_units_doc_python_blocks_run(tmp_path):
+    assert not run_blocks(ROOT / "docs" / "units-and-conventions.md", tmp_path)

@@ -12,7 +12,7 @@ The D3Q7 phase field lives in :mod:`.phasefield` (its own module and owner).
 from .grid import INFLOW, OUTFLOW, WALL, Boundaries, Face
 from .kernel_ops import KernelOps
 from .reference import ReferenceOps, equilibrium
-from .solver import FluidParams, FluidSolver
+from .solver import FluidParams, FluidSolver, OddFloorInactiveWarning
 
 __all__ = [
     "Boundaries",
@@ -20,6 +20,7 @@ __all__ = [
     "FluidParams",
     "FluidSolver",
     "KernelOps",
+    "OddFloorInactiveWarning",
     "ReferenceOps",
     "equilibrium",
     "WALL",
