@@ -32,6 +32,7 @@ Conventions (stated once):
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -230,12 +231,12 @@ def build_fluid(scene: Scene, backend: Backend, units: Units, coupled: bool, log
     velocity, the initial pressure (module docstring), and the stirring force."""
     from .faces import region_mask
     from .fluid.grid import Boundaries, Face, InflowRegion
-    from .fluid.solver import FluidParams, FluidSolver
+    from .fluid.solver import FluidParams, FluidSolver, OddFloorInactiveWarning
 
     fl, dom, eff = scene.fluid, scene.domain, scene.effects
     two = fl.phases == 2
     gravity = dom.gravity if fl.gravity is None else fl.gravity
-    prm = FluidParams(
+    prm = FluidParams.scene_defaults(  # one path: the defaults FluidParams documents as a scene's
         rho_h=1.0,
         rho_l=fl.air_density / fl.water_density if two else 1.0,
         nu_h=fl.water_lattice_viscosity,
@@ -288,18 +289,26 @@ def build_fluid(scene: Scene, backend: Backend, units: Units, coupled: bool, log
         )  # fmt: skip
         if pressure is None and any(prm.gravity):
             log("note: no hydrostatic start (gravity not along one non-periodic axis): the fluid starts at p = 0")
-    fluid = FluidSolver(
-        backend,
-        dom.shape,
-        prm,
-        Boundaries(faces, tuple(regions)),
-        solid=solid,
-        phi=phi,
-        velocity=velocity,
-        pressure=pressure,
-        mixture=coupled,
-        external_force=coupled or scene.stirring is not None,
-    )
+    with warnings.catch_warnings():  # a scene's odd_lambda default is on at every viscosity: a note, not a warning
+        warnings.simplefilter("ignore", OddFloorInactiveWarning)
+        fluid = FluidSolver(
+            backend,
+            dom.shape,
+            prm,
+            Boundaries(faces, tuple(regions)),
+            solid=solid,
+            phi=phi,
+            velocity=velocity,
+            pressure=pressure,
+            mixture=coupled,
+            external_force=coupled or scene.stirring is not None,
+        )
+    if prm.odd_lambda > 0 and not fluid.odd_floor_active:
+        log(
+            f"note: fluid.odd_lambda = {prm.odd_lambda:g} does nothing at this viscosity (lowest "
+            f"{prm.odd_reference_viscosity(two):g} >= {min(2 * prm.odd_lambda / 3, prm.odd_nu_max):g} in lattice "
+            "units): the odd moments relax at the paper's rate 1"
+        )
     if scene.stirring is not None:  # the swirl of [stirring], added to the force input (couplekit.scene.forces)
         from .scene.forces import StirringForce
 

@@ -5,9 +5,14 @@ A neutral module (no solver imports it from another solver): the fluid's velocit
 (:mod:`couplekit.sand.emission`) and the checks of a scene (:mod:`couplekit.scene.model`) all describe faces and
 outlets the same way, here.
 
-Face names: the fluid uses ``x-, x+, y-, y+, z-, z+`` (:data:`FACE_NAMES`), scenes ``x_min, x_max, …``
-(:data:`SCENE_FACES`; :func:`solver_face` converts), the sand's domain walls ``-x, +x, …``
-(:func:`wall_face`).
+Face names: one public naming, the scenes' ``x_min, x_max, y_min, y_max, z_min, z_max`` (:data:`SCENE_FACES`).
+Every API that takes a face accepts it: scene files, :class:`couplekit.fluid.grid.Boundaries` and
+:class:`~couplekit.fluid.grid.InflowRegion`, :meth:`couplekit.sand.boundaries.DomainWalls.from_dict`, and every
+function here; :meth:`~couplekit.fluid.grid.Boundaries.scene_faces` returns faces by that name. The solvers'
+internal spellings stay accepted as aliases (renaming them would touch the fluid grid's ghost layout, the sand
+emission and their tests): ``x-, x+, …`` (:data:`FACE_NAMES`, what the fluid grid stores; :func:`solver_face`
+converts to it) and the sand walls' ``-x, +x, …`` (:func:`wall_face`); :func:`scene_face` converts any of the
+three to the public name.
 
 Coordinates on a face are its two in-plane axes in x, y, z order (:data:`PLANE_AXES`): ``(y, z)`` on an x face,
 ``(x, z)`` on a y face, ``(x, y)`` on a z face, measured from the domain's origin corner, like every position
@@ -33,6 +38,7 @@ __all__ = [
     "SCENE_FACES",
     "PLANE_AXES",
     "SHAPES",
+    "scene_face",
     "solver_face",
     "wall_face",
     "face_plane_shape",
@@ -57,18 +63,32 @@ SHAPES = ("rect", "disc")
 """Outlet shapes."""
 
 
+_WALL_FACE = {f[1] + f[0]: f for f in FACE_NAMES}  # the sand walls' "-x" -> "x-"
+_SCENE_FACE = dict(zip(FACE_NAMES, SCENE_FACES, strict=True))
+
+
 def solver_face(name: str) -> str:
-    """The solvers' name (``x-`` …) of a face given by either naming (``x_min`` or ``x-``)."""
+    """The fluid grid's name (``x-`` …) of a face given in any naming (``x_min``, ``x-`` or ``-x``)."""
     if name in _SOLVER_FACE:
         return _SOLVER_FACE[name]
     if name in FACE_NAMES:
         return name
-    raise ValueError(f"unknown face {name!r}; faces are {', '.join(SCENE_FACES)} (or {', '.join(FACE_NAMES)})")
+    if name in _WALL_FACE:
+        return _WALL_FACE[name]
+    raise ValueError(
+        f"unknown face {name!r}; faces are {', '.join(SCENE_FACES)} (the aliases {', '.join(FACE_NAMES)} and "
+        f"{', '.join(_WALL_FACE)} are accepted too)"
+    )
+
+
+def scene_face(name: str) -> str:
+    """The public name (``x_min`` …) of a face given in any naming (``x_min``, ``x-`` or ``-x``)."""
+    return _SCENE_FACE[solver_face(name)]
 
 
 def wall_face(name: str) -> str:
-    """The sand walls' name (``-x`` …, :class:`couplekit.sand.boundaries.DomainWalls`) of a face given as
-    ``x_min`` or ``x-``."""
+    """The sand walls' name (``-x`` …, :class:`couplekit.sand.boundaries.DomainWalls`) of a face given in any
+    naming (``x_min``, ``x-`` or ``-x``)."""
     face = solver_face(name)
     return face[1] + face[0]
 

@@ -277,18 +277,45 @@ class Simulation:
         """Start a new frame of :meth:`frame_stage_costs`."""
         self._cost_mark = ({s: r["total"] for s, r in self.cost_report().items()}, self.scheduler._timed_steps)
 
-    def fields(self) -> dict[str, np.ndarray]:
-        """Host NumPy grid fields: velocity (m/s), pressure (lattice), density, phi, solid (fluid);
-        sand_fraction, sand_velocity (m/s) (sand). Shapes (nz, ny, nx) and (3, nz, ny, nx)."""
+    def fields(self, lattice: bool = False) -> dict[str, np.ndarray]:
+        """Host NumPy grid fields, in SI units (``lattice=True``: the solvers' lattice units).
+
+        Arrays are in array order ``(nz, ny, nx)`` (index ``[k, j, i]`` is the cell whose centre is
+        ``((i + ½) dx, (j + ½) dx, (k + ½) dx)``), vectors ``(3, nz, ny, nx)`` with components in ``(x, y, z)``
+        order. Fluid scenes:
+
+        ===================== ====================================================== ==========================
+        field                 SI (default)                                           ``lattice=True``
+        ===================== ====================================================== ==========================
+        ``velocity``          fluid velocity, m/s (0 in solid cells)                 Δx/Δt
+        ``pressure``          gauge pressure p of Eqs. 39–40, Pa (p = 0: the         ρ_w (Δx/Δt)²
+                              reference level of the start, the top of a
+                              hydrostatic column or the initial state)
+        ``density``           ρ(φ) of Eq. 4, kg/m³                                   ρ_w (water = 1)
+        ``phi``               water fraction φ (1 water, 0 air; two-phase), 1        same
+        ``solid``             obstacle cells (bool)                                  same
+        ===================== ====================================================== ==========================
+
+        Sand scenes add ``sand_fraction`` ε (1) and ``sand_velocity`` (MPM grid velocity, m/s; lattice:
+        Δx/Δt); coupled scenes ``fluid_fraction`` (1 − ε, 1), ``water`` (the water fraction of Eq. 59, 1) and
+        with retention ``bound_water`` (bound water per cell volume, 1). ρ_w is the scene's water density
+        (:meth:`couplekit.scene.Scene.units`); the conversion is :meth:`couplekit.units.Units.to_si`.
+        :meth:`write_frame` writes these SI fields into the ``.vti`` files (docs/units-and-conventions.md).
+        """
+        u = self.units
+        speed = 1.0 if lattice else u.scale("velocity")
         out: dict[str, np.ndarray] = {}
         if self.fluid is not None:
             f = self.fluid.fields()
-            f["velocity"] = f["velocity"] * (self.scene.domain.dx / self.scene.time.dt)
+            if not lattice:
+                f["velocity"] = f["velocity"] * speed
+                f["pressure"] = (f["pressure"].astype(np.float64) * u.scale("pressure")).astype(np.float32)
+                f["density"] = f["density"] * np.float32(u.rho)
             out.update(f)
         if self.sand is not None:
             s = self.sand.fields()
             out["sand_fraction"] = s["sand_fraction"]
-            out["sand_velocity"] = s["velocity"]
+            out["sand_velocity"] = s["velocity"] if not lattice else s["velocity"] / u.scale("velocity")
         if self.coupler is not None:
             out.update(self.coupler.fields())
         return out
@@ -312,18 +339,31 @@ class Simulation:
         return out
 
     def diagnostics(self) -> dict[str, float]:
-        """Floats: time, step, frame; fluid_volume, fluid_volume_drift, max_lattice_speed, mach, max_speed,
-        momentum_x/y/z, kinetic_energy (fluid, lattice units); sand_mass, sand_momentum_x/y/z,
-        sand_kinetic_energy, sand_max_speed (SI); step_seconds (wall time of the last step's stages, when
-        timed) and ``stage_<name>_ms`` (:meth:`frame_stage_costs`: each stage's mean ms per step over the
-        frame); with sand ``sand_dt`` (the sand's Δt, s) and ``sand_steps_per_step`` (sand steps per time
-        step over the current frame: k sub-cycled, 1/m multi-rate, 1 lockstep) with ``substeps_min`` and
-        ``substeps_max``.
+        """Floats, in SI units unless the name says ``lattice``: time (s), step, frame; step_seconds (wall time
+        of the last step's stages, when timed) and ``stage_<name>_ms`` (:meth:`frame_stage_costs`: each stage's
+        mean ms per step over the frame).
+
+        Fluid: ``fluid_volume`` (water volume in cells, Σ φ, with sand Σ ε φ + bound water; Δx³ = 1),
+        ``fluid_volume_drift`` (relative to the start), ``max_lattice_speed`` (Δx/Δt), ``mach``, ``max_speed``
+        (m/s), ``fluid_momentum_x/y/z`` (Σ ε ρ u dV, kg m/s: ε the fluid fraction where there is sand, else 1;
+        u = Σ_j f_j c_j, the velocity of the populations the drag exchange sees, which the Eq. 13 velocity of
+        :meth:`fields` leads by half the last step's force), ``fluid_kinetic_energy_si`` (½ Σ ε ρ |u|² dV with
+        the :meth:`fields` velocity, J), ``free_surface_height`` (two-phase, m); and the solver's lattice
+        sums ``lattice_momentum_x/y/z`` (Σ ρ u over every fluid cell, not weighted by ε) and
+        ``lattice_kinetic_energy`` (½ Σ ρ |u|²), in lattice units (ρ_w = Δx = Δt = 1), as
+        :meth:`couplekit.fluid.solver.FluidSolver.diagnostics` gives them.
+
+        Sand: sand_mass (kg), ``sand_momentum_x/y/z`` (Σ m v, kg m/s), sand_kinetic_energy (J), sand_max_speed
+        (m/s); ``sand_dt`` (the sand's Δt, s) and ``sand_steps_per_step`` (sand steps per time step over the
+        current frame: k sub-cycled, 1/m multi-rate, 1 lockstep) with ``substeps_min`` and ``substeps_max``.
+
+        Both: ``total_momentum_x/y/z`` (fluid + sand momentum, kg m/s: what gravity, walls, inflows and
+        stirring change and the drag exchange between fluid and sand does not) and
+        ``total_kinetic_energy_si`` (fluid + sand, J).
 
         Measurements (:mod:`couplekit.metrics`, SI): ``sand_centroid_x/y/z`` (m), ``sand_front`` (runout from
-        the initial centroid's vertical, m), ``sand_top`` (height of the pile, m); ``free_surface_height``
-        (mean height of the φ = ½ surface, m; two-phase fluids); ``fluid_kinetic_energy_si`` (½ Σ ε ρ |u|² dV,
-        J) and ``total_kinetic_energy_si`` (fluid + sand, J)."""
+        the initial centroid's vertical, m), ``sand_top`` (height of the pile, m). Units and names:
+        docs/units-and-conventions.md."""
         from . import metrics
 
         sc = self.scene
@@ -333,9 +373,12 @@ class Simulation:
             out["step_seconds"] = float(sum(times.values()))
         out.update(self.frame_stage_costs())
         total_ke = 0.0
+        total_momentum = np.zeros(3)
         if self.fluid is not None:
             d = self.fluid.diagnostics()
             d.pop("step", None)
+            for k in ("momentum_x", "momentum_y", "momentum_z", "kinetic_energy"):
+                out["lattice_" + k] = d.pop(k)  # lattice sums over every fluid cell (the solver's)
             out.update(d)
             out["mach"] = d["max_lattice_speed"] / math.sqrt(CS2)
             out["max_speed"] = d["max_lattice_speed"] * sc.domain.dx / sc.time.dt
@@ -348,6 +391,10 @@ class Simulation:
                 velocity, f["density"] * self.units.rho, sc.domain.dx, eps
             )
             total_ke += out["fluid_kinetic_energy_si"]
+            momentum = self._fluid_momentum(f["density"], eps)
+            total_momentum += momentum
+            for axis, m in zip("xyz", momentum, strict=True):
+                out[f"fluid_momentum_{axis}"] = float(m)
             if "phi" in f:
                 out["free_surface_height"] = metrics.free_surface_height(
                     f["phi"], sc.domain.dx, sc.domain.gravity, f["solid"]
@@ -357,6 +404,7 @@ class Simulation:
                 if k not in ("time", "step"):
                     out[f"sand_{k}"] = v
             total_ke += out["sand_kinetic_energy"]
+            total_momentum += [out[f"sand_momentum_{axis}"] for axis in "xyz"]
             x = self.backend.to_host(self.sand.x)
             out.update(metrics.sand_metrics(x, self._sand_origin, sc.domain.gravity, sc.domain.size))
             st = self.scheduler.sand_steps()
@@ -364,7 +412,21 @@ class Simulation:
             out["sand_steps_per_step"] = st["frame_mean"]
             out["substeps_min"], out["substeps_max"] = st["frame_min"], st["frame_max"]
         out["total_kinetic_energy_si"] = total_ke
+        for axis, m in zip("xyz", total_momentum, strict=True):
+            out[f"total_momentum_{axis}"] = float(m)
         return out
+
+    def _fluid_momentum(self, density: np.ndarray, eps: np.ndarray | None) -> np.ndarray:
+        """Σ ε ρ u dV (3,) in kg m/s of the fluid: ``density`` the lattice ρ(φ) (interior), ``eps`` the fluid
+        fraction (interior; None: 1), u = Σ_j f_j c_j of the current populations (the velocity the drag
+        exchange reads, :meth:`couplekit.fluid.solver.FluidSolver.current_velocity`)."""
+        fl = self.fluid
+        u = self.backend.to_host(fl.current_velocity())[(slice(None), slice(1, -1), slice(1, -1), slice(1, -1))]
+        w = density.astype(np.float64) * fl._fluid_host
+        if eps is not None:
+            w = w * eps
+        lattice = np.einsum("dzyx,zyx->d", u.astype(np.float64), w)
+        return lattice * self.units.scale("mass") * self.units.scale("velocity")
 
     def _sand_centroid(self) -> np.ndarray | None:
         """Mean particle position (m) now, None without particles (the origin of ``sand_front``)."""

@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..faces import FACE_NAMES, face_plane_shape
+from ..faces import SCENE_FACES, face_plane_shape, solver_face
 
 FLUID, WALL, INFLOW, OUTFLOW = 0, 1, 2, 3
 _KINDS = {"periodic": None, "wall": WALL, "inflow": INFLOW, "outflow": OUTFLOW}
@@ -64,7 +64,8 @@ class Face:
 class InflowRegion:
     """A velocity inlet on part of one face: the face ghosts where ``mask`` is True become INFLOW.
 
-    ``face``: ``x-, x+, y-, y+, z-, z+`` (must not be periodic); ``mask``: boolean array of the face's plane
+    ``face``: ``x_min, x_max, …`` (or the alias ``x-, x+, …``, which ``face`` holds after construction; must
+    not be periodic); ``mask``: boolean array of the face's plane
     shape (:func:`face_plane_shape`: ``(ny, nx)`` for a z face, ``(nz, nx)`` for a y face, ``(nz, ny)`` for an
     x face; index ``[i, j]`` is the ghost facing interior cell ``i, j`` of those axes); ``velocity``: lattice
     units (x, y, z), either 3 numbers or a per-cell array ``(3, *mask.shape)``; ``phi``: the phase value it
@@ -78,8 +79,10 @@ class InflowRegion:
     phi: float | np.ndarray = 1.0
 
     def __post_init__(self) -> None:
-        if self.face not in FACE_NAMES:
-            raise ValueError(f"inflow region on unknown face {self.face!r}; faces are {', '.join(FACE_NAMES)}")
+        try:
+            object.__setattr__(self, "face", solver_face(self.face))  # any naming; stored as x- … (the grid's)
+        except ValueError as exc:
+            raise ValueError(f"inflow region on an unknown face: {exc}") from None
         mask = np.asarray(self.mask)
         if mask.ndim != 2 or mask.dtype != bool:
             raise ValueError(f"inflow region mask must be a 2-D boolean array, got {mask.dtype} {mask.shape}")
@@ -106,20 +109,38 @@ class InflowRegion:
 
 @dataclass(frozen=True)
 class Boundaries:
-    """The six faces of the box, by name ``x-, x+, y-, y+, z-, z+`` (default: all periodic), and inflow
-    regions on parts of non-periodic faces (:class:`InflowRegion`; they must not overlap)."""
+    """The six faces of the box, by name ``x_min, x_max, y_min, y_max, z_min, z_max`` (the scenes' naming; the
+    aliases ``x-, x+, …`` are accepted and are what ``faces`` holds after construction), and inflow regions on
+    parts of non-periodic faces (:class:`InflowRegion`; they must not overlap).
+
+    Default: every face not given is **periodic** (``Boundaries()`` is a fully periodic box), unlike a scene,
+    whose faces default to ``"wall"`` (``domain.boundary``): :meth:`scene_defaults` gives the scene's box.
+    """
 
     faces: dict[str, Face] = field(default_factory=dict)
     regions: tuple[InflowRegion, ...] = ()
 
     def face(self, name: str) -> Face:
-        """The face called ``name`` (periodic unless set)."""
-        return self.faces.get(name, Face())
+        """The face called ``name`` (``x_min`` … or ``x-`` …; periodic unless set)."""
+        return self.faces.get(solver_face(name), Face())
+
+    def scene_faces(self) -> dict[str, Face]:
+        """All six faces by their public names ``x_min, x_max, …`` (periodic where not set)."""
+        return {name: self.face(name) for name in SCENE_FACES}
+
+    @classmethod
+    def scene_defaults(cls) -> Boundaries:
+        """The box a scene gets when ``domain.boundary`` sets nothing: a stationary no-slip wall on every face."""
+        return cls({name: Face("wall") for name in SCENE_FACES})
 
     def __post_init__(self) -> None:
-        for name in self.faces:
-            if name not in FACE_NAMES:
-                raise ValueError(f"unknown face {name!r}; faces are {', '.join(FACE_NAMES)}")
+        named: dict[str, Face] = {}
+        for name, face in self.faces.items():
+            key = solver_face(name)  # ValueError naming the faces for an unknown one
+            if key in named:
+                raise ValueError(f"face {name!r} given twice (as {key} and under another name)")
+            named[key] = face
+        object.__setattr__(self, "faces", named)
         for axis in "xyz":
             lo, hi = self.face(axis + "-").kind, self.face(axis + "+").kind
             if (lo == "periodic") != (hi == "periodic"):
@@ -130,8 +151,9 @@ class Boundaries:
 
     @classmethod
     def channel(cls, walls: str = "y", moving: dict[str, tuple[float, float, float]] | None = None) -> Boundaries:
-        """Walls on the faces of the axes in ``walls`` (e.g. ``"y"`` or ``"xyz"``), periodic elsewhere."""
-        moving = moving or {}
+        """Walls on the faces of the axes in ``walls`` (e.g. ``"y"`` or ``"xyz"``), periodic elsewhere; ``moving``:
+        wall velocities (lattice units) by face name (``y_max`` or ``y+``)."""
+        moving = {solver_face(k): v for k, v in (moving or {}).items()}
         faces = {}
         for axis in walls:
             for side in "-+":

@@ -22,7 +22,10 @@ stored in ``phi`` at the inflow cells, outflow), so one step parity and one flag
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
+from dataclasses import fields as dataclass_fields
+from typing import Any
 
 import numpy as np
 
@@ -85,6 +88,29 @@ class FluidParams:
     exactly.
     ``smagorinsky``: Smagorinsky constant C of a subgrid viscosity ν_t = (C Δx)² |S̄| added to ν (0 = off, the
     default and the paper's model); 0.1–0.17 is usual for under-resolved turbulent flows.
+
+    **Defaults differ from a scene's.** ``FluidParams()`` is the paper's collision on a generic fluid, what the
+    solver validations test; a scene's ``[fluid]`` table defaults to the paper's viscosities with the
+    closures on. :meth:`scene_defaults` gives exactly the scene's (the assembly builds every scene's fluid
+    through it), and :class:`~couplekit.fluid.grid.Boundaries` likewise (all periodic here, walls in a scene:
+    ``Boundaries.scene_defaults()``):
+
+    ========================== ===================== ==================================================
+    field                      ``FluidParams()``     ``FluidParams.scene_defaults()`` (scene key)
+    ========================== ===================== ==================================================
+    ``nu_h``, ``nu_l``         0.1, 0.1              1e-4, 1e-2 (``water_/air_lattice_viscosity``)
+    ``rho_l``                  1.0                   1.25 / 1000 (``air_density / water_density``)
+    ``odd_lambda``             0 (off)               0.015 (``odd_lambda``): acts, ν_h = 1e-4 < 5e-4
+    ``smagorinsky``            0 (off)               0.1 (``smagorinsky``)
+    ``eta``                    0 (off)               2.0 (``controller_eta``)
+    ``mobility``, ``width``    0.02, 4               0.02, 4 (``mobility``, ``interface_width``)
+    ``gravity``, ``sigma``     0, 0                  0, 0 (SI in a scene: ``Units.to_lattice`` of them)
+    ========================== ===================== ==================================================
+
+    **When ``odd_lambda`` acts:** only when the fluid's lowest molecular viscosity ν_ref (ν_h single-phase,
+    min(ν_h, ν_l) two-phase) is below both 2Λ/3 (above it the paper's rate 1 already gives Λ) and
+    ``odd_nu_max``: :meth:`odd_floor_acts`. Otherwise the floor does nothing, and :class:`FluidSolver` warns
+    (:class:`OddFloorInactiveWarning`) when it was asked for (``odd_lambda`` > 0); a scene logs a note instead.
     """
 
     rho_h: float = 1.0
@@ -116,6 +142,48 @@ class FluidParams:
         if len(self.gravity) != 3:
             raise ValueError(f"FluidParams.gravity needs 3 components, got {self.gravity!r}")
 
+    @classmethod
+    def scene_defaults(cls, **overrides: Any) -> FluidParams:
+        """The lattice parameters a scene's fluid gets where its ``[fluid]`` table sets nothing (the class
+        docstring's table; the values are read from the scene schema, so they cannot drift), with
+        ``overrides`` (any field) applied. Gravity and surface tension are SI in a scene and stay 0 here: give
+        them in lattice units (:meth:`couplekit.units.Units.to_lattice`)."""
+        from ..scene.model import _DEFAULT_LATTICE_VISCOSITY
+        from ..scene.schema import SECTIONS
+
+        key = {k.name: k.default for k in SECTIONS["fluid"]}
+        values: dict[str, Any] = dict(
+            rho_h=1.0,
+            rho_l=key["air_density"] / key["water_density"],
+            nu_h=_DEFAULT_LATTICE_VISCOSITY["water"],
+            nu_l=_DEFAULT_LATTICE_VISCOSITY["air"],
+            mobility=key["mobility"],
+            width=key["interface_width"],
+            eta=key["controller_eta"],
+            odd_lambda=key["odd_lambda"],
+            smagorinsky=key["smagorinsky"],
+        )
+        names = [f.name for f in dataclass_fields(cls)]
+        unknown = set(overrides) - set(names)
+        if unknown:
+            raise TypeError(f"FluidParams has no field(s) {sorted(unknown)}; its fields are {', '.join(names)}")
+        values.update(overrides)
+        return cls(**values)
+
+    def odd_reference_viscosity(self, two_phase: bool = True) -> float:
+        """ν_ref of the odd-moment rate: the lowest molecular viscosity (ν_h single-phase, min(ν_h, ν_l))."""
+        return min(self.nu_h, self.nu_l) if two_phase else self.nu_h
+
+    def odd_floor_acts(self, two_phase: bool = True) -> bool:
+        """Whether the ``odd_lambda`` floor changes the collision: Λ > 0 and ν_ref < min(2Λ/3, ``odd_nu_max``)
+        (:func:`~couplekit.fluid.reference.odd_rates`); False means the solver runs the paper's rate 1."""
+        nu_ref = self.odd_reference_viscosity(two_phase)
+        return self.odd_lambda > 0 and nu_ref < min(2.0 * self.odd_lambda / 3.0, self.odd_nu_max)
+
+
+class OddFloorInactiveWarning(UserWarning):
+    """``FluidParams.odd_lambda`` > 0 was given with a viscosity at which the floor does nothing."""
+
 
 class FluidSolver:
     """Velocity-based D3Q27 NOCM-MRT flow, optionally with the D3Q7 conservative phase field.
@@ -124,8 +192,10 @@ class FluidSolver:
     ----------
     backend: where to run (:func:`couplekit.backend.get_backend`); numpy runs the reference ops.
     shape: interior grid ``(nz, ny, nx)``.
-    params: :class:`FluidParams` in lattice units.
-    boundaries: the six faces (:class:`~couplekit.fluid.grid.Boundaries`; default all periodic).
+    params: :class:`FluidParams` in lattice units (``FluidParams.scene_defaults()`` for a scene's fluid;
+        ``FluidParams()`` differs: see its docstring). ``odd_floor_active``: whether its odd-rate floor acts.
+    boundaries: the six faces (:class:`~couplekit.fluid.grid.Boundaries`); default ``None`` = **all periodic**
+        (a scene's faces default to walls: ``Boundaries.scene_defaults()``).
     solid: interior boolean mask of stationary obstacle cells (e.g. ``sdf < 0`` of a signed distance field).
     phi: initial phase field ``(nz, ny, nx)`` (1 = heavy); ``None`` makes a single-phase solver.
     velocity: initial velocity ``(3, nz, ny, nx)`` (x, y, z components), default rest.
@@ -157,9 +227,19 @@ class FluidSolver:
         self.params = params
         # the odd-rate floor acts only where nu < 2 Λ / 3 (see reference.odd_rate); 0 when no cell can reach it,
         # so the kernel keeps its rate-1 fast path
-        nu_min = min(params.nu_h, params.nu_l) if phi is not None else params.nu_h
-        active = nu_min < min(2.0 * params.odd_lambda / 3.0, params.odd_nu_max)
-        self._odd_lambda = params.odd_lambda if active else 0.0
+        self.odd_floor_active = params.odd_floor_acts(two_phase=phi is not None)
+        self._odd_lambda = params.odd_lambda if self.odd_floor_active else 0.0
+        if params.odd_lambda > 0 and not self.odd_floor_active:
+            nu_ref = params.odd_reference_viscosity(two_phase=phi is not None)
+            warnings.warn(
+                OddFloorInactiveWarning(
+                    f"FluidParams.odd_lambda = {params.odd_lambda:g} does nothing here: the fluid's lowest viscosity "
+                    f"{nu_ref:g} is not below min(2 odd_lambda / 3, odd_nu_max = {params.odd_nu_max:g}) = "
+                    f"{min(2 * params.odd_lambda / 3, params.odd_nu_max):g}, so the odd moments relax at the "
+                    "paper's rate 1. Set odd_lambda = 0 to say so, or lower the viscosity"
+                ),
+                stacklevel=2,
+            )
         self.boundaries = boundaries or Boundaries()
         self.two_phase = phi is not None
         self.surface_tension = self.two_phase and params.sigma > 0

@@ -25,6 +25,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..faces import wall_face
+
 __all__ = ["MODES", "Wall", "DomainWalls", "Collider", "SdfCollider", "pack_walls", "pack_colliders"]
 
 MODES = {"sticky": 0, "slip": 1, "separate": 2}
@@ -67,11 +69,18 @@ class DomainWalls:
 
     @classmethod
     def from_dict(cls, spec: dict[str, Wall], default: Wall = Wall(), bound: int = 2) -> DomainWalls:
-        """Faces named '-x', '+x', ...; missing faces get ``default``."""
-        unknown = set(spec) - set(FACES)
-        if unknown:
-            raise ValueError(f"unknown wall face(s) {sorted(unknown)}; faces are {', '.join(FACES)}")
-        return cls(tuple(spec.get(f, default) for f in FACES), bound)
+        """Faces named ``x_min``, ``x_max``, … (the scenes' naming) or ``-x``, ``+x``, … (or ``x-``, …); missing
+        faces get ``default``."""
+        named: dict[str, Wall] = {}
+        for name, wall in spec.items():
+            try:
+                key = wall_face(name)
+            except ValueError as exc:
+                raise ValueError(f"unknown wall face: {exc}") from None
+            if key in named:
+                raise ValueError(f"wall face {name!r} given twice (as {key} and under another name)")
+            named[key] = wall
+        return cls(tuple(named.get(f, default) for f in FACES), bound)
 
     def __post_init__(self) -> None:
         if len(self.faces) != 6:

@@ -52,6 +52,7 @@ from .schema import (
     TOP_LEVEL,
     Problem,
     SceneError,
+    parse_toml,
     read_table,
     read_toml,
     show,
@@ -413,6 +414,15 @@ class Scene:
         """Read and validate a TOML scene file; raises :class:`SceneError` naming every problem."""
         path = Path(path)
         return cls.from_dict(read_toml(path, SceneError), base_dir=path.parent, source_name=str(path))
+
+    @classmethod
+    def loads(cls, text: str, name: str = "<string>", base_dir: str | Path = ".") -> Scene:
+        """Read and validate a scene given as TOML text: :meth:`load` of a string.
+
+        The same checks and messages as :meth:`load`, with ``name`` (default ``"<string>"``) where those name
+        the file; relative mesh and height-field files resolve against ``base_dir`` (default the working
+        directory), as :meth:`load`'s resolve against the file's folder."""
+        return cls.from_dict(parse_toml(text, name, SceneError), base_dir=base_dir, source_name=name)
 
     @classmethod
     def from_dict(cls, data: dict, base_dir: str | Path = ".", source_name: str = "scene") -> Scene:

@@ -27,6 +27,7 @@ __all__ = [
     "Problem",
     "ProblemError",
     "SceneError",
+    "parse_toml",
     "read_toml",
     "SECTIONS",
     "BODY_KEYS",
@@ -136,7 +137,6 @@ class SceneError(ProblemError):
 def read_toml(path, error: type[ProblemError] = SceneError) -> dict:
     """The TOML file at ``path`` as a dict; a file that cannot be read or is not TOML raises ``error`` with one
     :class:`Problem` (key ``(file)`` or ``(syntax)``) naming the file and the fix."""
-    import tomllib
     from pathlib import Path
 
     path = Path(path)
@@ -149,18 +149,31 @@ def read_toml(path, error: type[ProblemError] = SceneError) -> dict:
             [Problem("(file)", f"{path} is not a text file (byte {exc.start} is not UTF-8)", "give a TOML text file")],
             str(path),
         ) from None
+    return parse_toml(text, str(path), error)
+
+
+def parse_toml(text: str, source: str = "<string>", error: type[ProblemError] = SceneError) -> dict:
+    """TOML ``text`` as a dict; text that is not TOML raises ``error`` with one :class:`Problem` (key
+    ``(syntax)``) naming ``source`` (a path, or ``"<string>"``) and the fix: :func:`read_toml`'s messages."""
+    import tomllib
+
+    if not isinstance(text, str):
+        raise error(
+            [Problem("(file)", f"TOML text must be a str, got {type(text).__name__}", "decode bytes as UTF-8 first")],
+            source,
+        )
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise error(
-            [Problem("(syntax)", f"not valid TOML: {exc}", "fix the TOML syntax at that line")], str(path)
+            [Problem("(syntax)", f"not valid TOML: {exc}", "fix the TOML syntax at that line")], source
         ) from None
     except RecursionError:  # arrays or inline tables nested thousands deep
         raise error(
-            [Problem("(syntax)", "arrays or tables are nested too deeply to read", "flatten the nesting")], str(path)
+            [Problem("(syntax)", "arrays or tables are nested too deeply to read", "flatten the nesting")], source
         ) from None
     except (ValueError, OverflowError) as exc:  # e.g. an integer literal of more digits than Python converts
-        raise error([Problem("(syntax)", f"not valid TOML: {exc}", "fix the value")], str(path)) from None
+        raise error([Problem("(syntax)", f"not valid TOML: {exc}", "fix the value")], source) from None
 
 
 # ------------------------------------------------------------------------------------------------ the schema

@@ -42,10 +42,10 @@ def _tank(stirring: dict, phases: int = 1, water_top: float | None = None) -> di
 
 
 def _angular_momentum(sim: Simulation, axis: np.ndarray, density: np.ndarray | None = None) -> np.ndarray:
-    """L = Σ ρ (x − c) × u dV (SI, kg m²/s) of the fluid, and the lattice-density weighted version."""
+    """L = Σ ρ (x − c) × u dV (SI, kg m²/s) of the fluid; ``density`` (kg/m³) replaces ρ (e.g. ε ρ)."""
     f = sim.fields()
     u = f["velocity"]  # m/s
-    rho = 1000.0 * (f["density"] if density is None else density)  # lattice density × ρ_w
+    rho = f["density"] if density is None else density  # kg/m³
     nz, ny, nx = u.shape[1:]
     z, y, x = np.meshgrid(*((np.arange(n) + 0.5) * DX for n in (nz, ny, nx)), indexing="ij")
     rel = np.stack([x, y, z]) - np.asarray(CENTER)[:, None, None, None]
