@@ -81,8 +81,13 @@ def test_arrays_allow_explicit_transfers_and_device_math(gpu):
     assert float(s) == float((2 * host + 1).sum())
     assert isinstance(gpu.to_host(b), np.ndarray)
     np.testing.assert_array_equal(xp.asnumpy(b[1:, ::2]), (2 * host + 1)[1:, ::2])
-    a[0] = np.ones(4, np.float32)  # host -> device assignment, which CuPy allows
-    assert a.get()[0].tolist() == [1, 1, 1, 1]
+    a[0] = gpu.asarray(np.ones(4, np.float32))
+    a[1] = np.float32(5)  # a scalar fill
+    assert a.get()[:2].tolist() == [[1, 1, 1, 1], [5, 5, 5, 5]]
+    with pytest.raises(ValueError, match="non-scalar numpy.ndarray"):
+        a[...] = host  # CuPy refuses a host array as the value of an assignment
+    a.set(host)  # the explicit host -> device copy
+    np.testing.assert_array_equal(a.get(), host)
 
 
 def test_kernels_take_device_arrays_and_numpy_scalars_only(gpu):
@@ -171,3 +176,24 @@ def test_a_missing_transfer_fails(gpu, tmp_path, monkeypatch):
         sim.save(tmp_path / "c.h5")
     with pytest.raises(TypeError, match="[Ii]mplicit conversion"):
         np.savez(tmp_path / "f.npz", **sim.fields())
+
+
+def test_a_nan_on_the_device_is_reported_and_the_last_good_state_kept(gpu, tmp_path):
+    """The divergence path of run() (finite checks, the last good checkpoint, the replay to the first bad
+    step) on device arrays."""
+    sim = Simulation(Scene.from_dict(tiny_fluid(frames=3)), backend=gpu, log=None)
+    real_step = sim.step
+
+    def poisoned(n=1):  # after step 7 a NaN appears in the pressure at cell (x=3, y=2, z=4)
+        for _ in range(n):
+            real_step(1)
+            if sim.step_count == 7:
+                sim.fluid.p[4 + 1, 2 + 1, 3 + 1] = np.nan  # padded array: interior cell + 1
+
+    sim.step = poisoned
+    result = sim.run(out=tmp_path, progress=False)
+    assert result.status == "diverged"
+    report = (tmp_path / "diverged.txt").read_text()
+    assert "after step 7" in report and "'pressure'" in report and "(3, 2, 4)" in report
+    good = Simulation.load(tmp_path / "last_good.h5", backend=gpu, log=None)
+    assert good.step_count == 5 and np.isfinite(good.fields()["pressure"]).all()

@@ -7,6 +7,7 @@
 * arrays (:class:`StandInArray`) hold NumPy memory but, like CuPy's, refuse implicit conversion:
   ``np.asarray(a)``, ``np.array(a)``, h5py writes and NumPy functions on them raise ``TypeError``; an
   operation mixing them with a ``numpy.ndarray`` raises ``TypeError`` (CuPy: "Unsupported type");
+  assigning a non-scalar ``numpy.ndarray`` into one raises ``ValueError`` (CuPy's ``ndarray.fill``);
   ``a.get()``, ``cupy.asnumpy(a)``, ``cupy.asarray(host)``, ``a.set(host)`` are the explicit transfers, and
   ``float(a)``/``int(a)``/``bool(a)``/``a.item()`` of one element the implicit ones CuPy allows;
 * their attributes are CuPy's (``a.flags`` has ``c_contiguous``, ``f_contiguous``, ``owndata`` and no
@@ -247,11 +248,17 @@ class StandInArray:
     def __reduce__(self):
         raise TypeError("pickling a device array (stand-in device) would hide a device->host copy; use .get()")
 
-    # ---- indexing: host index arrays and values are accepted, as CuPy copies them to the device
+    # ---- indexing: host index arrays are accepted (CuPy copies them to the device); an assigned value must
+    # be a device array or a scalar: CuPy's __setitem__ refuses a non-scalar numpy.ndarray (ndarray.fill)
     def __getitem__(self, key):
         return _wrap(self._a[_unwrap(key, "indexing", allow_host=True)])
 
     def __setitem__(self, key, value):
+        if isinstance(value, np.ndarray) and value.shape != ():
+            raise ValueError(
+                "non-scalar numpy.ndarray cannot be used for fill (stand-in device, as CuPy's __setitem__): copy "
+                "the host array to the device first (backend.asarray / cupy.asarray) or use .set()"
+            )
         self._a[_unwrap(key, "indexing", allow_host=True)] = _unwrap(value, "assignment", allow_host=True)
 
 
