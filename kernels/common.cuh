@@ -25,6 +25,8 @@
 // finite: it must stay visibly non-finite, never be turned into a valid-looking number).
 // Tables:  CONSTANT float W[27] = {...};   (__constant__ on CUDA, static constexpr on the host)
 //
+// Device path: the host compiler with -DCK_DEVICE_PATH=1 builds the CK_ON_GPU branches (see the host section).
+//
 // Build variants: a kernel file whose code depends on -D flags lists the values each flag takes in a
 // comment line  `// variants: CK_FLAG_A=0,1 CK_FLAG_B=0,1`; the build tests (nvcc sm_80/sm_90, NVRTC)
 // compile every combination. Without such a line the file is compiled once, with no flags.
@@ -83,7 +85,6 @@ DEVICE double ck_warp_sum(double v) {
 #define DEVICE static inline
 #define CONSTANT static constexpr
 #define RESTRICT __restrict__
-#define CK_ON_GPU 0
 #define CK_NANF __builtin_nanf("")
 #define CK_MAX_THREADS 1024
 
@@ -91,11 +92,28 @@ DEVICE double ck_warp_sum(double v) {
 
 #define FOR_EACH(i, n) CK_PRAGMA(omp parallel for schedule(static)) for (long long i = 0; i < (long long)(n); ++i)
 
+#if defined(CK_DEVICE_PATH) && CK_DEVICE_PATH
+// Device-path host build (the cpu-device backend): the CUDA code paths (`#if CK_ON_GPU`) built by the host
+// compiler, so that the algorithms a GPU runs are run and tested without one.  A CUDA thread's work item
+// becomes an iteration of an `omp parallel for` over the same index space (FOR_EACH as above; FOR_EACH_CELL
+// one flat cell index decoded into (x, y, z) exactly as the CUDA macro does), and atomicAdd becomes
+// `omp atomic` (atomic_add below).  The warp-shuffle reduction has no host equivalent: REDUCE_SUM keeps the
+// host's thread-order sum.  No kernel uses shared memory or __syncthreads.
+#define CK_ON_GPU 1
+#define FOR_EACH_CELL(x, y, z, nx, ny, nz)                                                                 \
+    CK_PRAGMA(omp parallel for schedule(static))                                                           \
+    for (long long ck_cell_ = 0; ck_cell_ < (long long)(nx) * (long long)(ny) * (nz); ++ck_cell_)           \
+        for (int x = (int)(ck_cell_ % (nx)), y = (int)((ck_cell_ / (nx)) % (ny)),                          \
+                 z = (int)(ck_cell_ / ((long long)(nx) * (ny))), ck_once_ = 1;                              \
+             ck_once_; ck_once_ = 0)
+#else
+#define CK_ON_GPU 0
 #define FOR_EACH_CELL(x, y, z, nx, ny, nz)                                   \
     CK_PRAGMA(omp parallel for collapse(2) schedule(static))                 \
     for (int z = 0; z < (int)(nz); ++z)                                      \
         for (int y = 0; y < (int)(ny); ++y)                                  \
             CK_PRAGMA(omp simd) for (int x = 0; x < (int)(nx); ++x)
+#endif
 
 DEVICE void atomic_add(float* addr, float v) {
     CK_PRAGMA(omp atomic)

@@ -41,7 +41,9 @@
 // |grad phi|^2 below which the interface normal is set to zero (bulk phases, round-off gradients)
 #define PF_GRAD_EPS2 1e-12f
 
-#if CK_ON_GPU
+// pragmas and inlining follow the compiler, not CK_ON_GPU: the device-path host build (CK_DEVICE_PATH=1)
+// is compiled by g++ and takes the host spellings
+#if defined(__CUDACC__)
 #define PF_UNROLL _Pragma("unroll")
 #define PF_INLINE DEVICE
 #else

@@ -29,6 +29,30 @@ def cpu1():
 
 
 @pytest.fixture(scope="session")
+def cpu_device():
+    """The cpu-device backend: the kernels' CUDA code paths (CK_ON_GPU) built by the host compiler, one OpenMP
+    loop iteration per CUDA thread; skips where no C++ compiler is present."""
+    ok, why = cpu_status()
+    if not ok:
+        pytest.skip(f"cpu-device backend unavailable: {why}")
+    return get_backend("cpu-device")
+
+
+# the kernel backends a kernel-vs-reference test runs on: the host code paths and the CUDA ones
+KERNEL_BACKENDS = ("cpu", "cpu-device")
+
+
+@pytest.fixture(scope="session", params=KERNEL_BACKENDS)
+def kernel_backend(request):
+    """Each kernel backend in turn (cpu: the host code paths; cpu-device: the CUDA code paths built for the
+    host), for kernel-vs-NumPy-reference tests; skips where no C++ compiler is present."""
+    ok, why = cpu_status()
+    if not ok:
+        pytest.skip(f"{request.param} backend unavailable: {why}")
+    return get_backend(request.param)
+
+
+@pytest.fixture(scope="session")
 def numpy_backend():
     """The NumPy reference backend."""
     return get_backend("numpy")

@@ -1,5 +1,9 @@
 """Backends: run one kernel source on a GPU (cuda), on the CPU (cpu, host build) or not at all (numpy).
 
+A fourth, ``cpu-device``, is the host build of the kernels' CUDA code paths (``#if CK_ON_GPU``: one loop
+iteration per CUDA thread, ``omp atomic`` for atomics; kernels/common.cuh): the algorithms a GPU runs, run
+and tested on a machine without one.  It is never chosen by ``auto``.
+
 >>> from couplekit.backend import get_backend
 >>> be = get_backend("auto")          # cuda -> cpu -> numpy
 >>> print(be.name, "-", be.reason)
@@ -29,12 +33,19 @@ __all__ = [
     "KernelArgumentError",
     "KernelBuildError",
     "BACKENDS",
+    "NAMED_BACKENDS",
+    "cpu_device_status",
     "cpu_status",
     "cuda_status",
     "get_backend",
 ]
 
 BACKENDS = ("cuda", "cpu", "numpy")
+# backends that run only when asked for by name (never picked by "auto")
+NAMED_BACKENDS = ("cpu-device",)
+# backends whose kernels take the CUDA code paths: the Python side must drive them as it drives a GPU
+# (clear a grid before an atomic scatter, no per-thread scratch grids)
+GPU_CODE_PATH_BACKENDS = ("cuda", "cpu-device")
 
 
 def cuda_status() -> tuple[bool, str]:
@@ -62,6 +73,14 @@ def cpu_status() -> tuple[bool, str]:
     return True, f"host build with {compiler_version(cxx)}"
 
 
+def cpu_device_status() -> tuple[bool, str]:
+    """(usable, why): the cpu-device backend needs what the cpu backend needs, a host C++ compiler."""
+    ok, why = cpu_status()
+    if not ok:
+        return ok, why
+    return True, f"CUDA code paths (CK_DEVICE_PATH) {why}"
+
+
 @dataclass
 class Backend:
     """A place to run solver stages: array module ``xp`` plus, for cuda/cpu, compiled kernel modules."""
@@ -79,6 +98,11 @@ class Backend:
 
             return cupy
         return np
+
+    @property
+    def gpu_code_paths(self) -> bool:
+        """True when the kernels run their CUDA code paths (cuda, and cpu-device: the same code on the host)."""
+        return self.name in GPU_CODE_PATH_BACKENDS
 
     @property
     def has_kernels(self) -> bool:
@@ -101,7 +125,9 @@ class Backend:
             else:
                 from .host import HostModule
 
-                self._modules[key] = HostModule(source, defines, threads=self.threads)
+                self._modules[key] = HostModule(
+                    source, defines, threads=self.threads, device_path=self.name == "cpu-device"
+                )
         return self._modules[key]
 
     def asarray(self, a, dtype=None):
@@ -143,16 +169,22 @@ def _threads_from(threads: int | None) -> int | None:
 def get_backend(name: str | None = "auto", threads: int | None = None) -> Backend:
     """Choose a backend.
 
-    ``name``: ``"auto"`` (cuda, else cpu, else numpy), ``"cuda"``, ``"cpu"`` or ``"numpy"``; ``None`` or
-    ``"auto"`` defer to ``$COUPLEKIT_BACKEND`` when it is set. ``threads``: OpenMP threads of the cpu
-    backend (default: ``$OMP_NUM_THREADS``, else all cores).
+    ``name``: ``"auto"`` (cuda, else cpu, else numpy), ``"cuda"``, ``"cpu"``, ``"numpy"`` or
+    ``"cpu-device"`` (the kernels' CUDA code paths built for the host; for testing them without a GPU);
+    ``None`` or ``"auto"`` defer to ``$COUPLEKIT_BACKEND`` when it is set. ``threads``: OpenMP threads of
+    the cpu and cpu-device backends (default: ``$OMP_NUM_THREADS``, else all cores).
     """
     source = "argument"
     if name in (None, "auto") and os.environ.get("COUPLEKIT_BACKEND"):
         name, source = os.environ["COUPLEKIT_BACKEND"].strip().lower(), "COUPLEKIT_BACKEND"
     name = (name or "auto").lower()
     threads = _threads_from(threads)
-    checks = {"cuda": cuda_status, "cpu": cpu_status, "numpy": lambda: (True, "NumPy reference ops")}
+    checks = {
+        "cuda": cuda_status,
+        "cpu": cpu_status,
+        "numpy": lambda: (True, "NumPy reference ops"),
+        "cpu-device": cpu_device_status,
+    }
     if name == "auto":
         skipped = []
         for candidate in BACKENDS:
@@ -163,7 +195,9 @@ def get_backend(name: str | None = "auto", threads: int | None = None) -> Backen
             skipped.append(f"{candidate}: {why}")
         raise AssertionError("unreachable: the numpy backend is always available")
     if name not in checks:
-        raise ValueError(f"unknown backend {name!r} (from {source}); choose one of auto, {', '.join(BACKENDS)}")
+        raise ValueError(
+            f"unknown backend {name!r} (from {source}); choose one of auto, {', '.join(BACKENDS + NAMED_BACKENDS)}"
+        )
     ok, why = checks[name]()
     if not ok:
         raise BackendUnavailableError(f"backend {name!r} was requested ({source}) but cannot run here: {why}")

@@ -23,6 +23,10 @@ from .sources import kernel_path, source_digest
 # sqrtf (measured 1.3-1.6x on the phase-field collide step); results are unchanged (IEEE sqrt either way)
 HOST_FLAGS = ("-std=c++17", "-O3", "-march=native", "-fno-math-errno", "-fopenmp", "-shared", "-fPIC", "-x", "c++")
 
+# the device-path host build (the cpu-device backend): the CUDA code paths (`#if CK_ON_GPU`) compiled by the
+# host compiler, OpenMP loops where CUDA has threads (kernels/common.cuh); part of the flags, so of the cache key
+DEVICE_PATH_DEFINE = "CK_DEVICE_PATH"
+
 _CTYPES = {
     np.dtype(np.float32): ctypes.c_float,
     np.dtype(np.float64): ctypes.c_double,
@@ -99,8 +103,13 @@ class HostBuild:
 _build_lock = threading.Lock()
 
 
-def build_library(source: Path, defines: dict | None = None, cxx: str | None = None) -> HostBuild:
+def build_library(
+    source: Path, defines: dict | None = None, cxx: str | None = None, device_path: bool = False
+) -> HostBuild:
     """Compile ``source`` into a shared library in the cache, or reuse the cached one.
+
+    ``device_path``: build the CUDA code paths (``-DCK_DEVICE_PATH=1``, see kernels/common.cuh) instead of
+    the host ones; a separate cache entry.
 
     The cache key hashes the source, every local header it includes, the flags, the compiler version and
     the CPU. Builds go to a temporary name in the cache directory and are renamed into place atomically,
@@ -109,11 +118,14 @@ def build_library(source: Path, defines: dict | None = None, cxx: str | None = N
     cxx = cxx or find_compiler()
     if cxx is None:
         raise KernelBuildError("no C++ compiler found (set CXX, or install g++)")
-    flags = [*HOST_FLAGS, *define_flags(defines), f"-I{source.parent}"]
+    if defines and DEVICE_PATH_DEFINE in defines:
+        raise ValueError(f"{DEVICE_PATH_DEFINE} is set by device_path=True (the cpu-device backend), not a define")
+    mode = [f"-D{DEVICE_PATH_DEFINE}=1"] if device_path else []
+    flags = [*HOST_FLAGS, *mode, *define_flags(defines), f"-I{source.parent}"]
     key = source_digest(source, "\n".join([*flags, compiler_version(cxx), _cpu_model()]))
     out_dir = cache_dir()
     out_dir.mkdir(parents=True, exist_ok=True)
-    library = out_dir / f"{source.stem}-{key[:20]}.so"
+    library = out_dir / f"{source.stem}{'-device' if device_path else ''}-{key[:20]}.so"
     command = [cxx, *flags, str(source), "-o", str(library)]
     if library.is_file():
         return HostBuild(library, command, cached=True)
@@ -158,12 +170,14 @@ class HostFunction:
 
 
 class HostModule:
-    """One kernel source compiled for the host with one set of defines."""
+    """One kernel source compiled for the host with one set of defines; ``device_path=True`` builds its CUDA
+    code paths (the cpu-device backend)."""
 
-    def __init__(self, name: str, defines: dict | None = None, threads: int | None = None):
+    def __init__(self, name: str, defines: dict | None = None, threads: int | None = None, device_path: bool = False):
         self.source = kernel_path(name)
         self.defines = dict(defines or {})
-        self.build = build_library(self.source, self.defines)
+        self.device_path = bool(device_path)
+        self.build = build_library(self.source, self.defines, device_path=self.device_path)
         self._lib = ctypes.CDLL(str(self.build.library))
         self.signatures = parse_kernels(self.source.read_text(), self.source.name)
         self.threads = int(threads) if threads else None

@@ -208,7 +208,8 @@ def check_args(sig: Signature, n: int, args: tuple, array_type: type, array_kind
                 isinstance(a, array_type)
                 and a.dtype == p.dtype
                 and a.flags.c_contiguous
-                and (p.const or a.flags.writeable)
+                # cupy.ndarray.flags has no `writeable` (device arrays are always writable)
+                and (p.const or getattr(a.flags, "writeable", True))
             ):
                 _array_error(sig, i, p, a, array_type, array_kind)
             out.append(a)

@@ -146,7 +146,7 @@ class KernelOps:
         nz, ny, nx = bound.shape
         ncell = nx * ny * nz
         mod = self.backend.module("coupling_moisture.cu", {"CK_RETENTION": int(self.retention)})
-        if self.backend.name == "cuda":
+        if self.backend.gpu_code_paths:  # the atomic scatter (cuda, cpu-device) accumulates into a cleared grid
             mod.function("coupling_clear")(ncell, bound)
             scratch, threads = self._none, 1
         else:

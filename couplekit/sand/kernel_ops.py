@@ -26,7 +26,8 @@ class KernelOps:
         self.name = backend.name
         self.host_atomics = bool(host_atomics) and backend.name == "cpu"
         self._p2g_defines = {"MPM_HOST_ATOMICS": 1} if self.host_atomics else {}
-        self._clear_first = backend.name == "cuda" or self.host_atomics
+        # the atomic P2G (cuda, cpu-device, host atomics) accumulates into a grid cleared first
+        self._clear_first = backend.gpu_code_paths or self.host_atomics
         self.deterministic = backend.name == "cpu" and not self.host_atomics
         self._scratch = None
         self._threads = 1

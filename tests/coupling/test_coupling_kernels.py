@@ -1,4 +1,5 @@
-"""Every coupling kernel against its NumPy reference on random but valid states (cpu backend).
+"""Every coupling kernel against its NumPy reference on random but valid states (cpu and cpu-device
+backends: the host and the CUDA code paths).
 
 Tolerances: the kernels compute in float32, the reference in float64 on the same float32 inputs.
 * fractions: a handful of flops per node (a min, a multiply, two additions) — rtol 1e-6, atol 1e-6
@@ -19,6 +20,12 @@ from couplekit.coupling import CouplingParams, KernelOps, ReferenceOps
 
 VARIANTS = [(False, True), (True, True), (False, False), (True, False)]
 IDS = [f"retention={r}-two_phase={t}" for r, t in VARIANTS]
+
+
+@pytest.fixture(scope="module")
+def cpu(kernel_backend):
+    """cpu and cpu-device in turn: the host code paths (private scratch grids) and the CUDA ones (atomics)."""
+    return kernel_backend
 
 
 def _pair(cpu, retention: bool, two_phase: bool, **kw):

@@ -16,7 +16,6 @@ import numpy as np
 import pytest
 from fluid_states import BOUNDARY_SETS, random_state
 
-from couplekit.backend import get_backend
 from couplekit.fluid import KernelOps, ReferenceOps
 from couplekit.fluid.grid import Boundaries, Face
 
@@ -31,8 +30,9 @@ ATOL = 2e-6
 
 
 @pytest.fixture(scope="module")
-def cpu():
-    return get_backend("cpu")
+def cpu(kernel_backend):
+    """cpu and cpu-device in turn: the host and the CUDA code paths of the flow kernels."""
+    return kernel_backend
 
 
 def _pair(seed, boundaries):

@@ -12,6 +12,15 @@ from sand_states import DT, DX, SHAPE, particles
 
 from couplekit.sand import SandParams
 
+
+@pytest.fixture(scope="module")
+def kops(kernel_backend):
+    """KernelOps on cpu and on cpu-device in turn: the host and the CUDA code paths of the sand kernels."""
+    from couplekit.sand import KernelOps
+
+    return KernelOps(kernel_backend)
+
+
 MODELS = {
     "sand": SandParams(cohesion_max=0.0),
     "sand_cohesive": SandParams(cohesion_max=2000.0),

@@ -19,6 +19,14 @@ from couplekit.sand import Collider, DomainWalls, SandParams, Wall
 from couplekit.sand.boundaries import pack_colliders, pack_walls
 
 
+@pytest.fixture(scope="module")
+def kops(kernel_backend):
+    """KernelOps on cpu and on cpu-device in turn: the host and the CUDA code paths of the sand kernels."""
+    from couplekit.sand import KernelOps
+
+    return KernelOps(kernel_backend)
+
+
 def _rel(a, b):
     return float(np.max(np.abs(a.astype(np.float64) - b.astype(np.float64))) / max(np.max(np.abs(b)), 1e-30))
 

@@ -16,6 +16,14 @@ import numpy as np
 import pytest
 
 
+@pytest.fixture(scope="module")
+def kops(kernel_backend):
+    """KernelOps on cpu and on cpu-device in turn: the host and the CUDA code paths of the sand kernels."""
+    from couplekit.sand import KernelOps
+
+    return KernelOps(kernel_backend)
+
+
 def _as_mats(a):
     return a.T.reshape(-1, 3, 3).astype(np.float64)
 
