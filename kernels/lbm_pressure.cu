@@ -16,7 +16,7 @@
 
 // p <- p - cs2 rho [(1 - sum f) + (eps_s div v + (u - v).grad eps) / eps]   (Eq. 39, 1 - sum f ~ div u, Eq. 38;
 // u the velocity of Eq. 13 written by the last collision; the slip term (u - v).grad eps only in the cells
-// of slip_cells (couplekit.fluid.grid.slip_cells: not in the 3 layers next to a wall), and weighted by the water
+// of slip_cells (couplekit.fluid.grid.slip_cells: not in the 1 or 3 layers next to a wall), and weighted by the water
 // fraction phi in two-phase flow)
 KERNEL void lbm_macro_pressure(const long long n, const float* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
                                const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
@@ -54,8 +54,8 @@ KERNEL void lbm_macro_pressure(const long long n, const float* RESTRICT f /* siz
         lbm_gradient<0>(sand_v + 2 * N, flags, c, px, pxy, gvz);
         const float e = eps[c];
         const float div_v = gvx[0] + gvy[1] + gvz[2];
-        // the slip term only in the cells of slip_cells, not in the SLIP_WALL_LAYERS = 3 layers next to a wall:
-        // there a porosity step grows a grid-scale mode (reference docstring)
+        // the slip term only in the cells of slip_cells, not in the layers next to a wall (1, or 3 with the odd-rate
+        // floor): there a porosity step grows a grid-scale mode (reference docstring)
         const float slip = slip_cells[c] ? (ux - sand_v[c]) * ge[0] + (uy - sand_v[N + c]) * ge[1] +
                                                (uz - sand_v[2 * N + c]) * ge[2]
                                          : 0.f;

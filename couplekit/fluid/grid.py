@@ -279,9 +279,19 @@ def periodic_lists(shape: tuple[int, int, int], boundaries: Boundaries) -> tuple
     return idx, _wrap_index(shape, zz[ghost], yy[ghost], xx[ghost])
 
 
-SLIP_WALL_LAYERS = 3
+SLIP_WALL_LAYERS = 1
 """The layers of cells next to a wall, an inflow or a solid cell (along any of the 26 lattice directions) that
-get no porosity-slip term in the pressure update (Eq. 39; ``ReferenceOps.macro_pressure`` says why 3)."""
+get no porosity-slip term in the pressure update (Eq. 39) with the paper's collision (odd moments at rate 1)."""
+
+SLIP_WALL_LAYERS_ODD_FLOOR = 3
+"""The same where the odd-rate floor acts (``FluidParams.odd_lambda``, the scenes' default below ν = 5e-4):
+there a porosity edge within two cells of a wall grows a mode (``ReferenceOps.macro_pressure`` says why 3)."""
+
+
+def slip_wall_layers(odd_floor: bool) -> int:
+    """The layers next to walls without the slip term of Eq. 39, with (``odd_floor``) or without the odd-rate
+    floor acting (:data:`SLIP_WALL_LAYERS_ODD_FLOOR`, :data:`SLIP_WALL_LAYERS`)."""
+    return SLIP_WALL_LAYERS_ODD_FLOOR if odd_floor else SLIP_WALL_LAYERS
 
 
 def slip_cells(flags: np.ndarray, periodic: tuple[bool, bool, bool], layers: int = SLIP_WALL_LAYERS) -> np.ndarray:

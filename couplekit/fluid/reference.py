@@ -243,8 +243,9 @@ class ReferenceOps:
         same profile away from walls was stable either way (tests/coupling/test_bed_wall_stability.py).
 
         Why the slip term (u − v)·∇ε only in the cells of ``slip`` (padded uint8 mask,
-        :func:`couplekit.fluid.grid.slip_cells`: not in the ``SLIP_WALL_LAYERS`` = 3 layers of cells next to a
-        wall, inflow or solid cell, along the 26 lattice directions): next to a wall the gradient's wall rule
+        :func:`couplekit.fluid.grid.slip_cells`: not in the layers of cells next to a wall, inflow or solid
+        cell, along the 26 lattice directions; one layer with the paper's collision, three where the odd-rate
+        floor acts, :func:`~couplekit.fluid.grid.slip_wall_layers`): next to a wall the gradient's wall rule
         (a wall neighbour takes the centre value) cannot express that no fluid crosses the wall, and with the
         Eq. 13 velocity the same column still grew (×2 per 200 steps from step ~1000, a mode alternating in x
         at the floor), as did a porosity step next to the side walls' edge; without the term in wall-adjacent
@@ -254,8 +255,12 @@ class ReferenceOps:
         grew ×2.5 per 250 steps to 1.4e-2 by step 3000 with the term dropped in the one layer next to the
         walls, ×2.3 per 500 steps with it dropped in two layers, and stays at 1.8e-6 (round-off) for 4000
         steps with it dropped in three (docs/fluid-stability.md, tests/coupling/test_bed_wall_stability.py).
-        The cost: the pressure of a cell in those three layers does not see flow into a narrower pore there
-        (its ∇·u still does).
+        With the odd moments at rate 1 (ν ≥ 5e-4, or ``odd_lambda`` = 0) one layer is stable, and three cost
+        physics there: a 4-cell bed under a partition wall in a 6-cell wide tank loses the slip term
+        everywhere, and retention's slowing of the wetting front fell from 0.81× to 0.90×
+        (tests/coupling/test_retention_front_partition.py), so three apply only where the floor acts.  The
+        cost: the pressure of a cell in those layers does not see flow into a narrower pore there (its ∇·u
+        still does).
 
         Why the slip term is weighted by the water fraction φ (two-phase): in the light phase the pressure it
         raises accelerates the fluid by ∇p/ρ with ρ down to ρ_l, and a sand ball falling through the air

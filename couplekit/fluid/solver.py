@@ -41,6 +41,7 @@ from .grid import (
     padded_shape,
     periodic_lists,
     slip_cells,
+    slip_wall_layers,
 )
 from .kernel_ops import KernelOps
 from .reference import ReferenceOps, equilibrium
@@ -284,11 +285,13 @@ class FluidSolver:
 
         self.fluid_fraction = xp.ones(pshape, dtype=np.float32) if self.mixture else None
         self.sand_velocity = xp.zeros((3,) + pshape, dtype=np.float32) if self.mixture else None
-        # the cells where Eq. 39 keeps its porosity-slip term: not in the 3 layers next to a wall (grid.slip_cells)
+        # the cells where Eq. 39 keeps its porosity-slip term: not in the layers next to a wall, 3 with the
+        # odd-rate floor, 1 with the paper's collision (grid.slip_wall_layers)
         self._slip_cells = None
         if self.mixture:
             periodic_axes = tuple(self.boundaries.face(a + "-").kind == "periodic" for a in "xyz")
-            self._slip_cells = backend.asarray(slip_cells(flags, periodic_axes))
+            layers = slip_wall_layers(self.odd_floor_active)
+            self._slip_cells = backend.asarray(slip_cells(flags, periodic_axes, layers))
         self.force = xp.zeros((3,) + pshape, dtype=np.float32) if self.external_force else None
 
         self.step_count = 0

@@ -71,15 +71,16 @@ def test_water_at_rest_over_a_bed_next_to_the_floor_stays_at_rest(cpu1):
 
 
 def test_slip_cells_leave_out_three_layers_at_every_wall():
-    """grid.slip_cells: the fluid cells outside the 3 layers next to every wall, inflow and solid cell along
-    the 26 lattice directions; periodic axes wrap (no distance counted there), outflow ghosts count as fluid."""
+    """grid.slip_cells: the fluid cells outside the (here 3) layers next to every wall, inflow and solid cell
+    along the 26 lattice directions; periodic axes wrap (no distance counted there), outflow ghosts count as
+    fluid."""
     from couplekit.fluid.grid import INTERIOR, Face, build_flags, slip_cells
 
     shape = (9, 10, 12)  # (nz, ny, nx)
     flags, _, _ = build_flags(shape, Boundaries.channel("xyz"), None)
     expected = np.zeros(shape, dtype=bool)
     expected[3:-3, 3:-3, 3:-3] = True
-    np.testing.assert_array_equal(slip_cells(flags, (False, False, False))[INTERIOR] != 0, expected)
+    np.testing.assert_array_equal(slip_cells(flags, (False, False, False), layers=3)[INTERIOR] != 0, expected)
     # one layer: the cells whose 26 neighbours are all stencil cells (the rule before session 6)
     expected1 = np.zeros(shape, dtype=bool)
     expected1[1:-1, 1:-1, 1:-1] = True
@@ -89,7 +90,7 @@ def test_slip_cells_leave_out_three_layers_at_every_wall():
     solid = np.zeros(shape, dtype=bool)
     solid[4, 0, 0] = True
     flags, _, _ = build_flags(shape, Boundaries.channel("z"), solid)
-    got = slip_cells(flags, (True, True, False))[INTERIOR] != 0
+    got = slip_cells(flags, (True, True, False), layers=3)[INTERIOR] != 0
     z, y, x = np.meshgrid(*(np.arange(n) for n in shape), indexing="ij")
     dy = np.minimum(y, shape[1] - y)  # periodic distance to y = 0
     dx = np.minimum(x, shape[2] - x)
@@ -100,7 +101,7 @@ def test_slip_cells_leave_out_three_layers_at_every_wall():
     # an outflow face counts as fluid beyond it: cells next to it keep the term
     faces = {name: Face("wall") for name in ("x-", "x+", "y-", "y+", "z-")}
     flags, _, _ = build_flags(shape, Boundaries(faces={**faces, "z+": Face("outflow")}), None)
-    got = slip_cells(flags, (False, False, False))[INTERIOR] != 0
+    got = slip_cells(flags, (False, False, False), layers=3)[INTERIOR] != 0
     assert got[-1, 3:-3, 3:-3].all() and not got[:3].any()
 
 
@@ -138,3 +139,20 @@ def test_bed_edge_at_the_floor_with_the_scene_closures_stays_at_rest(cpu1, nu, n
     fluid = _bed_edge_column(cpu1, nu=nu, odd_lambda=0.015, nx=nx)
     fluid.step(4000)
     assert _max_speed(fluid) < 5e-5
+
+
+@pytest.mark.parametrize("nu, odd_lambda, layers", [(1e-4, 0.015, 3), (1e-4, 0.0, 1), (1e-3, 0.015, 1)])
+def test_the_solver_drops_the_slip_term_in_three_layers_where_the_odd_floor_acts(cpu1, nu, odd_lambda, layers):
+    """Three layers where the odd-rate floor acts (nu below 5e-4 with odd_lambda > 0), one with the paper's
+    collision (rate 1), where three would cost the slip term in thin beds (reference.macro_pressure)."""
+    import warnings
+
+    from couplekit.fluid.grid import INTERIOR, slip_cells
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # odd_lambda at nu = 1e-3 does nothing, and says so
+        fluid = _still_column(cpu1, (12, 10, 12), nu, walls="z", odd_lambda=odd_lambda)
+    got = cpu1.to_host(fluid._slip_cells)
+    flags = cpu1.to_host(fluid.flags)
+    np.testing.assert_array_equal(got, slip_cells(flags, (True, True, False), layers=layers))
+    assert got[INTERIOR][layers:-layers].all() and not got[INTERIOR][:layers].any()
