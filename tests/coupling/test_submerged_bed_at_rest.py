@@ -6,7 +6,8 @@ where the bed's vertical edges reach it: with the porosity-slip term of Eq. 39 d
 cells next to the walls, max lattice speed 1.1e-2 at step 3000 and 1.9e-2 at step 4000 (at z = 0). With the
 term dropped in the three layers next to them (couplekit.fluid.grid.slip_cells): 1.6e-3 at step 2500 while the
 bed settles (its top drops 2 mm), then decaying, 6.3e-4 at step 6000 and 4.9e-4 at step 10,000, in the cell
-next to a bottom corner of the box (docs/fluid-stability.md).
+next to a bottom corner of the box, the tank's own corner current (4.8e-4 without the sand in a smaller
+variant; docs/fluid-stability.md).
 
 Bounds: below 1e-3 at step 10,000 (twice the measured value; 19× below what the floor current reached) and not
 growing over the last 4000 steps (at most 1.2× the speed at step 6000; measured 0.77×); the fluid volume within
