@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent / "scene"))
-from sim_scenes import tiny_coupled, tiny_fluid, tiny_sand  # noqa: E402
+from sim_scenes import run_with_a_nan_after_step_7, tiny_coupled, tiny_fluid, tiny_sand  # noqa: E402
 
 from couplekit.backend import Backend, get_backend  # noqa: E402
 from couplekit.backend.standin import StandInArray, stand_in_device  # noqa: E402
@@ -182,18 +182,8 @@ def test_a_nan_on_the_device_is_reported_and_the_last_good_state_kept(gpu, tmp_p
     """The divergence path of run() (finite checks, the last good checkpoint, the replay to the first bad
     step) on device arrays."""
     sim = Simulation(Scene.from_dict(tiny_fluid(frames=3)), backend=gpu, log=None)
-    real_step = sim.step
-
-    def poisoned(n=1):  # after step 7 a NaN appears in the pressure at cell (x=3, y=2, z=4)
-        for _ in range(n):
-            real_step(1)
-            if sim.step_count == 7:
-                sim.fluid.p[4 + 1, 2 + 1, 3 + 1] = np.nan  # padded array: interior cell + 1
-
-    sim.step = poisoned
-    result = sim.run(out=tmp_path, progress=False)
+    result, report = run_with_a_nan_after_step_7(sim, tmp_path)
     assert result.status == "diverged"
-    report = (tmp_path / "diverged.txt").read_text()
     assert "after step 7" in report and "'pressure'" in report and "(3, 2, 4)" in report
     good = Simulation.load(tmp_path / "last_good.h5", backend=gpu, log=None)
     assert good.step_count == 5 and np.isfinite(good.fields()["pressure"]).all()

@@ -81,3 +81,21 @@ min = [0.02, 0.02, 0.03]
 max = [0.04, 0.04, 0.045]
 """
 """A tiny sand-only scene file (2 frames of 5 steps) for the command-line tests."""
+
+
+def run_with_a_nan_after_step_7(sim, out):
+    """Run ``sim`` (a tiny_fluid of 3 frames) into ``out`` with a NaN put into the pressure of cell
+    (x=3, y=2, z=4) after step 7; returns the run's result and the text of diverged.txt."""
+    import numpy as np
+
+    real_step = sim.step
+
+    def poisoned(n=1):
+        for _ in range(n):
+            real_step(1)
+            if sim.step_count == 7:
+                sim.fluid.p[4 + 1, 2 + 1, 3 + 1] = np.nan  # padded array: interior cell + 1
+
+    sim.step = poisoned
+    result = sim.run(out=out, progress=False)
+    return result, (out / "diverged.txt").read_text()

@@ -14,7 +14,6 @@ import pytest
 from sim_scenes import tiny_coupled, tiny_sand
 
 from couplekit.assembly import assemble, sand_walls
-from couplekit.backend import BackendUnavailableError, get_backend
 from couplekit.coupling.params import CouplingParams
 from couplekit.sand.boundaries import DomainWalls, Wall, pack_walls
 from couplekit.scene import Scene
@@ -22,11 +21,8 @@ from couplekit.scene.schema import SceneError
 
 
 @pytest.fixture(scope="module")
-def cpu():
-    try:
-        return get_backend("cpu")
-    except BackendUnavailableError as exc:  # pragma: no cover - CI always has g++
-        pytest.skip(f"cpu backend unavailable: {exc}")
+def cpu(cpu_backend):
+    return cpu_backend
 
 
 def _refused(data: dict) -> dict[str, str]:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from sim_scenes import tiny_coupled, tiny_fluid, tiny_sand
+from sim_scenes import run_with_a_nan_after_step_7, tiny_coupled, tiny_fluid, tiny_sand
 
 import couplekit.simulation as simulation
 from couplekit.io import read_diagnostics, read_pvd
@@ -171,18 +171,8 @@ def test_memory_estimate_counts_arrays():
 
 def test_nan_is_reported_with_step_field_and_cell(tmp_path):
     sim = _sim(tiny_fluid(frames=3))
-    real_step = sim.step
-
-    def poisoned(n=1):  # after step 7 a NaN appears in the pressure at cell (x=3, y=2, z=4)
-        for _ in range(n):
-            real_step(1)
-            if sim.step_count == 7:
-                sim.fluid.p[4 + 1, 2 + 1, 3 + 1] = np.nan  # padded array: interior cell + 1
-
-    sim.step = poisoned
-    result = sim.run(out=tmp_path, progress=False)
+    result, report = run_with_a_nan_after_step_7(sim, tmp_path)
     assert result.status == "diverged"
-    report = (tmp_path / "diverged.txt").read_text()
     assert "after step 7" in report and "'pressure'" in report and "(3, 2, 4)" in report
     assert "last good state: step 5" in report
     good = Simulation.load(tmp_path / "last_good.h5", backend="cpu", log=None)
