@@ -111,8 +111,26 @@ def _cmd_validate(args: argparse.Namespace) -> int:
             f"memory estimate: {_gib(est['total'])}"
             + (f", about {est['particle_count']:,.0f} particles at most" if est["particle_count"] else "")
         )
+    if est is not None:
+        from .effect_memory import describe_effect_memory
+
+        print("effects and the memory each costs (FluidX3D's convention, per simulation cell):")
+        for line in describe_effect_memory(scene, est.get("particle_count", 0.0)):
+            print(line)
     if note is not None:
         print(note)
+    return 0
+
+
+def _cmd_bench(args: argparse.Namespace) -> int:
+    """Table 1 row by row and the price of each effect (couplekit.bench.runner); prints the tables."""
+    from .bench.runner import run_bench
+
+    res = run_bench(args.out, quick=args.quick, tiny=args.tiny, backend=args.backend, progress=not args.no_progress)
+    print(res["table1_md"])
+    print()
+    print(res["effect_costs_md"])
+    print("wrote " + ", ".join(str(p) for p in res["paths"].values()))
     return 0
 
 
@@ -293,6 +311,18 @@ def build_parser() -> argparse.ArgumentParser:
     validate = sub.add_parser("validate", help="check a scene file (names every bad key and the fix)")
     validate.add_argument("scene", help="scene file (TOML)")
     validate.set_defaults(func=_cmd_validate)
+
+    bench = sub.add_parser(
+        "bench", help="Table 1 of paper 000 row by row and what each effect costs (docs/benchmarks.md)"
+    )
+    bench.add_argument("--quick", action="store_true", help="a subset: Fig. 13 and five effects (minutes)")
+    bench.add_argument(
+        "--tiny", action="store_true", help="the test suite's size: runs and writes, timings meaningless"
+    )
+    bench.add_argument("--out", default=None, metavar="DIR", help="results folder (default benchmarks/results)")
+    bench.add_argument("--backend", default=None, help="cpu (default; numpy with --tiny), cuda, numpy")
+    bench.add_argument("--no-progress", action="store_true", help="no progress bar")
+    bench.set_defaults(func=_cmd_bench)
 
     run = sub.add_parser("run", help="run a scene: progress bar, VTK/PLY/PNG outputs, diagnostics, checkpoints")
     run.add_argument("scene", help="scene file (TOML)")

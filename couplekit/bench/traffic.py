@@ -1,0 +1,152 @@
+"""Bytes each stage moves per cell or particle, and the bandwidth-bound projection of a step on a GPU.
+
+The byte counts are compulsory traffic (each array a kernel touches read or written once, float32 = 4 B,
+flags 1 B): the fluid kernels' counts are the ones ``benchmarks/fluid_throughput.py`` measures its roofline
+with (it imports them from here); the sand and coupling counts follow the arrays the kernels read and write
+(``kernels/mpm_*.cu``, ``kernels/coupling*.cu``; the 27-node gathers and scatters of a particle are assumed to
+hit cache, so the grid is counted once per node).
+
+Projection: ``time = bytes / (peak bandwidth × efficiency) + launches × launch overhead``.
+
+Efficiency assumptions (not measured here: no GPU was at hand; re-derive them from ``scripts/gpu_check.sh``'s
+throughput results once it has run on a GPU):
+
+* grid kernels (LBM, phase field, coupling fields, MPM grid update): 0.80 of peak, the fraction that
+  bandwidth-bound LBM kernels reach on recent NVIDIA GPUs in FluidX3D's published benchmark table
+  (github.com/ProjectPhysX/FluidX3D, README "Single-GPU/CPU Benchmarks": measured MLUPs against the
+  bandwidth roofline, 70-90 % on A100 / H100-class cards);
+* particle kernels (P2G with atomic scatter, G2P with its SVD): 0.40 of peak, our assumption: atomics and
+  the per-particle SVD keep MPM kernels well below the roofline (MPM GPU codes report 30-50 % of peak).
+
+Launch overhead: 5 µs per kernel launch (CUDA launch latency on a busy stream), ~25 launches a coupled step.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+F32 = 4
+
+# ---------------------------------------------------------------------------------------------- fluid, per cell
+# compulsory traffic per interior cell and step (each array touched once per kernel)
+BYTES_COLLIDE_SINGLE = 27 * F32 * 2 + 1 + 3 * F32 + F32  # f read+write, flags, velocity write, p̄ read
+BYTES_TWO_PHASE_STEP = {
+    "lbm_macro_pressure": 27 * F32 + 1 + 2 * F32 + F32,  # f read, flags, p read+write, phi read
+    "lbm_pressure_filter": F32 + F32 + 1,  # p read, p̄ write, flags
+    "lbm_collide_stream (two-phase)": 27 * F32 * 2 + 1 + 3 * F32 + F32 + F32 + F32,  # f, flags, u, p̄, phi, mu
+    "phase_macroscopic": 7 * F32 + F32 + 1,  # h read, phi write, flags
+    "phase_gradients": F32 + 3 * F32 + F32 + 1,  # phi read, grad write, mu write, flags
+    "phase_collide_stream": 7 * F32 * 2 + F32 + 3 * F32 + 3 * F32 + F32 + 1,  # h, phi, grad, u, source, flags
+}
+
+# the scheduler's stages (couplekit.schedulers.base) -> bytes per fluid cell and step
+FLUID_STAGE_BYTES_PER_CELL = {
+    "lbm_pressure": BYTES_TWO_PHASE_STEP["lbm_macro_pressure"],
+    "lbm_pressure_filter": BYTES_TWO_PHASE_STEP["lbm_pressure_filter"],
+    "lbm_collide_stream": BYTES_TWO_PHASE_STEP["lbm_collide_stream (two-phase)"],
+    "phase_field_macroscopic": BYTES_TWO_PHASE_STEP["phase_macroscopic"] + BYTES_TWO_PHASE_STEP["phase_gradients"],
+    "phase_field_collide_stream": BYTES_TWO_PHASE_STEP["phase_collide_stream"],
+    "volume_controller": 2 * F32 + 1,  # phi and source read, flags (a reduction)
+}
+# mixture inputs read by the collide kernel when coupled: ε, sand velocity, force
+MIXTURE_BYTES_PER_CELL = (1 + 3 + 3) * F32
+
+# ---------------------------------------------------------------------------------------------- coupling
+COUPLING_STAGE_BYTES_PER_CELL = {
+    "volume_fractions": 2 * F32 + F32,  # clear + write ε_sand, water; ε_prev read
+    "fluid_velocity": 3 * F32 + 3 * F32 + F32,  # u read, fluid_u write, ε
+    "drag_buoyancy": 3 * F32 + 3 * F32 + F32 + F32,  # force write, sand velocity read, ε, p
+    "retention_source": 4 * F32 + F32,  # ε, ε_prev, φ, source write, d_bound
+    "sand_velocity": 3 * F32 + F32,  # sand velocity write, mass read
+    "coupling_finish": 2 * F32,  # ε_prev ← ε
+}
+COUPLING_STAGE_BYTES_PER_PARTICLE = {
+    "volume_fractions": 3 * F32 + F32,  # x, volume (scatter into ε)
+    "drag_buoyancy": 3 * F32 + 3 * F32 + F32,  # x, v read, volume (gather u, scatter force)
+    "moisture": 3 * F32 + 2 * F32,  # x read, saturation read+write
+    "sand_velocity": 3 * F32 * 2 + F32,  # x, v, mass
+}
+
+# ---------------------------------------------------------------------------------------------- sand
+# per particle: x v C F (3+3+9+9), tau 6, q, vc, saturation, mass, volume
+SAND_STAGE_BYTES_PER_PARTICLE = {
+    "mpm_p2g": (3 + 3 + 9 + 6 + 1 + 1) * F32,  # x, v, C, tau, mass, volume read
+    "mpm_g2p": (3 + 3 + 9 + 9 + 1 + 1 + 1) * F32 + (3 + 3 + 9 + 9 + 6 + 1 + 1) * F32,  # read, write
+}
+SAND_STAGE_BYTES_PER_NODE = {
+    "mpm_p2g": (1 + 3 + 1) * F32 * 2,  # clear and accumulate mass, momentum, volume
+    "mpm_grid_update": (1 + 3 + 3 + 3 + 1) * F32,  # mass, momentum, velocity write, f_ext, sdf
+    "mpm_g2p": 3 * F32,  # velocity read
+}
+
+GRID_EFFICIENCY = 0.80
+PARTICLE_EFFICIENCY = 0.40
+LAUNCH_OVERHEAD_S = 5e-6
+LAUNCHES_PER_STEP = 25
+
+
+@dataclass(frozen=True)
+class GPU:
+    """A GPU for the projection: name, memory (GB) and peak memory bandwidth (TB/s, the vendor's figure)."""
+
+    name: str
+    memory_gb: float
+    bandwidth_tbs: float
+
+
+GPUS = (
+    GPU("RTX PRO 6000 Blackwell (the paper's)", 96.0, 1.792),  # GDDR7, 512-bit, 28 Gbps
+    GPU("H100 SXM", 80.0, 3.35),
+    GPU("H200", 141.0, 4.8),
+)
+
+
+def stage_bytes(cells: float, particles: float, two_phase: bool = True, coupled: bool = True) -> dict[str, dict]:
+    """Bytes each stage moves in one step: ``{stage: {"grid": bytes, "particles": bytes}}``."""
+    out: dict[str, dict] = {}
+
+    def add(stage: str, grid: float = 0.0, part: float = 0.0) -> None:
+        e = out.setdefault(stage, {"grid": 0.0, "particles": 0.0})
+        e["grid"] += grid
+        e["particles"] += part
+
+    if cells:
+        for s, b in FLUID_STAGE_BYTES_PER_CELL.items():
+            if two_phase or not s.startswith(("phase", "volume")):
+                add(s, b * cells)
+        if coupled:
+            add("lbm_collide_stream", MIXTURE_BYTES_PER_CELL * cells)
+    if particles:
+        for s, b in SAND_STAGE_BYTES_PER_NODE.items():
+            add(s, b * cells)
+        for s, b in SAND_STAGE_BYTES_PER_PARTICLE.items():
+            add(s, 0.0, b * particles)
+    if coupled and cells and particles:
+        for s, b in COUPLING_STAGE_BYTES_PER_CELL.items():
+            add(s, b * cells)
+        for s, b in COUPLING_STAGE_BYTES_PER_PARTICLE.items():
+            add(s, 0.0, b * particles)
+    return out
+
+
+def projected_step(gpu: GPU, cells: float, particles: float, two_phase: bool = True, coupled: bool = True) -> dict:
+    """Projected seconds per step on ``gpu``: per stage and in total (module docstring: the model)."""
+    bw = gpu.bandwidth_tbs * 1e12
+    per_stage = {
+        s: b["grid"] / (bw * GRID_EFFICIENCY) + b["particles"] / (bw * PARTICLE_EFFICIENCY)
+        for s, b in stage_bytes(cells, particles, two_phase, coupled).items()
+    }
+    total = sum(per_stage.values()) + LAUNCHES_PER_STEP * LAUNCH_OVERHEAD_S
+    return {"stages_s": per_stage, "launch_overhead_s": LAUNCHES_PER_STEP * LAUNCH_OVERHEAD_S, "step_s": total}
+
+
+def assumptions() -> dict:
+    """The projection's assumptions, for the JSON results."""
+    return {
+        "grid_efficiency": GRID_EFFICIENCY,
+        "particle_efficiency": PARTICLE_EFFICIENCY,
+        "launch_overhead_s": LAUNCH_OVERHEAD_S,
+        "launches_per_step": LAUNCHES_PER_STEP,
+        "gpus": [g.__dict__ for g in GPUS],
+        "source": "couplekit/bench/traffic.py docstring",
+    }

@@ -1,0 +1,128 @@
+"""What each effect costs in memory, FluidX3D's convention ("this costs N bytes per cell"): the arrays each
+effect allocates, per padded fluid cell ((nx+2)(ny+2)(nz+2)), per sand-grid cell (nx·ny·nz) and per particle.
+
+These are the arrays the solvers allocate for an effect (couplekit.fluid.solver, couplekit.coupling.coupler,
+couplekit.scene.forces); tests/test_bench.py checks each against the bytes a scene with the effect on
+allocates more than the same scene with it off.  An effect with 0 bytes either needs no field (volume
+controller: a reduction; the closures: local rates; drag, buoyancy: the force field belongs to the coupling)
+or keeps its field when it is off because a kernel reads it in both variants (source term: the phase-field
+collide kernel reads S_φ, zeros when off; hardening: G2P reads and writes q; cohesion: the saturation is the
+coupling's moisture), recorded in :data:`KEPT_WHEN_OFF`."""
+
+from __future__ import annotations
+
+F32 = 4
+
+# effect -> (bytes per padded fluid cell, bytes per sand-grid cell, bytes per particle)
+EFFECT_BYTES = {
+    "phase_field": (F32 * (7 + 1 + 3 + 1), 0, 0),  # h, phi, grad phi, source term
+    "surface_tension": (F32 * 1, 0, 0),  # mu
+    "volume_controller": (0, 0, 0),
+    "source_term": (0, 0, 0),
+    "coupling": (F32 * (1 + 3 + 3 + 1 + 3 + 1) + 1, F32 * 1, 0),  # ε, u_s, force, ε_sand, fluid u, ε_prev, slip
+    "drag_buoyancy": (0, 0, 0),
+    "retention": (0, F32 * 3, F32 * 1),  # bound_in, bound, d_bound; moisture ratio per particle
+    "odd_rate_floor": (0, 0, 0),
+    "smagorinsky": (0, 0, 0),
+    "cohesion": (0, 0, 0),
+    "hardening": (0, 0, 0),
+    # the summed force buffer (+ the force input in a fluid-only scene) per padded cell; on the host the
+    # swirl's acceleration (3 float64), radius (float64) and inside mask (bool) per cell, which the torque
+    # diagnostic reads; + ρ_w a (3 float32) in the stirred cells' bounding box (:func:`_stirred_box_cells`)
+    "stirring": (F32 * 3, 3 * 8 + 8 + 1, 0),
+    "sand_emission": (0, 0, 0),  # the particles it emits (memory_estimate's emitted_particles)
+}
+
+KEPT_WHEN_OFF = {
+    "source_term": "fluid.source_term (4 B/cell): the phase-field collide kernel reads S_φ in every variant",
+    "hardening": "sand.q (4 B/particle): mpm_g2p reads and writes the hardening state in every variant",
+    "cohesion": "sand.saturation (4 B/particle): it is the coupling's moisture too",
+}
+
+
+def _stirred_box_cells(scene) -> int:
+    """Cells in the bounding box of the stirred cylinder (exact for an axis along x, y or z; the whole
+    domain, an upper bound, otherwise)."""
+    st, dom = scene.stirring, scene.domain
+    res = dom.resolution
+    axis = [abs(a) for a in st.axis]
+    if sorted(axis) != [0.0, 0.0, max(axis)]:
+        return int(res[0] * res[1] * res[2])
+    along = axis.index(max(axis))
+    count = 1
+    for d in range(3):
+        centres = [(i + 0.5) * dom.dx - st.center[d] for i in range(res[d])]
+        if d == along:
+            n = res[d] if st.length is None else sum(abs(c) <= 0.5 * st.length for c in centres)
+        else:
+            n = sum(abs(c) < st.radius for c in centres)
+        count *= n
+    return int(count)
+
+
+def effect_memory(scene) -> dict[str, dict[str, float]]:
+    """Per effect that applies to ``scene``: whether it is on, and the bytes per cell / per particle it costs
+    and in total at the scene's size (``bytes_total``; 0 for an effect that is off)."""
+    nx, ny, nz = scene.domain.resolution
+    padded, cells = (nx + 2) * (ny + 2) * (nz + 2), nx * ny * nz
+    fl, eff = scene.fluid, scene.effects
+    two = bool(fl is not None and fl.phases == 2)
+    coupled = scene.has_fluid and scene.has_sand
+    from .assembly import retention_flags
+
+    retention = coupled and any(retention_flags(scene))
+    on = {
+        "phase_field": two,
+        "surface_tension": two and eff.surface_tension and bool(fl.surface_tension),
+        "volume_controller": two and eff.volume_controller and fl.controller_eta > 0,
+        "source_term": coupled and two and eff.source_term,
+        "coupling": coupled,
+        "drag_buoyancy": coupled and (eff.drag or eff.buoyancy),
+        "retention": retention,
+        "odd_rate_floor": fl is not None and fl.odd_lambda > 0,
+        "smagorinsky": fl is not None and fl.smagorinsky > 0,
+        "cohesion": scene.has_sand and eff.cohesion,
+        "hardening": scene.has_sand and eff.hardening,
+        "stirring": fl is not None and scene.stirring is not None,
+        "sand_emission": scene.emits_sand,
+    }
+    applies = {k: (scene.has_sand if k in ("cohesion", "hardening") else fl is not None) for k in on}
+    applies["coupling"] = applies["drag_buoyancy"] = applies["retention"] = applies["source_term"] = coupled
+    applies["sand_emission"] = scene.emits_sand
+    out = {}
+    for name, (per_cell, per_node, per_particle) in EFFECT_BYTES.items():
+        if not applies[name]:
+            continue
+        extra = 0.0
+        if name == "stirring":
+            if not scene.has_sand:
+                per_cell += F32 * 3  # the force input a coupled scene has anyway
+            extra = F32 * 3 * _stirred_box_cells(scene) if on[name] else 0.0
+        per_cell_total = (per_cell * padded + extra) / cells + per_node  # per simulation cell
+        out[name] = {
+            "on": bool(on[name]),
+            "bytes_per_cell": float(per_cell_total),
+            "bytes_per_particle": float(per_particle),
+            "bytes_total": float(per_cell * padded + per_node * cells + extra) if on[name] else 0.0,
+            "kept_when_off": KEPT_WHEN_OFF.get(name, ""),
+        }
+    return out
+
+
+def describe_effect_memory(scene, particles: float = 0.0) -> list[str]:
+    """Lines for ``couplekit validate``: each effect, on/off, and what it costs."""
+    lines = []
+    for name, e in effect_memory(scene).items():
+        cost = f"{e['bytes_per_cell']:.3g} bytes per cell"
+        if e["bytes_per_particle"]:
+            cost += f" + {e['bytes_per_particle']:.3g} bytes per particle"
+        total = e["bytes_total"] + (e["bytes_per_particle"] * particles if e["on"] else 0.0)
+        state = "on " if e["on"] else "off"
+        if e["bytes_per_cell"] or e["bytes_per_particle"]:
+            line = f"  {name:18s} {state}  this costs {cost}" + (f" ({total / 2**20:.3g} MiB here)" if e["on"] else "")
+        else:
+            line = f"  {name:18s} {state}  no fields of its own"
+        if e["kept_when_off"]:
+            line += f"; off keeps {e['kept_when_off'].split(':')[0]}"
+        lines.append(line)
+    return lines

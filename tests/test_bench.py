@@ -1,0 +1,70 @@
+"""couplekit bench: Table 1's values as the paper prints them, the memory each effect reports against the
+arrays a scene actually allocates, and `couplekit bench --tiny` writing its files."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from couplekit.bench import effects as eff
+from couplekit.bench.table1 import TABLE1, project_row
+
+
+def row(fig):
+    return next(r for r in TABLE1 if r.figure == fig)
+
+
+def test_table1_rows_match_the_paper():
+    assert len(TABLE1) == 17
+    assert row(1).grid == (800, 320, 400) and row(1).particles_k == 5838 and row(1).s_per_frame == 252.0
+    assert row(13).dt == 1.2e-5 and row(13).nu_h == 5e-4 and row(13).density == "1500"
+    assert row(17).retention == "yes/0.001" and row(17).nu_h == 1e-2 and row(17).s_per_frame == 29.4
+    assert row(18).dx == 0.50 and row(18).particles_k == 19971
+    assert row(6).dt == 7.5e-6 and row(6).eta == 1
+
+
+def test_projection_scales_with_the_bandwidth():
+    p = project_row(row(13), 300.0, 200.0)
+    s = {k: v["s_per_frame"] for k, v in p["gpus"].items()}
+    assert s["H200"] < s["H100 SXM"] < s["RTX PRO 6000 Blackwell (the paper's)"]
+    assert p["memory_bytes"] == pytest.approx(300.0 * 322 * 502 * 322 + 200.0 * 524e3)
+
+
+@pytest.mark.parametrize(
+    "name",
+    ["surface_tension", "volume_controller", "source_term", "retention", "cohesion", "hardening",
+     "odd_rate_floor", "smagorinsky", "stirring", "stirring (fluid only)"],
+)  # fmt: skip
+def test_memory_reported_per_effect_matches_the_allocated_arrays(name):
+    variant, on, off = eff.effect_variants(eff.base_scene(10))[name]
+    m_on, m_off = eff.measure(on, "numpy", 1), eff.measure(off, "numpy", 1)
+    table = m_on["effect_memory"][name.split(" (")[0]]
+    assert table["on"]
+    expected = table["bytes_total"] + table["bytes_per_particle"] * m_on["particles"]
+    assert m_on["allocated_bytes"] - m_off["allocated_bytes"] == pytest.approx(expected)
+
+
+def test_bench_tiny_writes_its_files(tmp_path):
+    out = tmp_path / "bench"
+    proc = subprocess.run(
+        [sys.executable, "-m", "couplekit", "bench", "--tiny", "--no-progress", "--out", str(out)],
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    for f in ("table1.json", "table1.png", "table1.md", "effect_costs.json", "effect_costs.png", "effect_costs.md"):
+        assert (out / f).stat().st_size > 0, f
+    t1 = json.loads((out / "table1.json").read_text())
+    assert t1["rows"][0]["paper"]["figure"] == 13 and "projection" in t1["rows"][0]
+    assert "| 13 |" in proc.stdout
+
+
+def test_validate_prints_the_memory_of_each_effect():
+    proc = subprocess.run(
+        [sys.executable, "-m", "couplekit", "validate", "examples/fig13_sand_drop_beaker_small.toml"],
+        capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    assert "surface_tension" in proc.stdout and "this costs 4" in proc.stdout
