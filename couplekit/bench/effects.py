@@ -9,11 +9,11 @@ memory each costs is checked against :func:`couplekit.effect_memory.effect_memor
 from __future__ import annotations
 
 import copy
-import time
 
 from ..assembly import CouplingUnavailableError
 from ..effect_memory import effect_memory
 from .memory import allocated_summary
+from .timing import time_steps
 
 
 def base_scene(n: int = 16, frames: int = 2) -> dict:
@@ -123,18 +123,15 @@ def effect_variants(data: dict) -> dict[str, tuple[str, dict, dict]]:
     return out
 
 
-def measure(data: dict, backend: str = "cpu", steps: int = 3) -> dict:
-    """One scene: s/step over ``steps`` after a warm-up step, stage costs, memory as allocated."""
+def measure(data: dict, backend: str = "cpu", steps: int = 10, repeats: int = 3) -> dict:
+    """One scene: s/step (:func:`~couplekit.bench.timing.time_steps`), stage costs over all timed steps,
+    memory as allocated."""
     from ..scene import Scene
     from ..simulation import Simulation
 
     scene = Scene.from_dict(data, source_name=data["scene"]["name"])
     sim = Simulation(scene, backend=backend, log=None, check_memory=False)
-    sim.step(1)
-    sim.reset_timing()
-    t = time.perf_counter()
-    sim.step(steps)
-    s = (time.perf_counter() - t) / steps
+    s = time_steps(sim, steps, repeats)
     mem = allocated_summary(sim)
     return {
         "s_per_step": s,
@@ -148,7 +145,12 @@ def measure(data: dict, backend: str = "cpu", steps: int = 3) -> dict:
 
 
 def run_effect_costs(
-    n: int = 16, backend: str = "cpu", steps: int = 3, effects: list[str] | None = None, progress=None
+    n: int = 16,
+    backend: str = "cpu",
+    steps: int = 10,
+    effects: list[str] | None = None,
+    progress=None,
+    repeats: int = 3,
 ) -> dict:
     """Every effect (or ``effects``) on and off: time, memory allocated, the difference, and the bytes the
     effect table (:mod:`couplekit.effect_memory`) reports for it."""
@@ -165,7 +167,7 @@ def run_effect_costs(
             for state, d in (("on", on), ("off", off)):
                 key = repr(sorted(d.items(), key=lambda kv: kv[0]))
                 if key not in cache:
-                    cache[key] = measure(d, backend, steps)
+                    cache[key] = measure(d, backend, steps, repeats)
                 res[state] = cache[key]
         except CouplingUnavailableError as exc:  # an effect the coupling cannot switch off yet
             rows[name] = {"variant": variant, "unavailable": str(exc)}

@@ -90,11 +90,13 @@ def run_bench(
     n_rows = len(figures) if figures else len(table1_mod.TABLE1)
     n_eff = len(effect_names) if effect_names else len(effects_mod.effect_variants(effects_mod.base_scene(8)))
     bar = _Progress(n_rows + n_eff, progress)
-    steps = 1 if tiny else 3
+    steps, repeats = (1, 1) if tiny else (10, 3)
     machine = {"platform": platform.platform(), "processor": platform.processor() or platform.machine()}
-    t1 = table1_mod.run_table1(backend, steps, coarsen=2.0 if tiny else 1.0, figures=figures, progress=bar)
+    t1 = table1_mod.run_table1(
+        backend, steps, repeats=repeats, coarsen=2.0 if tiny else 1.0, figures=figures, progress=bar
+    )
     t1.update({"machine": machine, "projection": assumptions(), "quick": quick, "tiny": tiny})
-    ec = effects_mod.run_effect_costs(10 if tiny else 16, backend, steps, effect_names, progress=bar)
+    ec = effects_mod.run_effect_costs(10 if tiny else 16, backend, steps, effect_names, progress=bar, repeats=repeats)
     ec.update({"machine": machine, "quick": quick, "tiny": tiny})
     bar.close()
     md1, md2 = table1_mod.markdown_table(t1), effects_mod.markdown_table(ec)

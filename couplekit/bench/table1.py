@@ -15,6 +15,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from .memory import allocated_summary
+from .timing import time_steps
 from .traffic import GPUS, projected_step
 
 FRAME_DURATION = 1.0 / 30.0
@@ -86,19 +87,15 @@ def coarsened(scene, factor: float):
     return Scene.from_dict(data, source_name=f"{scene.name} x{factor:g} coarser")
 
 
-def measure_scene(scene, backend: str = "cpu", steps: int = 3, threads: int | None = None) -> dict:
-    """Build ``scene``, run one warm-up step (kernel loading) and ``steps`` timed steps: s/step, cell and
+def measure_scene(scene, backend: str = "cpu", steps: int = 10, threads: int | None = None, repeats: int = 3) -> dict:
+    """Build ``scene`` and time its steps (:func:`~couplekit.bench.timing.time_steps`): s/step, cell and
     particle updates per second, the per-stage cost report, memory as allocated against the estimate."""
     from ..simulation import Simulation
 
     t0 = time.perf_counter()
     sim = Simulation(scene, backend=backend, threads=threads, log=None, check_memory=False)
     build_s = time.perf_counter() - t0
-    sim.step(1)
-    sim.reset_timing()
-    t0 = time.perf_counter()
-    sim.step(steps)
-    step_s = (time.perf_counter() - t0) / steps
+    step_s = time_steps(sim, steps, repeats, warmup=1 if repeats == 1 else 3)
     mem = allocated_summary(sim)
     cells = mem["cells"]
     particles = sim.sand.n_particles if sim.sand is not None else 0
@@ -146,7 +143,8 @@ def project_row(row: Row, bytes_per_cell: float, bytes_per_particle: float) -> d
 
 def run_table1(
     backend: str = "cpu",
-    steps: int = 3,
+    steps: int = 10,
+    repeats: int = 3,
     coarsen: float = 1.0,
     figures: list[int] | None = None,
     progress=None,
@@ -172,7 +170,7 @@ def run_table1(
         if not full and not small:
             entry["status"] = "no scene file yet (the figure's scene is still to be written)"
         if small:
-            m = measure_scene(coarsened(Scene.load(small[0]), coarsen), backend, steps)
+            m = measure_scene(coarsened(Scene.load(small[0]), coarsen), backend, steps, repeats=repeats)
             entry["measured"] = m
             mem = m["memory_allocated"]
             bpc, bpp, src = mem["bytes_per_padded_cell"], mem["bytes_per_particle"], m["scene"]
