@@ -24,21 +24,16 @@ from pathlib import Path
 import numpy as np
 
 from couplekit.backend import get_backend
+from couplekit.backend.traffic import bytes_per_item, two_phase_step_bytes
 from couplekit.fluid.grid import Boundaries
 from couplekit.fluid.solver import FluidParams, FluidSolver
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
-# compulsory traffic per interior cell and step, float32 = 4 B, flags 1 B (each array touched once per kernel)
-BYTES_COLLIDE_SINGLE = 27 * 4 * 2 + 1 + 3 * 4 + 4  # f read+write, flags, velocity write, p̄ read
-BYTES_TWO_PHASE_STEP = {
-    "lbm_macro_pressure": 27 * 4 + 1 + 2 * 4 + 4,  # f read, flags, p read+write, phi read
-    "lbm_pressure_filter": 4 + 4 + 1,  # p read, p̄ write, flags
-    "lbm_collide_stream (two-phase)": 27 * 4 * 2 + 1 + 3 * 4 + 4 + 4 + 4,  # f, flags, u write, p̄, phi, mu
-    "phase_macroscopic": 7 * 4 + 4 + 1,  # h read, phi write, flags
-    "phase_gradients": 4 + 3 * 4 + 4 + 1,  # phi read, grad write, mu write, flags
-    "phase_collide_stream": 7 * 4 * 2 + 4 + 3 * 4 + 3 * 4 + 4 + 1,  # h, phi, grad, u, source, flags
-}
+# compulsory traffic per interior cell and step (couplekit/backend/traffic.py: one table for this script and
+# the GPU build report)
+BYTES_COLLIDE_SINGLE = bytes_per_item("lbm_collide_stream")
+BYTES_TWO_PHASE_STEP = two_phase_step_bytes()
 
 
 NOTE = (

@@ -22,6 +22,26 @@ _SPILL = re.compile(r"(\d+) bytes stack frame, (\d+) bytes spill stores, (\d+) b
 _REGS = re.compile(r"Used (\d+) registers")
 
 
+_BLOCK = re.compile(r"^#define CK_BLOCK_SIZE (\d+)\s*$", re.MULTILINE)
+_MIN_BLOCKS = re.compile(r"^#define CK_MIN_BLOCKS_PER_SM (\d+)\s*$", re.MULTILINE)
+
+# the register budget per thread on sm_90: 65536 registers / (256 threads x 2 blocks), kernels/common.cuh
+REGISTER_LIMIT = 128
+# kernels allowed above REGISTER_LIMIT (or to spill), each with the measured reason; none since the LBM
+# kernels' restructuring (docs/backends.md, "Register budget")
+REGISTER_EXCEPTIONS: dict[str, str] = {}
+
+
+def launch_bounds() -> tuple[int, int]:
+    """(CK_BLOCK_SIZE, CK_MIN_BLOCKS_PER_SM) of kernels/common.cuh: the block size every kernel is built for
+    (the cuda backend must launch with it) and the blocks per SM its register cap guarantees."""
+    text = (kernel_dir() / "common.cuh").read_text()
+    block, blocks = _BLOCK.search(text), _MIN_BLOCKS.search(text)
+    if block is None or blocks is None:
+        raise RuntimeError("kernels/common.cuh defines no CK_BLOCK_SIZE / CK_MIN_BLOCKS_PER_SM")
+    return int(block.group(1)), int(blocks.group(1))
+
+
 def kernel_sources() -> list[Path]:
     """Every ``*.cu`` file in the kernel directory, sorted."""
     return sorted(kernel_dir().glob("*.cu"))
