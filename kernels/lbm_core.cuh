@@ -102,8 +102,9 @@ LBM_INLINE void lbm_gradient(const float* RESTRICT s, const unsigned char* RESTR
                          : (MODE == LBM_NB_MASK ? ((gmask >> (q)) & 1u) != 0u : LBM_STENCIL_CELL(flags[cell])))
     // GPU: the sum by opposite pairs (q, q + 1 = opp q, q odd), g += 3 w_q c_q (d_q - d_opp q), accumulated as
     // each pair is read: 2 loaded values live per pair instead of the 26 differences the factorised sum below
-    // keeps until the end (measured: with it lbm_collide_stream spilled 80-330 bytes under 128 registers on
-    // sm_90).  Same terms, other summation order: float32 round-off from the host build.
+    // keeps until the end (measured on sm_90 under 128 registers, everything else as now: with the factorised
+    // sum the two-phase collide-stream variants spilled 28-288 bytes, with this one none).  Same terms, other
+    // summation order: float32 round-off from the host build.
     // The geometry and the mask pass through CK_PER_ITEM: two gradients of one cell (and the populations'
     // loads) share their 26 neighbour offsets, which the compiler otherwise computes once and keeps live
     // (52 registers) from the first stencil to the last; recomputing them costs one multiply-add each.
