@@ -27,9 +27,22 @@ _MIN_BLOCKS = re.compile(r"^#define CK_MIN_BLOCKS_PER_SM (\d+)\s*$", re.MULTILIN
 
 # the register budget per thread on sm_90: 65536 registers / (256 threads x 2 blocks), kernels/common.cuh
 REGISTER_LIMIT = 128
-# kernels allowed above REGISTER_LIMIT (or to spill), each with the measured reason; none since the LBM
-# kernels' restructuring (docs/backends.md, "Register budget")
-REGISTER_EXCEPTIONS: dict[str, str] = {}
+# kernels allowed to spill under the budget: kernel -> (most spill bytes allowed, stores or loads, the measured
+# reason); docs/backends.md, "Register budget"
+REGISTER_EXCEPTIONS: dict[str, tuple[int, str]] = {
+    "lbm_collide_stream": (
+        4,
+        "single-phase mixture variants (CK_TWO_PHASE=0 CK_MIXTURE=1) on sm_90 only: one register (4 B spill "
+        "store + load) over 128 after the restructuring; sm_80 and all other variants spill nothing; not yet "
+        "removed (an opaque eps value did not help)",
+    )
+}
+
+
+def within_exception(kernel: str, info: dict) -> bool:
+    """Whether a kernel build's spills are within its REGISTER_EXCEPTIONS allowance (no spills: True)."""
+    spill = max(info.get("spill_store_bytes", 0), info.get("spill_load_bytes", 0))
+    return spill == 0 or (kernel in REGISTER_EXCEPTIONS and spill <= REGISTER_EXCEPTIONS[kernel][0])
 
 
 def launch_bounds() -> tuple[int, int]:
