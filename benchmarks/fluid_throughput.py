@@ -24,13 +24,16 @@ from pathlib import Path
 import numpy as np
 
 from couplekit.backend import get_backend
-from couplekit.bench.traffic import BYTES_COLLIDE_SINGLE, BYTES_TWO_PHASE_STEP
+from couplekit.backend.traffic import bytes_per_item, two_phase_step_bytes
 from couplekit.fluid.grid import Boundaries
 from couplekit.fluid.solver import FluidParams, FluidSolver
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
-# compulsory traffic per cell-step: one table shared with couplekit bench (couplekit/bench/traffic.py)
+# compulsory traffic per interior cell and step (couplekit/backend/traffic.py: one table for this script and
+# the GPU build report)
+BYTES_COLLIDE_SINGLE = bytes_per_item("lbm_collide_stream")
+BYTES_TWO_PHASE_STEP = two_phase_step_bytes()
 
 
 NOTE = (

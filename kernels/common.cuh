@@ -20,6 +20,8 @@
 //                                        adds sum_i(...) in double to *out.  On the host the per-thread
 //                                        partials are combined in thread order, so for a fixed thread count
 //                                        the result is bitwise reproducible.
+// CK_PER_ITEM(v): v, hidden from the GPU compiler's common-subexpression and loop-invariant optimisations
+// (register pressure; see the CUDA section).
 // Atomics: atomic_add(float*|double*|int*|unsigned int*, value).
 // CK_NANF: a quiet float NaN (to mark a result that cannot be computed, e.g. a particle whose position is not
 // finite: it must stay visibly non-finite, never be turned into a valid-looking number).
@@ -32,10 +34,21 @@
 // compile every combination. Without such a line the file is compiled once, with no flags.
 #pragma once
 
+// Launch configuration: the cuda backend launches every kernel with CK_BLOCK_SIZE threads per block
+// (couplekit/backend/cuda.py BLOCK_SIZE; tests/test_kernel_builds.py checks they agree), and every kernel
+// carries __launch_bounds__(CK_BLOCK_SIZE, CK_MIN_BLOCKS_PER_SM): ptxas then keeps a kernel within
+// 65536 / (CK_BLOCK_SIZE * CK_MIN_BLOCKS_PER_SM) = 128 registers per thread on sm_80 / sm_90 (at least 25 %
+// theoretical occupancy, 2 blocks of 8 warps per SM), and a kernel that needs more spills, which the build
+// test refuses.
+#define CK_BLOCK_SIZE 256
+#ifndef CK_MIN_BLOCKS_PER_SM  // -DCK_MIN_BLOCKS_PER_SM=1 measures a kernel's unbounded register count (255 max)
+#define CK_MIN_BLOCKS_PER_SM 2
+#endif
+
 #if defined(__CUDACC__)
 // ---------------------------------------------------------------------------------------------- CUDA
 // NVRTC has no host headers: nothing may be included here (math functions are built in).
-#define KERNEL extern "C" __global__
+#define KERNEL extern "C" __global__ __launch_bounds__(CK_BLOCK_SIZE, CK_MIN_BLOCKS_PER_SM)
 #define DEVICE __device__ __forceinline__
 #define CONSTANT __constant__ const
 #define RESTRICT __restrict__
@@ -53,6 +66,27 @@
         for (int x = (int)(ck_cell_ % (nx)), y = (int)((ck_cell_ / (nx)) % (ny)),                        \
                  z = (int)(ck_cell_ / ((long long)(nx) * (ny))), ck_once_ = 1;                            \
              ck_once_; ck_once_ = 0)
+
+// CK_PER_ITEM(v): the value v, opaque to the optimiser.  Inside a grid-stride loop, a value derived only from
+// kernel arguments is loop-invariant, and the compiler hoists it out of the loop and keeps it in a register for
+// the whole loop: the 27 64-bit stream offsets q N +- (c_x + px c_y + pxy c_z) of the LBM loads and stores
+// took 54-80 of lbm_collide_stream's 242 registers and most of lbm_momentum's 142 (measured with ptxas for
+// sm_90: a one-pass copy of lbm_momentum used 64).  Taking the grid sizes through CK_PER_ITEM inside the loop
+// makes everything derived from them per-iteration, so it is recomputed (one integer multiply-add) where it
+// is used.  The empty asm emits no instruction.  Identity on the host.
+DEVICE long long ck_per_item_(long long v) {
+    asm volatile("" : "+l"(v));
+    return v;
+}
+DEVICE int ck_per_item_(int v) {
+    asm volatile("" : "+r"(v));
+    return v;
+}
+DEVICE unsigned int ck_per_item_(unsigned int v) {
+    asm volatile("" : "+r"(v));
+    return v;
+}
+#define CK_PER_ITEM(v) ck_per_item_(v)
 
 DEVICE void atomic_add(float* addr, float v) { atomicAdd(addr, v); }
 DEVICE void atomic_add(double* addr, double v) { atomicAdd(addr, v); }
@@ -89,6 +123,7 @@ DEVICE double ck_warp_sum(double v) {
 #define CK_MAX_THREADS 1024
 
 #define CK_PRAGMA(x) _Pragma(#x)
+#define CK_PER_ITEM(v) (v)
 
 #define FOR_EACH(i, n) CK_PRAGMA(omp parallel for schedule(static)) for (long long i = 0; i < (long long)(n); ++i)
 

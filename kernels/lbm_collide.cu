@@ -329,12 +329,18 @@ LBM_INLINE void lbm_collide_cell(const long long c, float* RESTRICT f, const uns
 #define LBM_BACK_Y(i) chimera_backward2(K[(i) / 3 * 9 + (i) % 3], K[(i) / 3 * 9 + 3 + (i) % 3], K[(i) / 3 * 9 + 6 + (i) % 3], uy, uy2, uyy);
     LBM_REP9(LBM_BACK_Y, 0)
 #undef LBM_BACK_Y
-    // z pass, each line stored as soon as it is final (fewer live values, fewer spills on the host)
+    // z pass, each line stored as soon as it is final (fewer live values, fewer spills on the host).  The
+    // store addresses of the AA pattern are the load addresses (of the opposite directions): computed from
+    // CK_PER_ITEM copies of the geometry, so that the GPU compiler recomputes them here instead of keeping the
+    // 27 64-bit indices of the loads live through the whole cell (measured on sm_90: that alone was the
+    // difference between spilling and not under 128 registers)
+    const int spx = CK_PER_ITEM(px);
+    const long long spxy = CK_PER_ITEM(pxy), sN = CK_PER_ITEM(N);
 #define LBM_PUT(i)                                                              \
     if (ODD)                                                                    \
-        f[QOF27[i] * N + c + LBM_OFFSET(QOF27[i], px, pxy)] = K[i];             \
+        f[QOF27[i] * sN + c + LBM_OFFSET(QOF27[i], spx, spxy)] = K[i];          \
     else                                                                        \
-        f[opposite_dir(QOF27[i]) * N + c] = K[i];
+        f[opposite_dir(QOF27[i]) * sN + c] = K[i];
 #define LBM_BACK_Z(ij)                                                            \
     chimera_backward2(K[(ij) * 3], K[(ij) * 3 + 1], K[(ij) * 3 + 2], uz, uz2, uzz); \
     LBM_PUT((ij) * 3) LBM_PUT((ij) * 3 + 1) LBM_PUT((ij) * 3 + 2)
@@ -359,14 +365,20 @@ KERNEL void lbm_collide_stream(const long long n, float* RESTRICT f /* size: 27 
     const int px = nx + 2;
     const long long pxy = (long long)px * (ny + 2);
     const long long N = pxy * (nz + 2);
-#define LBM_CELL_ARGS f, flags, vel, phi, mu, eps, force, pbar, px, pxy, N, rho_h, rho_l, nu_h, nu_l, gx, gy, gz, c_les, lambda_odd, odd_nu_max
+#define LBM_CELL_ARGS(px, pxy, N) \
+    f, flags, vel, phi, mu, eps, force, pbar, px, pxy, N, rho_h, rho_l, nu_h, nu_l, gx, gy, gz, c_les, lambda_odd, odd_nu_max
 #if CK_ON_GPU
-    // one thread per cell; the flag tests of the stencils cost little next to the memory traffic
-#define LBM_COLLIDE_LOOP(ODD)                                                    \
-    FOR_EACH_CELL(x, y, z, nx, ny, nz) {                                         \
-        const long long c = (x + 1) + px * (long long)(y + 1) + pxy * (z + 1);   \
-        if (flags[c] != FLAG_FLUID) continue;                                    \
-        lbm_collide_cell<ODD, LBM_NB_FLAGS>(c, LBM_CELL_ARGS, 0u);               \
+    // one thread per cell; the flag tests of the stencils cost little next to the memory traffic.  The grid
+    // sizes pass through CK_PER_ITEM inside the loop (common.cuh): hoisted out of the grid-stride loop, the 27
+    // load + 27 store offsets derived from them held ~100 registers (242 -> see the build report)
+#define LBM_COLLIDE_LOOP(ODD)                                                                  \
+    FOR_EACH_CELL(x, y, z, nx, ny, nz) {                                                       \
+        const int ipx = CK_PER_ITEM(px);                                                       \
+        const long long ipxy = CK_PER_ITEM(pxy), iN = CK_PER_ITEM(N);                          \
+        const long long c = (x + 1) + ipx * (long long)(y + 1) + ipxy * (z + 1);               \
+        if (flags[c] != FLAG_FLUID) continue;                                                  \
+        const unsigned int m = lbm_link_mask(flags, c, ipx, ipxy);                             \
+        lbm_collide_cell<ODD, LBM_NB_MASK>(c, LBM_CELL_ARGS(ipx, ipxy, iN), m);                \
     }
 #else
     // host: the FOR_EACH_CELL shape ((z, y) rows in parallel, x loop `omp simd`) written out, so that a row
@@ -383,7 +395,7 @@ KERNEL void lbm_collide_stream(const long long n, float* RESTRICT f /* size: 27 
             if (lbm_rows_all_fluid(flags, row, 0, nx + 1, px, pxy)) {                                  \
                 CK_PRAGMA(omp simd)                                                                    \
                 for (int x = 1; x <= nx; ++x)                                                          \
-                    lbm_collide_cell<ODD, LBM_NB_BULK>(row + x, LBM_CELL_ARGS, LBM_FULL_MASK);         \
+                    lbm_collide_cell<ODD, LBM_NB_BULK>(row + x, LBM_CELL_ARGS(px, pxy, N), LBM_FULL_MASK); \
                 continue;                                                                              \
             }                                                                                          \
             unsigned int masks[LBM_ROW_CHUNK], scratch[10 * (LBM_ROW_CHUNK + 2)];                      \
@@ -395,7 +407,7 @@ KERNEL void lbm_collide_stream(const long long n, float* RESTRICT f /* size: 27 
                 for (int i = 0; i < len; ++i) {                                                        \
                     const unsigned int m = masks[i];                                                   \
                     if (!(m & 1u)) continue;                                                           \
-                    lbm_collide_cell<ODD, LBM_NB_MASK>(c0 + i, LBM_CELL_ARGS, m);                      \
+                    lbm_collide_cell<ODD, LBM_NB_MASK>(c0 + i, LBM_CELL_ARGS(px, pxy, N), m);          \
                 }                                                                                      \
             }                                                                                          \
         }

@@ -22,6 +22,39 @@ _SPILL = re.compile(r"(\d+) bytes stack frame, (\d+) bytes spill stores, (\d+) b
 _REGS = re.compile(r"Used (\d+) registers")
 
 
+_BLOCK = re.compile(r"^#define CK_BLOCK_SIZE (\d+)\s*$", re.MULTILINE)
+_MIN_BLOCKS = re.compile(r"^#define CK_MIN_BLOCKS_PER_SM (\d+)\s*$", re.MULTILINE)
+
+# the register budget per thread on sm_90: 65536 registers / (256 threads x 2 blocks), kernels/common.cuh
+REGISTER_LIMIT = 128
+# kernels allowed to spill under the budget: kernel -> (most spill bytes allowed, stores or loads, the measured
+# reason); docs/backends.md, "Register budget"
+REGISTER_EXCEPTIONS: dict[str, tuple[int, str]] = {
+    "lbm_collide_stream": (
+        4,
+        "single-phase mixture variants (CK_TWO_PHASE=0 CK_MIXTURE=1) on sm_90 only: one register (4 B spill "
+        "store + load) over 128 after the restructuring; sm_80 and all other variants spill nothing; not yet "
+        "removed (an opaque eps value did not help)",
+    )
+}
+
+
+def within_exception(kernel: str, info: dict) -> bool:
+    """Whether a kernel build's spills are within its REGISTER_EXCEPTIONS allowance (no spills: True)."""
+    spill = max(info.get("spill_store_bytes", 0), info.get("spill_load_bytes", 0))
+    return spill == 0 or (kernel in REGISTER_EXCEPTIONS and spill <= REGISTER_EXCEPTIONS[kernel][0])
+
+
+def launch_bounds() -> tuple[int, int]:
+    """(CK_BLOCK_SIZE, CK_MIN_BLOCKS_PER_SM) of kernels/common.cuh: the block size every kernel is built for
+    (the cuda backend must launch with it) and the blocks per SM its register cap guarantees."""
+    text = (kernel_dir() / "common.cuh").read_text()
+    block, blocks = _BLOCK.search(text), _MIN_BLOCKS.search(text)
+    if block is None or blocks is None:
+        raise RuntimeError("kernels/common.cuh defines no CK_BLOCK_SIZE / CK_MIN_BLOCKS_PER_SM")
+    return int(block.group(1)), int(blocks.group(1))
+
+
 def kernel_sources() -> list[Path]:
     """Every ``*.cu`` file in the kernel directory, sorted."""
     return sorted(kernel_dir().glob("*.cu"))

@@ -1,8 +1,8 @@
 """Bytes each stage moves per cell or particle, and the bandwidth-bound projection of a step on a GPU.
 
 The byte counts are compulsory traffic (each array a kernel touches read or written once, float32 = 4 B,
-flags 1 B): the fluid kernels' counts are the ones ``benchmarks/fluid_throughput.py`` measures its roofline
-with (it imports them from here); the sand and coupling counts follow the arrays the kernels read and write
+flags 1 B): the fluid kernels' counts are :data:`couplekit.backend.traffic.KERNEL_TRAFFIC`, the table the GPU
+build report and ``benchmarks/fluid_throughput.py`` use too, mapped here onto the scheduler's stages; the sand and coupling counts follow the arrays the kernels read and write
 (``kernels/mpm_*.cu``, ``kernels/coupling*.cu``; the 27-node gathers and scatters of a particle are assumed to
 hit cache, so the grid is counted once per node).
 
@@ -23,21 +23,13 @@ Launch overhead: 5 µs per kernel launch (CUDA launch latency on a busy stream),
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from ..backend.traffic import BANDWIDTH_EFFICIENCY, GPU, GPUS, PARTICLE_BANDWIDTH_EFFICIENCY, two_phase_step_bytes
 
 F32 = 4
 
 # ---------------------------------------------------------------------------------------------- fluid, per cell
-# compulsory traffic per interior cell and step (each array touched once per kernel)
-BYTES_COLLIDE_SINGLE = 27 * F32 * 2 + 1 + 3 * F32 + F32  # f read+write, flags, velocity write, p̄ read
-BYTES_TWO_PHASE_STEP = {
-    "lbm_macro_pressure": 27 * F32 + 1 + 2 * F32 + F32,  # f read, flags, p read+write, phi read
-    "lbm_pressure_filter": F32 + F32 + 1,  # p read, p̄ write, flags
-    "lbm_collide_stream (two-phase)": 27 * F32 * 2 + 1 + 3 * F32 + F32 + F32 + F32,  # f, flags, u, p̄, phi, mu
-    "phase_macroscopic": 7 * F32 + F32 + 1,  # h read, phi write, flags
-    "phase_gradients": F32 + 3 * F32 + F32 + 1,  # phi read, grad write, mu write, flags
-    "phase_collide_stream": 7 * F32 * 2 + F32 + 3 * F32 + 3 * F32 + F32 + 1,  # h, phi, grad, u, source, flags
-}
+# compulsory traffic per interior cell and step of each fluid kernel: couplekit.backend.traffic.KERNEL_TRAFFIC
+BYTES_TWO_PHASE_STEP = two_phase_step_bytes()
 
 # the scheduler's stages (couplekit.schedulers.base) -> bytes per fluid cell and step
 FLUID_STAGE_BYTES_PER_CELL = {
@@ -79,26 +71,12 @@ SAND_STAGE_BYTES_PER_NODE = {
     "mpm_g2p": 3 * F32,  # velocity read
 }
 
-GRID_EFFICIENCY = 0.80
-PARTICLE_EFFICIENCY = 0.40
+GRID_EFFICIENCY = BANDWIDTH_EFFICIENCY
+PARTICLE_EFFICIENCY = PARTICLE_BANDWIDTH_EFFICIENCY
 LAUNCH_OVERHEAD_S = 5e-6
 LAUNCHES_PER_STEP = 25
 
-
-@dataclass(frozen=True)
-class GPU:
-    """A GPU for the projection: name, memory (GB) and peak memory bandwidth (TB/s, the vendor's figure)."""
-
-    name: str
-    memory_gb: float
-    bandwidth_tbs: float
-
-
-GPUS = (
-    GPU("RTX PRO 6000 Blackwell (the paper's)", 96.0, 1.792),  # GDDR7, 512-bit, 28 Gbps
-    GPU("H100 SXM", 80.0, 3.35),
-    GPU("H200", 141.0, 4.8),
-)
+__all__ = ["GPU", "GPUS", "stage_bytes", "projected_step", "assumptions"]
 
 
 def stage_bytes(cells: float, particles: float, two_phase: bool = True, coupled: bool = True) -> dict[str, dict]:
@@ -148,5 +126,5 @@ def assumptions() -> dict:
         "launch_overhead_s": LAUNCH_OVERHEAD_S,
         "launches_per_step": LAUNCHES_PER_STEP,
         "gpus": [g.__dict__ for g in GPUS],
-        "source": "couplekit/bench/traffic.py docstring",
+        "source": "couplekit/bench/traffic.py and couplekit/backend/traffic.py docstrings",
     }
