@@ -26,6 +26,8 @@ from .schema import (
     FACES,
     GEOMETRY_COMMON_KEYS,
     GEOMETRY_KEYS,
+    GEOMETRY_SUBTRACT,
+    GEOMETRY_SUBTRACT_DOC,
     INFLOW_KEYS,
     OUTLET_KEYS,
     REQUIRED,
@@ -139,6 +141,12 @@ def _geometry(gtype: str) -> dict[str, Any]:
     """One geometry type's table: the common keys with ``type`` fixed to ``gtype``, and the type's keys."""
     out = _table(GEOMETRY_COMMON_KEYS + GEOMETRY_KEYS[gtype], f'{_TABLE_TEXT["geometry"]} This is type = "{gtype}".')
     out["properties"]["type"] = {**out["properties"]["type"], "const": gtype}
+    out["properties"][GEOMETRY_SUBTRACT] = {
+        "type": "array",
+        "minItems": 1,
+        "description": GEOMETRY_SUBTRACT_DOC,
+        "items": {"$ref": "#/$defs/geometry"},
+    }
     return out
 
 

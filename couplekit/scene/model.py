@@ -38,12 +38,13 @@ import numpy as np
 from ..faces import PLANE_AXES, SCENE_FACES, face_extent, face_plane_shape, region_bounds, region_mask, solver_face
 from ..lattice import CS2
 from ..units import Units
-from .geometry import Box, Cylinder, Inverted, Shape, Sphere, Transformed
+from .geometry import Box, Cylinder, Difference, Inverted, Shape, Sphere, Transformed
 from .schema import (
     BODY_KEYS,
     FACES,
     GEOMETRY_COMMON_KEYS,
     GEOMETRY_KEYS,
+    GEOMETRY_SUBTRACT,
     INFLOW_KEYS,
     OUTLET_KEYS,
     REQUIRED,
@@ -214,6 +215,9 @@ class Geometry:
     rotate: tuple[float, float, float] = (0.0, 0.0, 0.0)
     translate: tuple[float, float, float] = (0.0, 0.0, 0.0)
     invert: bool = False
+    subtract: tuple[Geometry, ...] = ()
+    """Shapes cut out of this one (``subtract = [{...}, ...]``: a colander's holes, a ring wall), each in world
+    coordinates with its own transforms."""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "_shapes", {})
@@ -268,6 +272,8 @@ class Geometry:
             if domain is None:
                 raise ValueError("an inverted shape needs the domain for its bounds")
             s = Inverted(s, (0.0, 0.0, 0.0), domain.size)
+        if self.subtract:
+            s = Difference(s, [g.shape(domain, sample_spacing) for g in self.subtract])
         return s
 
     def bounds(self, domain: Domain | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -1095,6 +1101,9 @@ def _geometry(raw: Any, path: str, base_dir: Path, source: dict | None, problems
     if not isinstance(raw, dict):
         problems.append(Problem(path, "must be a table", f"write [{path}] with type = ... and the shape's keys"))
         return None
+    raw = dict(raw)
+    cut_raw = raw.pop(GEOMETRY_SUBTRACT, None)
+    cuts = _subtract(cut_raw, f"{path}.{GEOMETRY_SUBTRACT}", base_dir, source, problems)
     gtype = raw.get("type")
     if not isinstance(gtype, str) or gtype not in GEOMETRY_KEYS:
         read_table({"type": gtype} if gtype is not None else {}, path, GEOMETRY_COMMON_KEYS[:1], problems)
@@ -1156,7 +1165,35 @@ def _geometry(raw: Any, path: str, base_dir: Path, source: dict | None, problems
             problems.append(Problem(f"{path}.base", "the base is not below every height", "lower base"))
     if len([p for p in problems if p.key.startswith(path)]):
         return None
-    return Geometry(gtype, params, v["scale"], tuple(v["rotate"]), tuple(v["translate"]), v["invert"])
+    if cuts is None:
+        return None
+    return Geometry(gtype, params, v["scale"], tuple(v["rotate"]), tuple(v["translate"]), v["invert"], cuts)
+
+
+def _subtract(
+    raw: Any, path: str, base_dir: Path, source: dict | None, problems: list[Problem]
+) -> tuple[Geometry, ...] | None:
+    """The ``subtract`` list of a geometry table: each entry a geometry table of its own (checked as one,
+    ``path[j]`` in messages); () when absent, None when an entry failed."""
+    if raw is None:
+        return ()
+    if not isinstance(raw, list) or not raw:
+        problems.append(
+            Problem(
+                path,
+                "must be a non-empty list of geometry tables",
+                "write subtract = [{ type = 'cylinder', center = [...], radius = ..., height = ... }, ...] or remove it",
+            )
+        )
+        return None
+    sources = source.get(GEOMETRY_SUBTRACT) if source else None
+    out = []
+    for j, entry in enumerate(raw):
+        sub_source = (
+            sources[j] if isinstance(sources, list) and j < len(sources) and isinstance(sources[j], dict) else None
+        )
+        out.append(_geometry(entry, f"{path}[{j}]", base_dir, sub_source, problems))
+    return None if any(g is None for g in out) else tuple(out)
 
 
 def _check_inflows(

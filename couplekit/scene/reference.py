@@ -11,6 +11,8 @@ from .schema import (
     BODY_KEYS,
     GEOMETRY_COMMON_KEYS,
     GEOMETRY_KEYS,
+    GEOMETRY_SUBTRACT,
+    GEOMETRY_SUBTRACT_DOC,
     INFLOW_KEYS,
     MAX_DEPTH,
     MAX_MAGNITUDE,
@@ -250,6 +252,12 @@ def render() -> str:
     parts.append(
         "## [bodies.geometry]\n\nKeys every shape takes (transforms apply in the order scale, rotate, translate,\n"
         "which keep distances exact):\n\n" + _table(GEOMETRY_COMMON_KEYS) + "\n"
+        f"`{GEOMETRY_SUBTRACT}` (a list of geometry tables, optional): {GEOMETRY_SUBTRACT_DOC}. Example, a\n"
+        "sand ring wall (a cylinder less a narrower one) and a plate with a hole:\n\n"
+        '```toml\n[bodies.geometry]\ntype = "cylinder"\ncenter = [0.5, 0.5, 0.1]\nradius = 0.3\nheight = 0.2\n'
+        'subtract = [{ type = "cylinder", center = [0.5, 0.5, 0.1], radius = 0.2, height = 0.3 }]\n\n'
+        '[bodies.geometry]\ntype = "box"\nmin = [0.0, 0.0, 0.3]\nmax = [1.0, 1.0, 0.32]\n'
+        'subtract = [{ type = "cylinder", center = [0.5, 0.5, 0.31], radius = 0.05, height = 0.1 }]\n```\n'
     )
     descriptions = {
         "box": "Axis-aligned box (rotate it for any orientation).",

@@ -33,6 +33,8 @@ __all__ = [
     "BODY_KEYS",
     "GEOMETRY_KEYS",
     "GEOMETRY_COMMON_KEYS",
+    "GEOMETRY_SUBTRACT",
+    "GEOMETRY_SUBTRACT_DOC",
     "INFLOW_KEYS",
     "OUTLET_KEYS",
     "SAND_WALL_KEYS",
@@ -742,6 +744,18 @@ GEOMETRY_KEYS: dict[str, list[Key]] = {
     ],
 }
 """Type-specific keys of a ``geometry`` table."""
+
+GEOMETRY_SUBTRACT = "subtract"
+"""The key of a geometry table that lists shapes cut out of it (each a geometry table of its own)."""
+
+GEOMETRY_SUBTRACT_DOC = (
+    "shapes cut out of this one, each a geometry table of any type with its own keys and transforms (in world "
+    "coordinates, not relative to this shape): the body is this shape, after its transforms and invert, less "
+    "every listed shape (a colander's holes, the inside of a ring wall). An entry may have a subtract list of "
+    "its own. Nothing is left of a sand body wholly cut away, which validation refuses as it refuses a body "
+    "inside obstacles"
+)
+"""What ``subtract`` does (the reference and the JSON Schema show it)."""
 
 INFLOW_KEYS: list[Key] = [
     Key(

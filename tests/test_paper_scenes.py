@@ -1,0 +1,222 @@
+"""Paper 000's Figs. 2, 3, 4, 5, 9, 12, 15 and 18 (couplekit issue 16): each test runs the figure's small
+variant from ``examples/`` (shortened where the whole run is too long for CI) and checks the behaviour the
+figure is about with a number. The bounds are set below what the runs measured (numbers in each docstring,
+measured with the 2 CPU cores shared); what the small variants do not show is an xfail, strict, so that it
+fails the day it works. docs/examples.md describes each figure, our variant and what differs.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from couplekit.scene import Scene
+from couplekit.simulation import Simulation
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+
+
+def _sim(name: str) -> Simulation:
+    return Simulation(Scene.load(EXAMPLES / f"{name}_small.toml"), backend="cpu", log=None)
+
+
+def _frames(sim: Simulation, n: int) -> None:
+    sim.step(n * sim.scene.time.steps_per_frame)
+
+
+def _grid(sim: Simulation):
+    """Cell-centre coordinates (xc, yc, zc) of the scene's grid, m."""
+    dom = sim.scene.domain
+    return tuple((np.arange(n) + 0.5) * dom.dx for n in dom.resolution)
+
+
+def _water(sim: Simulation) -> np.ndarray:
+    """Water per cell (nz, ny, nx): φ times the fluid fraction, 0 in obstacles."""
+    f = sim.fields()
+    eps = f.get("sand_fraction", np.zeros_like(f["phi"]))
+    return np.where(f["solid"], 0.0, f["phi"] * (1.0 - eps))
+
+
+def test_fig02_island_floats_under_the_wind():
+    """Fig. 2: a 600 kg/m³ sand ring, placed 4 mm above a pool, under a 2 m/s downward air jet. After 0.2 s it
+    has dropped onto the water and floats: its lowest particle is below the undisturbed surface (0.06 m) and
+    its mean height above 0.045 m (measured 0.044 and 0.0548 m at 0.2 s; 0.0414 and 0.0522 m at 0.27 s,
+    settling). Its particles stay within the ring (mean radius 0.1086 m, unchanged to 0.1 mm)."""
+    sim = _sim("fig02_wind_island")
+    r0 = np.hypot(*(sim.particles()["x"][:2] - 0.3)).mean()
+    _frames(sim, 6)
+    x = sim.particles()["x"]
+    assert x[2].min() < 0.06 and x[2].mean() > 0.045
+    assert abs(np.hypot(*(x[:2] - 0.3)).mean() - r0) < 0.005
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="the wind does not break the island: air at 2 m/s (the lattice Mach limit at the Table 1 dx/dt) "
+    "carries ~2.5 Pa of dynamic pressure against ~120 Pa of sand weight per area (docs/examples.md, Fig. 2)",
+)
+def test_fig02_wind_breaks_the_island_apart():
+    """Fig. 2's point: the airflow breaks the island into fragments that drift apart. Asked of the small
+    variant's 0.5 s: the particles' radial spread grows by a quarter (measured: unchanged to 0.1 mm)."""
+    sim = _sim("fig02_wind_island")
+    s0 = np.hypot(*(sim.particles()["x"][:2] - 0.3)).std()
+    _frames(sim, 15)
+    assert np.hypot(*(sim.particles()["x"][:2] - 0.3)).std() > 1.25 * s0
+
+
+def test_fig03_castle_loses_sand_downstream():
+    """Fig. 3: the dam (0.25 m long, 0.3 m high) reaches the damp castle at 0.3 s. By 0.43 s sand has been
+    carried past the castle's rear face (x > 0.65 m: measured 14 % of the particles) and the castle's top is
+    lower (measured 0.1816 m from 0.1887 m)."""
+    sim = _sim("fig03_dam_break_castle")
+    top0 = sim.particles()["x"][2].max()
+    _frames(sim, 13)
+    x = sim.particles()["x"]
+    assert np.mean(x[0] > 0.65) > 0.05
+    assert x[2].max() < top0 - 0.004
+
+
+def test_fig04_colander_passes_sand_and_water():
+    """Fig. 4: a water jet carrying sand (fraction 0.2) falls into the perforated bowl. By 0.4 s sand and water
+    have passed its holes: particles below the bowl's bottom (z < 0.13 m; measured 676 at 0.37 s, 1504 at
+    0.47 s) and more water below it than the pool held (measured +2 % at 0.37 s, +5 % at 0.47 s)."""
+    sim = _sim("fig04_colander")
+    zc = _grid(sim)[2]
+    below0 = _water(sim)[zc < 0.13].sum()
+    _frames(sim, 12)
+    x = sim.particles()["x"]
+    assert np.sum(x[2] < 0.13) >= 300
+    assert _water(sim)[zc < 0.13].sum() > 1.01 * below0
+
+
+def _fig05_state(sim: Simulation) -> tuple[float, float]:
+    """(fraction of the water outside the bailey's outer radius, 99th percentile of the sand height)."""
+    xc, yc, zc = _grid(sim)
+    w = _water(sim)
+    outside = (np.hypot(*np.meshgrid(xc - 0.75, yc - 0.75, indexing="xy")) > 0.48)[None] & (zc > 0.06)[:, None, None]
+    return float(w[outside].sum() / w.sum()), float(np.percentile(sim.particles()["x"][2], 99))
+
+
+def test_fig05_water_escapes_the_bailey():
+    """Fig. 5: water held and poured inside a damp sand ring wall. By 0.5 s water has left the bailey through
+    its wetted wall (measured 8.5 % of the water outside at 0.47 s) and the wall has begun to settle (its
+    crest, the 99th percentile of the sand height, measured 0.2390 m from 0.2500 m)."""
+    sim = _sim("fig05_bailey_breach")
+    _, crest0 = _fig05_state(sim)
+    _frames(sim, 15)
+    out, crest = _fig05_state(sim)
+    assert out > 0.05
+    assert crest < crest0 - 0.005
+
+
+@pytest.mark.slow
+def test_fig05_bailey_breaches_over_the_whole_run():
+    """The whole small variant (1 s): a third of the water is outside (measured 31 %) and the crest has fallen
+    by a cell (measured 0.2200 m from 0.2500 m)."""
+    sim = _sim("fig05_bailey_breach")
+    _, crest0 = _fig05_state(sim)
+    _frames(sim, sim.scene.time.frames)
+    out, crest = _fig05_state(sim)
+    assert out > 0.25
+    assert crest < crest0 - 0.025
+
+
+def test_fig12_bunny_deflects_the_flow():
+    """Fig. 12: a dam of water over a sand layer (fraction 0.35) released towards a rigid bunny. At 1.34 s the
+    water has gone around it: beside the bunny it stands 0.47 m deep, in its lee 0.03 m (measured); the sand,
+    slower, has reached the bunny's front (measured 0.052 m³ of sand upstream of it, none in its lee)."""
+    sim = _sim("fig12_bunny_dam_break")
+    _frames(sim, 40)
+    xc, yc, _ = _grid(sim)
+    h = _water(sim).sum(axis=0) * sim.scene.domain.dx  # (ny, nx) water depth
+    band, sides = np.abs(yc - 2.0) < 0.5, (np.abs(yc - 2.0) > 0.8) & (np.abs(yc - 2.0) < 1.6)
+    lee, beside, upstream = (xc > 6.05) & (xc < 6.7), (xc > 4.6) & (xc < 5.8), (xc > 3.7) & (xc < 4.25)
+    h_side, h_lee = h[sides][:, beside].mean(), h[band][:, lee].mean()
+    assert h_side > 0.3 and h_side > 5 * h_lee
+    eps = sim.fields()["sand_fraction"][:, band]
+    assert eps[:, :, upstream].sum() * sim.scene.domain.dx**3 > 0.01
+    assert eps[:, :, lee].sum() < 0.1 * eps[:, :, upstream].sum()
+
+
+def test_fig18_city_floods_and_sand_settles():
+    """Fig. 18: a 60 m deep block of seawater released towards a city of 16 towers on a sand layer. By 10 s the
+    water covers part of the city's ground (measured 28 % of the open ground columns deeper than 5 m), a
+    fifth of the sand has been carried more than a cell (10 m; measured 22 %), and the sand has slowed from its
+    peak (mean particle speed measured 4.0 m/s at 4.5 s; 2.0, 1.6, 0.41 m/s over the last three frames: the
+    sand still shifts as the water sloshes, so the mean of three frames is compared)."""
+    sim = _sim("fig18_city_flood")
+    x0 = sim.particles()["x"].copy()
+    xc, _, _ = _grid(sim)
+    speeds = []
+    for _ in range(20):
+        _frames(sim, 1)
+        speeds.append(float(np.linalg.norm(sim.particles()["v"], axis=0).mean()))
+    p = sim.particles()
+    h = _water(sim).sum(axis=0) * sim.scene.domain.dx
+    city = (xc > 200) & (xc < 490)
+    ground = ~sim.fields()["solid"][3][:, city]  # open columns at z = 35 m, above the bedrock
+    assert np.mean(h[:, city][ground] > 5.0) > 0.15
+    assert np.mean(np.linalg.norm(p["x"] - x0, axis=0) > 10.0) > 0.1
+    assert max(speeds) > 2.0 and np.mean(speeds[-3:]) < 0.5 * max(speeds)
+
+
+def _fig09_foot(sim: Simulation) -> tuple[int, float, float]:
+    """Particles past the slope's foot (x > 1.8 m): their count, the spread of their y (m) and mean speed."""
+    p = sim.particles()
+    foot = p["x"][0] > 1.8
+    if not foot.any():
+        return 0, 0.0, 0.0
+    return int(foot.sum()), float(p["x"][1][foot].std()), float(np.linalg.norm(p["v"][:, foot], axis=0).mean())
+
+
+def test_fig09_mixture_runs_down_the_slope():
+    """Fig. 9, shortened to 0.84 s: the jet carrying sand (fraction 0.3, 1.5 m/s) runs down the 31° slope: the
+    sand front has passed x = 1.5 m (measured 1.78 m; the foot is at 1.67 m) and water with it (columns holding
+    over 1e-3 m³ of water up to x = 1.125 m, measured). Which front leads is not asserted: here the leading
+    sand particles run ahead of the water's bulk, where the paper's water leads (docs/examples.md)."""
+    sim = _sim("fig09_slope_delta")
+    _frames(sim, 25)
+    xc = _grid(sim)[0]
+    water_x = _water(sim).sum(axis=(0, 1)) * sim.scene.domain.dx**3
+    assert xc[water_x > 1e-3].max() > 0.9
+    assert sim.particles()["x"][0].max() > 1.5
+
+
+@pytest.mark.slow
+def test_fig09_delta_forms_at_the_slope_foot():
+    """The whole small variant (2 s): sand deposits past the foot and spreads sideways into a fan (measured at
+    1.9 s: 1714 particles past x = 1.8 m, their y spread 0.40 m against the outlet's 0.16 m, moving at
+    0.43 m/s against the jet's 1.5 m/s; the water front then at 3.2 m, ahead of the sand's 2.7 m)."""
+    sim = _sim("fig09_slope_delta")
+    _frames(sim, sim.scene.time.frames)
+    n, spread, speed = _fig09_foot(sim)
+    assert n > 100
+    assert spread > 2.0 * 0.54 / np.sqrt(12.0)
+    assert speed < 1.0
+
+
+def _fig15_wave(sim: Simulation) -> float:
+    """Highest water column (Σ water × dx, mean over y) between x = 0.3 and 0.95 m."""
+    xc = _grid(sim)[0]
+    h = _water(sim).sum(axis=0).mean(axis=0) * sim.scene.domain.dx
+    return float(h[(xc > 0.3) & (xc < 0.95)].max())
+
+
+def test_fig15_column_collapses_into_the_water():
+    """Fig. 15, shortened to 0.2 s: the 0.39 m column (L0 = 0.1 m) collapses into the 3 cm layer: its front
+    passes x = 0.15 m, into the water (measured 0.18 m at 0.2 s, 0.28 m at 0.37 s)."""
+    sim = _sim("fig15_granular_collapse")
+    _frames(sim, 6)
+    assert sim.particles()["x"][0].max() > 0.15
+
+
+@pytest.mark.slow
+def test_fig15_collapse_makes_a_wave():
+    """The whole small variant (0.6 s): the sand entering the water raises a wave ahead of it, the water column
+    beyond x = 0.3 m rises above the layer's 0.0305 m (measured 0.0350 m at 0.37 s)."""
+    sim = _sim("fig15_granular_collapse")
+    h0 = _fig15_wave(sim)
+    _frames(sim, sim.scene.time.frames)
+    assert _fig15_wave(sim) > 1.1 * h0
