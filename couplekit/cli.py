@@ -126,7 +126,15 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     """Table 1 row by row and the price of each effect (couplekit.bench.runner); prints the tables."""
     from .bench.runner import run_bench
 
-    res = run_bench(args.out, quick=args.quick, tiny=args.tiny, backend=args.backend, progress=not args.no_progress)
+    try:
+        res = run_bench(args.out, quick=args.quick, tiny=args.tiny, backend=args.backend, progress=not args.no_progress)
+    except OSError as exc:
+        print(f"error: cannot write the results to {args.out or 'benchmarks/results'}: {exc}; choose another --out",
+              file=sys.stderr)  # fmt: skip
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted: no results written", file=sys.stderr)
+        return 130
     print(res["table1_md"])
     print()
     print(res["effect_costs_md"])

@@ -59,6 +59,12 @@ EXIT_CODES: dict[str, dict[int, str]] = {
         2: "a run folder or its log is unusable, --labels does not match the runs, or the PNGs cannot be written",
         141: _CLOSED,
     },
+    "bench": {
+        0: "every measurement ran; results (JSON, PNG, markdown) written",
+        2: "a bad option, or the results folder cannot be written",
+        130: "interrupted by Ctrl-C (no results are written)",
+        141: _CLOSED,
+    },
     "schema": {
         0: "printed, or written to --out",
         2: "the --out file cannot be written",
@@ -109,6 +115,10 @@ EXAMPLES: dict[str, list[tuple[str, str]]] = {
     "compare": [
         ("couplekit compare runs/a runs/b --labels lockstep subcycle:8 --out cmp/", "two runs overlaid"),
     ],
+    "bench": [
+        ("couplekit bench --quick", "Fig. 13's row and five effects, minutes"),
+        ("couplekit bench --out results/", "every Table 1 row and effect"),
+    ],
     "schema": [
         ("couplekit schema > scene.schema.json", "print it"),
         ("couplekit schema --out docs/scene.schema.json", "regenerate the repository's copy"),
@@ -135,6 +145,9 @@ DESCRIPTIONS: dict[str, str] = {
     "only when the run logged its keys; docs/outputs-plots.md). 'run' draws it at the end of every run.",
     "compare": "Overlay the diagnostics of several run folders (a scheduler sweep's points, two commits) in\n"
     "compare.png, and their mean stage costs in compare_stages.png.",
+    "bench": "Measure every Table 1 row of paper 000 (its small scene here: s/step, stage costs, memory as\n"
+    "allocated) and project s/frame at the paper's size on the paper's RTX PRO 6000, an H100 and an H200; time\n"
+    "each effect on and off and check the memory it costs (docs/benchmarks.md).",
     "schema": "Print the JSON Schema of scene files (draft 2020-12), generated from the keys 'validate' checks.\n"
     "TOML editors (Taplo, VS Code's Even Better TOML) then complete and check scene files: associate it\n"
     "with '#:schema path/to/scene.schema.json' on a scene's first line or a .taplo.toml rule\n"

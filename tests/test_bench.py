@@ -68,3 +68,12 @@ def test_validate_prints_the_memory_of_each_effect():
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     assert "surface_tension" in proc.stdout and "this costs 4" in proc.stdout
+
+
+def test_bench_into_a_file_is_refused_with_exit_2(tmp_path, capsys):
+    from couplekit.cli import main
+
+    target = tmp_path / "a_file"
+    target.write_text("")
+    assert main(["bench", "--tiny", "--no-progress", "--out", str(target)]) == 2
+    assert "choose another --out" in capsys.readouterr().err

@@ -12,7 +12,7 @@ from couplekit.cli import build_parser, main
 from couplekit.cli_help import EXIT_CODES
 
 ROOT = Path(__file__).resolve().parents[1]
-COMMANDS = ["", "info", "validate", "run", "sweep", "schema", "plot", "compare"]
+COMMANDS = ["", "info", "validate", "run", "sweep", "schema", "plot", "compare", "bench"]
 
 
 def _help(command: str, capsys) -> str:
