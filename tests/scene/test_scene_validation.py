@@ -80,7 +80,15 @@ def _set(d: dict, path: str, value) -> None:
         d[keys[-1]] = value
 
 
-_DELETE = object()
+class _Delete:
+    """Marker value of a MALFORMED case that deletes the key (a stable repr keeps test ids equal across
+    processes, as pytest-xdist needs)."""
+
+    def __repr__(self) -> str:
+        return "<delete>"
+
+
+_DELETE = _Delete()
 
 # (base, key path to set, value, key the message must name, a word of the message)
 MALFORMED = [
