@@ -96,7 +96,9 @@ def run_bench(
         backend, steps, repeats=repeats, coarsen=2.0 if tiny else 1.0, figures=figures, progress=bar
     )
     t1.update({"machine": machine, "projection": assumptions(), "quick": quick, "tiny": tiny})
-    ec = effects_mod.run_effect_costs(10 if tiny else 16, backend, steps, effect_names, progress=bar, repeats=repeats)
+    ec = effects_mod.run_effect_costs(
+        10 if tiny else (24 if quick else 40), backend, steps, effect_names, progress=bar, repeats=repeats
+    )
     ec.update({"machine": machine, "quick": quick, "tiny": tiny})
     bar.close()
     md1, md2 = table1_mod.markdown_table(t1), effects_mod.markdown_table(ec)
