@@ -4,41 +4,25 @@ cpu-device.  Small scenes: a 5x6x7 two-phase jet with walls, a 12x12x16 falling 
 
 from __future__ import annotations
 
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 from couplekit.backend import get_backend
-from couplekit.fluid.grid import Boundaries, Face
-from couplekit.fluid.solver import FluidParams, FluidSolver
+from couplekit.fluid.solver import FluidSolver
 from couplekit.sand import DomainWalls, SandParams
 from couplekit.sand.seeding import seed_box
 from couplekit.sand.solver import SandSolver
 
-SHAPE = (5, 6, 7)
-JET = Boundaries(
-    {
-        "x-": Face("inflow", velocity=(0.03, 0.0, 0.0), phi=0.0),
-        "x+": Face("outflow"),
-        "y-": Face("wall"),
-        "y+": Face("wall", velocity=(0.01, 0.0, 0.0)),
-    }
-)
+sys.path.insert(0, str(Path(__file__).parent / "fluid"))
+from test_fluid_solver import JET, _solver  # noqa: E402
 
 
 def _fluid(backend, two_phase: bool) -> FluidSolver:
-    rng = np.random.default_rng(5)
-    vel = rng.uniform(-0.01, 0.01, (3,) + SHAPE)
-    kw = {}
-    if two_phase:  # a diffuse water blob in air at 800:1 with surface tension
-        params = FluidParams(
-            rho_h=1.0, rho_l=1 / 800, nu_h=1e-3, nu_l=1e-2, gravity=(0.0, -1e-5, 0.0), sigma=1e-3, width=3.0, eta=1.0
-        )
-        z, y, x = np.meshgrid(*(np.arange(s) + 0.5 for s in SHAPE), indexing="ij")
-        r = np.sqrt((x - 3.5) ** 2 + (y - 3.0) ** 2 + (z - 2.5) ** 2)
-        kw["phi"] = 0.5 * (1 + np.tanh(2 * (2.2 - r) / 3.0))
-    else:
-        params = FluidParams(nu_h=0.05, gravity=(0.0, -1e-5, 0.0))
-    return FluidSolver(backend, SHAPE, params, JET, velocity=vel, **kw)
+    """The jet-in-a-channel state of tests/fluid/test_fluid_solver.py (one builder for both files)."""
+    return _solver(backend, JET, two_phase=two_phase)
 
 
 @pytest.mark.parametrize("two_phase", [False, True], ids=["single", "two_phase"])
