@@ -155,6 +155,7 @@ class Simulation:
         self._log = log or (lambda s: None)
         self._preview_failed = False
         self._preview_scale: tuple[float, float] | None = None  # the run's fixed sand-speed colours (preview_scale)
+        self._preview_colour: tuple[str, float | None] | None = None  # (colour_by, r_max), preview_colouring
         self.coupled = sc.has_fluid and sc.has_sand
         refuse_unsupported(sc)
         self.backend = backend if isinstance(backend, Backend) else get_backend(backend, threads=threads)
@@ -585,9 +586,30 @@ class Simulation:
             from .io.preview import preview_speed_range
 
             self._preview_scale, why = preview_speed_range(self.scene)
-            if self.sand is not None or self.scene.emits_sand:
+            if (self.sand is not None or self.scene.emits_sand) and self.preview_colouring()[0] == "speed":
                 self._log(f"previews: sand speed coloured 0 to {self._preview_scale[1]:.3g} m/s in every frame ({why})")
         return self._preview_scale
+
+    def preview_colouring(self) -> tuple[str, float | None]:
+        """(colour_by, moisture_max) of this simulation's previews (:func:`couplekit.io.preview.render_preview`),
+        decided once from the scene's ``outputs.preview_colour`` and logged: 'auto' colours by wetness where
+        sand meets water (a coupled two-phase scene), else by speed; the wetness is the retained water r_p on
+        the fixed scale 0 to r_max with retention, else the wet/dry classification S_r,p > (1 − ε_max)/2."""
+        if self._preview_colour is None:
+            choice = self.scene.outputs.preview_colour
+            wet_possible = self.coupler is not None and self.fluid is not None and self.fluid.phi is not None
+            mode = "wetness" if choice == "wetness" or (choice == "auto" and wet_possible) else "speed"
+            r_max = (
+                self.coupler.params.r_max
+                if mode == "wetness" and self.coupler is not None and self.coupler.retention
+                else None
+            )
+            self._preview_colour = (mode, r_max)
+            if self.sand is not None or self.scene.emits_sand:
+                if mode == "wetness":
+                    how = f"retained water r_p, 0 to {r_max:.3g}" if r_max else "wet where S_r,p > (1 - eps_max)/2"
+                    self._log(f"previews: sand coloured by wetness ({how}), dry sand light, wet sand dark")
+        return self._preview_colour
 
     def write_frame(self, out: Path, indexes: dict, log_file) -> None:
         """Write the outputs of the current frame (per the scene's [outputs])."""
@@ -618,6 +640,8 @@ class Simulation:
                     parts,
                     title=f"{self.scene.name}  frame {frame}  t = {t:.4g} s",
                     speed_range=self.preview_scale(),
+                    colour_by=self.preview_colouring()[0],
+                    moisture_max=self.preview_colouring()[1],
                 )
             except Exception as exc:  # a missing OpenGL/EGL library must not stop the simulation
                 self._preview_failed = True

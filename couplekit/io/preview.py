@@ -1,6 +1,11 @@
 """PNG previews rendered off-screen with PyVista: the domain outline with axes in metres, the water surface
 (φ = ½), obstacles, sand particles coloured by speed, a legend and a colour bar beside the box.
 
+The sand is coloured by its wetness or by its speed (``colour_by``). By wetness as paper 000 renders it
+(§5.1): with water retention by the water each particle has retained, r_p (Eq. 58), on a ramp from the dry
+sand colour to :data:`WET_SAND_COLOUR` over the fixed range 0 to r_max; without retention in two colours, wet
+where the particle's saturation exceeds (1 − ε_max)/2 (wetness ½, :mod:`couplekit.coupling.wetness`).
+
 The colour scale of the sand speed is fixed for a run, so frames can be compared: :func:`preview_speed_range`
 takes it from the scene (``time.max_speed`` when the scene gives it, otherwise the speed estimate every
 time-step check uses, :meth:`couplekit.scene.Scene.expected_max_speed`: body and inflow speeds plus free fall
@@ -19,9 +24,13 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["render_preview", "preview_speed_range", "ABOVE_COLOUR"]
+__all__ = ["render_preview", "preview_speed_range", "ABOVE_COLOUR", "WET_SAND_COLOUR", "COLOUR_BY"]
 
 WATER_COLOUR, OBSTACLE_COLOUR, SAND_COLOUR = "#3a7bd5", "#888888", "#c2a46b"
+WET_SAND_COLOUR = "#5c4426"
+"""Sand at the wet end of the wetness colouring: the dry sand colour darkened, as wet sand looks."""
+COLOUR_BY = ("speed", "wetness")
+"""What :func:`render_preview` can colour the sand by."""
 ABOVE_COLOUR = "#7b3294"
 """Particles faster than the run's colour scale."""
 SPEED_COLOURS = (SAND_COLOUR, "#e08a2c", "#c0392b", "#5e0b15")
@@ -32,6 +41,29 @@ def _speed_cmap():
     from matplotlib.colors import LinearSegmentedColormap
 
     return LinearSegmentedColormap.from_list("sand_speed", SPEED_COLOURS)
+
+
+def _wet_cmap():
+    from matplotlib.colors import LinearSegmentedColormap
+
+    return LinearSegmentedColormap.from_list("sand_wetness", (SAND_COLOUR, WET_SAND_COLOUR))
+
+
+def _scalar_bar(title: str) -> dict:
+    return dict(
+        title=title + "\n",
+        vertical=True,
+        position_x=0.86,
+        position_y=0.12,
+        width=0.05,
+        height=0.6,
+        n_labels=5,
+        fmt="%.3g",
+        color="black",
+        title_font_size=14,
+        label_font_size=12,
+        above_label="",
+    )
 
 
 def preview_speed_range(scene) -> tuple[tuple[float, float], str]:
@@ -63,11 +95,17 @@ def render_preview(
     title: str = "",
     window: tuple[int, int] = (800, 600),
     speed_range: tuple[float, float] | None = None,
+    colour_by: str = "speed",
+    moisture_max: float | None = None,
 ) -> Path:
     """Render a preview PNG of a frame. ``fields`` may hold ``phi``, ``solid``; ``particles`` ``x`` (3, P)
-    and ``v`` (3, P). ``speed_range``: the colour scale of the sand speed, m/s (a run passes
-    :func:`preview_speed_range`, the same for every frame); ``None`` scales to this frame's fastest particle.
-    Returns the path written."""
+    and ``v`` (3, P), for ``colour_by="wetness"`` ``moisture`` (P,) or ``wetness`` (P,). ``speed_range``: the
+    colour scale of the sand speed, m/s (a run passes :func:`preview_speed_range`, the same for every frame);
+    ``None`` scales to this frame's fastest particle. ``colour_by``: 'speed', or 'wetness' (see the module
+    docstring: ``moisture`` on the fixed scale 0 to ``moisture_max`` when both are given, else the wet/dry
+    classification of ``wetness``; speed when the particles carry neither). Returns the path written."""
+    if colour_by not in COLOUR_BY:
+        raise ValueError(f"colour_by must be one of {COLOUR_BY}, got {colour_by!r}")
     if not os.environ.get("DISPLAY"):
         # without an X server go straight to EGL (VTK would try X first and print a warning)
         os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
@@ -95,11 +133,30 @@ def render_preview(
             legend.append(["obstacles", OBSTACLE_COLOUR])
     x = particles.get("x")
     if x is not None and np.asarray(x).shape[1] > 0:
-        x = np.asarray(x, dtype=np.float32)
-        cloud = pv.PolyData(np.ascontiguousarray(x.T))
-        v = particles.get("v")
-        if v is not None:
-            speed = np.linalg.norm(np.asarray(v, np.float32), axis=0)
+        x = np.ascontiguousarray(np.asarray(x, dtype=np.float32).T)
+        moisture, wet = particles.get("moisture"), particles.get("wetness")
+        if colour_by == "wetness" and moisture is not None and moisture_max is not None and moisture_max > 0:
+            cloud = pv.PolyData(x)
+            cloud.point_data["retained water r_p"] = np.nan_to_num(np.asarray(moisture, np.float32))
+            p.add_mesh(cloud, scalars="retained water r_p", cmap=_wet_cmap(), clim=(0.0, float(moisture_max)),
+                       render_points_as_spheres=True, point_size=5,
+                       scalar_bar_args=_scalar_bar("retained water r_p"))  # fmt: skip
+            legend += [["dry sand", SAND_COLOUR], [f"wet sand (r_p = {moisture_max:.3g})", WET_SAND_COLOUR]]
+        elif colour_by == "wetness" and wet is not None:
+            from ..coupling.wetness import WET_THRESHOLD
+
+            is_wet = np.asarray(wet, np.float32) > WET_THRESHOLD
+            cloud = pv.PolyData(x)
+            cloud.point_data["wet"] = is_wet.astype(np.float32)  # the ramp's two ends: drawn as r_p would be
+            p.add_mesh(cloud, scalars="wet", cmap=_wet_cmap(), clim=(0.0, 1.0), render_points_as_spheres=True,
+                       point_size=5, show_scalar_bar=False)  # fmt: skip
+            for present, colour, label in ((~is_wet).any(), SAND_COLOUR, "dry sand"), (
+                is_wet.any(), WET_SAND_COLOUR, "wet sand (S > (1 - eps_max)/2)"):  # fmt: skip
+                if present:
+                    legend.append([label, colour])
+        elif particles.get("v") is not None:
+            cloud = pv.PolyData(x)
+            speed = np.linalg.norm(np.asarray(particles["v"], np.float32), axis=0)
             if speed_range is None:
                 top = float(np.nanmax(speed)) if np.isfinite(speed).any() else 1.0
                 speed_range = (0.0, max(top, 1e-6))
@@ -113,26 +170,13 @@ def render_preview(
                 clim=clim,
                 above_color=ABOVE_COLOUR,
                 point_size=5,
-                scalar_bar_args=dict(
-                    title="sand speed (m/s)\n",
-                    vertical=True,
-                    position_x=0.86,
-                    position_y=0.12,
-                    width=0.05,
-                    height=0.6,
-                    n_labels=5,
-                    fmt="%.3g",
-                    color="black",
-                    title_font_size=14,
-                    label_font_size=12,
-                    above_label="",
-                ),
+                scalar_bar_args=_scalar_bar("sand speed (m/s)"),
             )
             legend.append(["sand at rest (redder: faster)", SAND_COLOUR])
             if np.nanmax(speed) > clim[1]:
                 legend.append([f"sand > {clim[1]:.3g} m/s", ABOVE_COLOUR])
         else:
-            p.add_mesh(cloud, color=SAND_COLOUR, point_size=5, render_points_as_spheres=True)
+            p.add_mesh(pv.PolyData(x), color=SAND_COLOUR, point_size=5, render_points_as_spheres=True)
             legend.append(["sand", SAND_COLOUR])
     p.show_bounds(
         bounds=bounds,

@@ -349,6 +349,8 @@ class Outputs:
     """Write the water surface mesh of every frame (two-phase fluids; :mod:`couplekit.io.surface`)."""
     surface_format: tuple[str, ...] = ("ply",)
     """Renderer formats of the surface meshes ('ply', 'obj'); the ParaView .vtp comes with ``vtk``."""
+    preview_colour: str = "auto"
+    """What colours the sand in the previews: 'wetness', 'speed' or 'auto' (:mod:`couplekit.io.preview`)."""
 
 
 @dataclass(frozen=True)
@@ -816,6 +818,7 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
         out["diagnostics"],
         surface=out["surface"],
         surface_format=tuple(out["surface_format"]),
+        preview_colour=out["preview_colour"],
     )
     effects = Effects(**eff)
     has_sand = any(b.kind == "sand" for b in bodies) or any(i.sand_fraction > 0 for i in inflows)

@@ -519,6 +519,16 @@ SECTIONS: dict[str, list[Key]] = {
         Key("preview", "bool", True, "PNG preview of every preview_every-th frame, rendered off-screen"),
         Key("preview_every", "int", 1, "frames between previews", "", lo=1),
         Key(
+            "preview_colour",
+            "choice",
+            "auto",
+            "what colours the sand in the previews: 'wetness' (as paper 000 §5.1 renders: with retention the "
+            "retained water r_p from dry to wet colour, 0 to r_max; without it two colours, wet where S_r,p > "
+            "(1 - eps_max)/2), 'speed' (sand speed on the run's fixed scale) or 'auto' (wetness where sand meets "
+            "water, else speed)",
+            choices=("auto", "wetness", "speed"),
+        ),
+        Key(
             "checkpoint_every",
             "int",
             10,
