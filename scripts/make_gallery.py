@@ -22,16 +22,24 @@ HEADING = "## Gallery (previews written by `couplekit run` on the small variants
 CAPTIONS = {
     "sand_drop_small": "Sand drop (the demo)",
     "fig01_outlet_jet_small": "Fig. 1, a water jet from a wall outlet over a sand bed, carrying sand from 0.05 s",
+    "fig02_wind_island_small": "Fig. 2, a floating 600 kg/m³ sand ring under a vertical wind",
+    "fig03_dam_break_castle_small": "Fig. 3, dam break over a damp sand castle",
+    "fig04_colander_small": "Fig. 4, a water–sand jet through a colander into a pool",
+    "fig05_bailey_breach_small": "Fig. 5, water poured into a damp sand bailey",
     "fig06_raindrop_small": "Fig. 6, raindrop on sand",
     "fig08_sand_densities_small": "Fig. 8, sand balls of 600, 950 and 1500 kg/m³ dropped into water",
+    "fig09_slope_delta_small": "Fig. 9, a sediment-laden flow down a slope and the delta at its foot",
     "fig10_retention_small": "Fig. 10, sand in two openings of a partition wall, retention on one",
     "fig11_stirring_small": "Fig. 11, stirring water and sand",
+    "fig12_bunny_dam_break_small": "Fig. 12, a sediment-laden dam break against a rigid bunny (spheres and cylinders)",
     "fig13_sand_drop_beaker_small": "Fig. 13, sand ball into a beaker (obstacles are drawn see-through)",
     "fig14_volume_preservation_small": "Fig. 14, a big sand ball into shallow water",
+    "fig15_granular_collapse_small": "Fig. 15, a granular column collapsing into a water layer",
     "fig16_dam_break_sand_small": "Fig. 16, dam break over a sand pile",
     "fig16_dam_break_water_small": "Fig. 16 without sand (water and air)",
     "fig17_wet_column_small": "Fig. 17, water poured on a sand block (retention on)",
     "fig17_dry_column_small": "Fig. 17, the dry sand block",
+    "fig18_city_flood_small": "Fig. 18, a flood over a city of boxes, eroding and depositing sand",
 }
 
 
