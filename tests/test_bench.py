@@ -36,7 +36,8 @@ def test_projection_scales_with_the_bandwidth():
 @pytest.mark.parametrize(
     "name",
     ["surface_tension", "volume_controller", "source_term", "retention", "cohesion", "hardening",
-     "odd_rate_floor", "smagorinsky", "stirring", "stirring (fluid only)"],
+     "odd_rate_floor", "smagorinsky", "stirring", "stirring (fluid only)", "cohesion (sand only)",
+     "hardening (sand only)"],
 )  # fmt: skip
 def test_memory_reported_per_effect_matches_the_allocated_arrays(name):
     variant, on, off = eff.effect_variants(eff.base_scene(10))[name]
@@ -45,6 +46,13 @@ def test_memory_reported_per_effect_matches_the_allocated_arrays(name):
     assert table["on"]
     expected = table["bytes_total"] + table["bytes_per_particle"] * m_on["particles"]
     assert m_on["allocated_bytes"] - m_off["allocated_bytes"] == pytest.approx(expected)
+    # hardening's q, and cohesion's saturation in a sand-only scene, are not allocated when off (4 B/particle);
+    # a coupled scene keeps the saturation (the coupling's moisture), and says so
+    if name.startswith("hardening") or name == "cohesion (sand only)":
+        assert m_on["allocated_bytes"] - m_off["allocated_bytes"] == 4 * m_on["particles"] > 0
+        assert table["kept_when_off"] == ""
+    if name == "cohesion":
+        assert "moisture" in table["kept_when_off"] and expected == 0
 
 
 def test_bench_tiny_writes_its_files(tmp_path):
