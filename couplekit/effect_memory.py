@@ -122,9 +122,10 @@ def describe_effect_memory(scene, particles: float = 0.0) -> list[str]:
     """Lines for ``couplekit validate``: each effect, on/off, and what it costs."""
     lines = []
     for name, e in effect_memory(scene).items():
-        cost = f"{e['bytes_per_cell']:.3g} bytes per cell"
+        parts = [f"{e['bytes_per_cell']:.3g} bytes per cell"] if e["bytes_per_cell"] else []
         if e["bytes_per_particle"]:
-            cost += f" + {e['bytes_per_particle']:.3g} bytes per particle"
+            parts.append(f"{e['bytes_per_particle']:.3g} bytes per particle")
+        cost = " + ".join(parts)
         total = e["bytes_total"] + (e["bytes_per_particle"] * particles if e["on"] else 0.0)
         state = "on " if e["on"] else "off"
         if e["bytes_per_cell"] or e["bytes_per_particle"]:
