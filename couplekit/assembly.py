@@ -465,6 +465,7 @@ def _sand_solver(SandSolver, backend, scene, dt, params, xs, vols, vels, dens, w
         elastic_cfl=sd.elastic_cfl,
         allow_empty=scene.emits_sand,
         saturation=saturation,
+        keep_saturation=scene.has_fluid,  # the coupling's moisture (Eq. 59), cohesion or not
     )
 
 
@@ -546,7 +547,13 @@ def memory_estimate(scene: Scene) -> dict[str, float]:
             out["emitted_particles"] = expected_particles(InflowEmitter.from_scene(scene), duration)
             count += out["emitted_particles"]
         out["particle_count"] = count
-        out["particles"] = 4.0 * _SAND_FLOATS_PER_PARTICLE * count
+        # q and the saturation are not allocated when their effects are off (SandSolver; the saturation stays
+        # in a coupled scene, as the coupling's moisture, and with seeded saturation)
+        floats = _SAND_FLOATS_PER_PARTICLE - (0 if scene.effects.hardening else 1)
+        seeded = any(b.saturation for b in scene.bodies if b.kind == "sand")
+        cohesive = scene.effects.cohesion and scene.sand.cohesion > 0
+        floats -= 0 if (cohesive or scene.has_fluid or seeded) else 1
+        out["particles"] = 4.0 * floats * count
     retention = False
     if scene.fluid is not None and scene.has_sand:
         # fluid mixture inputs (fluid_fraction, sand_velocity, force) and the coupler's fields

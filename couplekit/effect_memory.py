@@ -6,8 +6,10 @@ couplekit.scene.forces); tests/test_bench.py checks each against the bytes a sce
 allocates more than the same scene with it off.  An effect with 0 bytes either needs no field (volume
 controller: a reduction; the closures: local rates; drag, buoyancy: the force field belongs to the coupling)
 or keeps its field when it is off because a kernel reads it in both variants (source term: the phase-field
-collide kernel reads S_φ, zeros when off; hardening: G2P reads and writes q; cohesion: the saturation is the
-coupling's moisture), recorded in :data:`KEPT_WHEN_OFF`."""
+collide kernel reads S_φ, zeros when off), recorded in :data:`KEPT_WHEN_OFF`.  Hardening (q) and cohesion
+(the saturation) cost 4 B per particle each; without them G2P takes the variant that never touches the field
+and the sand solver does not allocate it, except the saturation of a coupled scene, which is the coupling's
+moisture (Eq. 59) cohesion or not (and of particles seeded with a saturation, which carry it as data)."""
 
 from __future__ import annotations
 
@@ -24,8 +26,8 @@ EFFECT_BYTES = {
     "retention": (0, F32 * 3, F32 * 1),  # bound_in, bound, d_bound; moisture ratio per particle
     "odd_rate_floor": (0, 0, 0),
     "smagorinsky": (0, 0, 0),
-    "cohesion": (0, 0, 0),
-    "hardening": (0, 0, 0),
+    "cohesion": (0, 0, F32 * 1),  # saturation (sand-only scenes; coupled: the coupling's moisture, kept)
+    "hardening": (0, 0, F32 * 1),  # q
     # the summed force buffer (+ the force input in a fluid-only scene) per padded cell; on the host the
     # swirl's acceleration (3 float64), radius (float64) and inside mask (bool) per cell, which the torque
     # diagnostic reads; + ρ_w a (3 float32) in the stirred cells' bounding box (:func:`_stirred_box_cells`)
@@ -35,8 +37,10 @@ EFFECT_BYTES = {
 
 KEPT_WHEN_OFF = {
     "source_term": "fluid.source_term (4 B/cell): the phase-field collide kernel reads S_φ in every variant",
-    "hardening": "sand.q (4 B/particle): mpm_g2p reads and writes the hardening state in every variant",
-    "cohesion": "sand.saturation (4 B/particle): it is the coupling's moisture too",
+}
+# kept only in some scenes: the effect's field is another effect's input there
+KEPT_WHEN_OFF_COUPLED = {
+    "cohesion": "sand.saturation (4 B/particle): in a coupled scene it is the coupling's moisture (Eq. 59)",
 }
 
 
@@ -81,7 +85,7 @@ def effect_memory(scene) -> dict[str, dict[str, float]]:
         "retention": retention,
         "odd_rate_floor": fl is not None and fl.odd_lambda > 0,
         "smagorinsky": fl is not None and fl.smagorinsky > 0,
-        "cohesion": scene.has_sand and eff.cohesion,
+        "cohesion": scene.has_sand and eff.cohesion and scene.sand.cohesion > 0,
         "hardening": scene.has_sand and eff.hardening,
         "stirring": fl is not None and scene.stirring is not None,
         "sand_emission": scene.emits_sand,
@@ -93,6 +97,11 @@ def effect_memory(scene) -> dict[str, dict[str, float]]:
     for name, (per_cell, per_node, per_particle) in EFFECT_BYTES.items():
         if not applies[name]:
             continue
+        kept = KEPT_WHEN_OFF.get(name, "")
+        if coupled and name in KEPT_WHEN_OFF_COUPLED:
+            kept, per_particle = KEPT_WHEN_OFF_COUPLED[name], 0
+        elif name == "cohesion" and any(b.saturation for b in scene.bodies if b.kind == "sand"):
+            kept, per_particle = "sand.saturation (4 B/particle): the bodies' seeded saturation", 0
         extra = 0.0
         if name == "stirring":
             if not scene.has_sand:
@@ -104,7 +113,7 @@ def effect_memory(scene) -> dict[str, dict[str, float]]:
             "bytes_per_cell": float(per_cell_total),
             "bytes_per_particle": float(per_particle),
             "bytes_total": float(per_cell * padded + per_node * cells + extra) if on[name] else 0.0,
-            "kept_when_off": KEPT_WHEN_OFF.get(name, ""),
+            "kept_when_off": kept,
         }
     return out
 
@@ -113,9 +122,10 @@ def describe_effect_memory(scene, particles: float = 0.0) -> list[str]:
     """Lines for ``couplekit validate``: each effect, on/off, and what it costs."""
     lines = []
     for name, e in effect_memory(scene).items():
-        cost = f"{e['bytes_per_cell']:.3g} bytes per cell"
+        parts = [f"{e['bytes_per_cell']:.3g} bytes per cell"] if e["bytes_per_cell"] else []
         if e["bytes_per_particle"]:
-            cost += f" + {e['bytes_per_particle']:.3g} bytes per particle"
+            parts.append(f"{e['bytes_per_particle']:.3g} bytes per particle")
+        cost = " + ".join(parts)
         total = e["bytes_total"] + (e["bytes_per_particle"] * particles if e["on"] else 0.0)
         state = "on " if e["on"] else "off"
         if e["bytes_per_cell"] or e["bytes_per_particle"]:

@@ -1,8 +1,9 @@
 // The constitutive pieces of mpm_g2p.cu as stand-alone kernels, so each can be checked against its NumPy
 // reference on its own (and used by tools that need a stress from an F): the float32 SVD, and the
 // constitutive update F_trial -> (F_new, tau, q, vc), and the vectorisable log / exp of the host G2P.
-// Same defines as mpm_g2p.cu (see mpm_model.cuh).
-// variants: MPM_PLASTICITY=0,1 MPM_COHESION=0,1
+// Same defines as mpm_g2p.cu (see mpm_model.cuh); as there, q is not touched without MPM_HARDENING and the
+// saturation not read without MPM_COHESION (placeholders).
+// variants: MPM_PLASTICITY=0,1 MPM_HARDENING=0,1 MPM_COHESION=0,1
 #include "common.cuh"
 #include "mpm_model.cuh"
 #include "mpm_loops.cuh"
@@ -30,12 +31,24 @@ KERNEL void mpm_constitutive_batch(const long long n, float* RESTRICT F, float* 
     FOR_EACH(p, n) {
         float f[9], U[9], e0, e1, e2, t[6];
         for (int j = 0; j < 9; ++j) f[j] = F[j * n + p];
-        float qp = q[p], vcp = vc[p];
-        mpm_constitutive(f, U, e0, e1, e2, qp, vcp, saturation[p], mu, lambda, h0, h1, h2, h3, c_max, S1, S2, S3);
+#if MPM_HARDENING
+        float qp = q[p];
+#else
+        float qp = 0.f;
+#endif
+#if MPM_COHESION
+        const float S = saturation[p];
+#else
+        const float S = 0.f;
+#endif
+        float vcp = vc[p];
+        mpm_constitutive(f, U, e0, e1, e2, qp, vcp, S, mu, lambda, h0, h1, h2, h3, c_max, S1, S2, S3);
         mpm_kirchhoff(U, e0, e1, e2, mu, lambda, t);
         for (int j = 0; j < 9; ++j) F[j * n + p] = f[j];
         for (int j = 0; j < 6; ++j) tau[j * n + p] = t[j];
+#if MPM_HARDENING
         q[p] = qp;
+#endif
         vc[p] = vcp;
     }
 }

@@ -16,6 +16,8 @@
 // MPM_G2P_BATCH particles through `omp simd` loops, one particle per SIMD lane (see the kernel body);
 // the constitutive update after the SVD restates mpm_constitutive (mpm_model.cuh) in vectorisable form,
 // pinned to it by tests/sand/test_g2p_batched.py.
+// Without MPM_HARDENING there is no hardening state: q is neither read nor written (the caller passes a
+// placeholder, the field is not allocated); without MPM_COHESION the saturation is not read (the same).
 // variants: MPM_PLASTICITY=0,1 MPM_HARDENING=0,1 MPM_COHESION=0,1 MPM_VOLUME_CORRECTION=0,1
 #include "common.cuh"
 #include "mpm_model.cuh"
@@ -183,7 +185,13 @@ MPM_INLINE void mpm_g2p_finish(const float* ft, const float* Us, const float* si
     float e0 = mpm_logf(mpm_max_nonneg(fabsf(sig[0]), MPM_SIGMA_MIN));
     float e1 = mpm_logf(mpm_max_nonneg(fabsf(sig[ld]), MPM_SIGMA_MIN));
     float e2 = mpm_logf(mpm_max_nonneg(fabsf(sig[2 * ld]), MPM_SIGMA_MIN));
-    float qp = qo[0], vcp = vco[0];
+    float vcp = vco[0];
+#if MPM_HARDENING
+    float qp = qo[0];
+#else
+    float qp = 0.f;  // the return map's increment is computed and dropped: no hardening state
+    (void)qo;
+#endif
 #if MPM_PLASTICITY
     qp += mpm_return_map(e0, e1, e2, vcp, alpha, cC, mu, lambda);
     const float s0 = mpm_expf(e0), s1 = mpm_expf(e1), s2 = mpm_expf(e2);
@@ -202,9 +210,25 @@ MPM_INLINE void mpm_g2p_finish(const float* ft, const float* Us, const float* si
     for (int j = 0; j < 9; ++j) Fo[j * ldo] = Fn[j];
     MPM_UNROLL_9
     for (int j = 0; j < 6; ++j) to[j * ldo] = t[j];
+#if MPM_HARDENING
     qo[0] = qp;
+#else
+    (void)qp;
+#endif
     vco[0] = vcp;
 }
+
+// the hardening state and saturation of particle p as the yield parameters read them (0 where compiled out)
+#if MPM_HARDENING
+#define MPM_Q_OF(qarr, p) (qarr)[p]
+#else
+#define MPM_Q_OF(qarr, p) 0.f
+#endif
+#if MPM_COHESION
+#define MPM_S_OF(p) saturation[p]
+#else
+#define MPM_S_OF(p) 0.f
+#endif
 
 KERNEL void mpm_g2p(const long long n, float* RESTRICT x, float* RESTRICT v, float* RESTRICT C,
                     float* RESTRICT F, float* RESTRICT tau, float* RESTRICT q, float* RESTRICT vc,
@@ -221,7 +245,7 @@ KERNEL void mpm_g2p(const long long n, float* RESTRICT x, float* RESTRICT v, flo
         mpm_g2p_transfer(p, np, x, F, grid_v, nx, ny, nz, ncell, dx, inv_dx, dt, x + p, v + p, C + p, np, ft, 1);
         mpm_svd3(ft, U, sig, V);
 #if MPM_PLASTICITY
-        mpm_g2p_yield(q[p], saturation[p], h0, h1, h2, h3, c_max, S1, S2, S3, alpha, cC);
+        mpm_g2p_yield(MPM_Q_OF(q, p), MPM_S_OF(p), h0, h1, h2, h3, c_max, S1, S2, S3, alpha, cC);
 #endif
         mpm_g2p_finish(ft, U, sig, V, 1, alpha, cC, mu, lambda, F + p, tau + p, q + p, vc + p, np);
     }
@@ -247,7 +271,9 @@ KERNEL void mpm_g2p(const long long n, float* RESTRICT x, float* RESTRICT v, flo
                 const long long p = p0 + (j < cnt ? j : cnt - 1);
                 for (int k = 0; k < 3; ++k) xb[k * B + j] = x[k * np + p];
                 for (int k = 0; k < 9; ++k) Fb[k * B + j] = F[k * np + p];
+#if MPM_HARDENING
                 qb[j] = q[p];
+#endif
                 vcb[j] = vc[p];
             }
         }
@@ -256,7 +282,11 @@ KERNEL void mpm_g2p(const long long n, float* RESTRICT x, float* RESTRICT v, flo
         float* Cs = full ? C + p0 : Cb;
         float* Fs = full ? F + p0 : Fb;
         float* ts = full ? tau + p0 : tb;
+#if MPM_HARDENING
         float* qs = full ? q + p0 : qb;
+#else
+        float* qs = qb;  // never read or written (mpm_g2p_finish); q is a placeholder
+#endif
         float* vcs = full ? vc + p0 : vcb;
         const long long ld = full ? np : B;
         CK_PRAGMA(omp simd)
@@ -268,7 +298,8 @@ KERNEL void mpm_g2p(const long long n, float* RESTRICT x, float* RESTRICT v, flo
 #if MPM_PLASTICITY
         for (int j = 0; j < B; ++j) {
             const long long p = p0 + (j < cnt ? j : cnt - 1);
-            mpm_g2p_yield(qs[j], saturation[p], h0, h1, h2, h3, c_max, S1, S2, S3, alpha[j], cC[j]);
+            mpm_g2p_yield(MPM_Q_OF(qs, j), MPM_S_OF(p), h0, h1, h2, h3, c_max, S1, S2, S3, alpha[j], cC[j]);
+            (void)p;
         }
 #else
         for (int j = 0; j < B; ++j) alpha[j] = cC[j] = 0.f;
@@ -283,7 +314,9 @@ KERNEL void mpm_g2p(const long long n, float* RESTRICT x, float* RESTRICT v, flo
                 for (int k = 0; k < 3; ++k) x[k * np + p] = xb[k * B + j], v[k * np + p] = vb[k * B + j];
                 for (int k = 0; k < 9; ++k) C[k * np + p] = Cb[k * B + j], F[k * np + p] = Fb[k * B + j];
                 for (int k = 0; k < 6; ++k) tau[k * np + p] = tb[k * B + j];
+#if MPM_HARDENING
                 q[p] = qb[j];
+#endif
                 vc[p] = vcb[j];
             }
         }

@@ -36,7 +36,8 @@ def test_projection_scales_with_the_bandwidth():
 @pytest.mark.parametrize(
     "name",
     ["surface_tension", "volume_controller", "source_term", "retention", "cohesion", "hardening",
-     "odd_rate_floor", "smagorinsky", "stirring", "stirring (fluid only)"],
+     "odd_rate_floor", "smagorinsky", "stirring", "stirring (fluid only)", "cohesion (sand only)",
+     "hardening (sand only)"],
 )  # fmt: skip
 def test_memory_reported_per_effect_matches_the_allocated_arrays(name):
     variant, on, off = eff.effect_variants(eff.base_scene(10))[name]
@@ -45,6 +46,13 @@ def test_memory_reported_per_effect_matches_the_allocated_arrays(name):
     assert table["on"]
     expected = table["bytes_total"] + table["bytes_per_particle"] * m_on["particles"]
     assert m_on["allocated_bytes"] - m_off["allocated_bytes"] == pytest.approx(expected)
+    # hardening's q, and cohesion's saturation in a sand-only scene, are not allocated when off (4 B/particle);
+    # a coupled scene keeps the saturation (the coupling's moisture), and says so
+    if name.startswith("hardening") or name == "cohesion (sand only)":
+        assert m_on["allocated_bytes"] - m_off["allocated_bytes"] == 4 * m_on["particles"] > 0
+        assert table["kept_when_off"] == ""
+    if name == "cohesion":
+        assert "moisture" in table["kept_when_off"] and expected == 0
 
 
 def test_bench_tiny_writes_its_files(tmp_path):
@@ -77,3 +85,22 @@ def test_bench_into_a_file_is_refused_with_exit_2(tmp_path, capsys):
     target.write_text("")
     assert main(["bench", "--tiny", "--no-progress", "--out", str(target)]) == 2
     assert "choose another --out" in capsys.readouterr().err
+
+
+def test_median_interval_is_the_binomial_order_statistics():
+    # n = 24: P(Bin(24, 1/2) <= 6) = 0.011 <= 0.025 < P(<= 7) = 0.032, so the 95 % interval is x_(7), x_(18)
+    assert eff.median_interval([float(i) for i in range(1, 25)]) == (7.0, 18.0)
+    # n = 10: x_(2), x_(9) (P(<= 1) = 0.011, P(<= 2) = 0.055)
+    assert eff.median_interval([float(i) for i in range(10, 0, -1)]) == (2.0, 9.0)
+    assert eff.ratio_summary([0.9, 1.1, 1.0, 0.95, 1.05, 1.02])["resolved"] is False
+    assert eff.ratio_summary([1.2, 1.25, 1.3, 1.22, 1.28, 1.26])["resolved"] is True
+
+
+def test_interleaved_pair_reports_a_ratio_per_pair_and_the_stage_cost():
+    variant, on, off = eff.effect_variants(eff.base_scene(10))["volume_controller"]
+    pair = eff.measure_pair(on, off, "numpy", steps=1, alternations=4, warmup=1)
+    assert len(pair["block_ratios"]) == 4 and all(r > 0 for r in pair["block_ratios"])
+    sc = eff.stage_cost(pair, eff.EFFECT_STAGES["volume_controller"])
+    # the volume controller's own stage does not run when it is off: its cost is positive in every pair
+    assert sc["fraction_ci95"][0] > 0.0 and sc["resolved"]
+    assert pair["on"]["allocated_bytes"] == pair["off"]["allocated_bytes"]

@@ -49,7 +49,8 @@ class _Progress:
 
 
 def plot_effects(result: dict, path: Path) -> Path:
-    """Horizontal bars: time ratio on/off of each effect, annotated with the bytes it allocates."""
+    """Horizontal bars: time ratio on/off of each effect (median of the interleaved pairs, the whisker its
+    interquartile range; grey where not resolved), annotated with the bytes it allocates."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -58,7 +59,13 @@ def plot_effects(result: dict, path: Path) -> Path:
     rows = [(k, r) for k, r in result["effects"].items() if "unavailable" not in r]
     fig, ax = plt.subplots(figsize=(7, 0.35 * len(rows) + 1.5))
     names = [k for k, _ in rows]
-    ax.barh(names, [r["time_ratio_on_off"] for _, r in rows])
+    med = [r["time_ratio_on_off"] for _, r in rows]
+    err = [
+        [m - r.get("ratio_q1", m) for m, (_, r) in zip(med, rows, strict=True)],
+        [r.get("ratio_q3", m) - m for m, (_, r) in zip(med, rows, strict=True)],
+    ]
+    colors = ["C0" if r.get("resolved", True) else "0.7" for _, r in rows]
+    ax.barh(names, med, xerr=err, color=colors, capsize=2)
     for i, (_, r) in enumerate(rows):
         ax.text(r["time_ratio_on_off"], i, f"  {r['allocated_difference'] / 1024:.0f} KiB", va="center", fontsize=7)
     ax.axvline(1.0, color="k", lw=0.8)
@@ -97,7 +104,12 @@ def run_bench(
     )
     t1.update({"machine": machine, "projection": assumptions(), "quick": quick, "tiny": tiny})
     ec = effects_mod.run_effect_costs(
-        10 if tiny else (24 if quick else 40), backend, steps, effect_names, progress=bar, repeats=repeats
+        10 if tiny else (24 if quick else 40),
+        backend,
+        1 if tiny else 4,
+        effect_names,
+        progress=bar,
+        alternations=2 if tiny else 10,
     )
     ec.update({"machine": machine, "quick": quick, "tiny": tiny})
     bar.close()

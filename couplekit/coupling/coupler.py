@@ -76,6 +76,8 @@ class SandFluidCoupler:
         if not (fluid.mixture and fluid.external_force):
             raise ValueError("the fluid must be built with mixture=True and external_force=True to be coupled")
         self.sand, self.fluid, self.units = sand, fluid, units
+        if sand.saturation is None:  # cohesionless sand built without it: the moisture (Eq. 59) writes it
+            sand.saturation = sand.backend.xp.zeros(sand.n_particles, dtype=np.float32)
         self.params = params or CouplingParams()
         self.two_phase = bool(fluid.two_phase)
         self.ops = make_coupling_ops(fluid.backend, self.params, self.two_phase)

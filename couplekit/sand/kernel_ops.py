@@ -33,6 +33,9 @@ class KernelOps:
         self._threads = 1
         self._skipped = backend.xp.zeros(1, dtype=np.int32)
         self._no_friction = backend.xp.zeros(1, dtype=np.float32)  # the pointer passed without a friction field
+        # the pointer passed for a particle field an effect that is compiled out does not have (q without
+        # hardening, saturation without cohesion): that variant of the kernel never reads or writes it
+        self._no_field = backend.xp.zeros(1, dtype=np.float32)
 
     def _module(self, source: str, defines: dict | None = None):
         return self.backend.module(source, defines)
@@ -142,9 +145,9 @@ class KernelOps:
             C,
             F,
             tau,
-            q,
+            self._no_field if q is None else q,  # q None: hardening off; saturation None: cohesion off
             vc,
-            saturation,
+            self._no_field if saturation is None else saturation,
             grid_v,
             np.int32(nx),
             np.int32(ny),
@@ -167,5 +170,11 @@ class KernelOps:
     def constitutive(self, F, tau, q, vc, saturation, model: ConstitutiveModel) -> None:
         """F_trial (9, P) -> elastic F after plasticity, tau (6, P), q, vc (in place)."""
         self._module("mpm_constitutive.cu", model.defines()).function("mpm_constitutive_batch")(
-            F.shape[1], F, tau, q, vc, saturation, *model.scalars()
+            F.shape[1],
+            F,
+            tau,
+            self._no_field if q is None else q,
+            vc,
+            self._no_field if saturation is None else saturation,
+            *model.scalars(),
         )

@@ -243,7 +243,8 @@ class ReferenceOps:
         F[...] = F_new.reshape(-1, 9).T
         C[...] = C_new.reshape(-1, 9).T
         tau[...] = tau_new
-        q[...] = q_new
+        if q is not None:  # None: hardening off, no hardening state (not allocated)
+            q[...] = q_new
         vc[...] = vc_new
         v[...] = v_new.T
         x_new = x.astype(np.float64) + dt * v_new.T  # x_p += Δt v_p
@@ -262,15 +263,23 @@ class ReferenceOps:
         F_new, tau_new, q_new, vc_new = _constitutive(_mat(F), q, vc, saturation, model)
         F[...] = F_new.reshape(-1, 9).T
         tau[...] = tau_new
-        q[...] = q_new
+        if q is not None:
+            q[...] = q_new
         vc[...] = vc_new
 
 
 def _constitutive(F_trial: np.ndarray, q, vc, saturation, model: ConstitutiveModel):
-    """Hencky + Drucker–Prager on (P, 3, 3) trial F: (F_new, tau (6, P), q_new, vc_new)."""
+    """Hencky + Drucker–Prager on (P, 3, 3) trial F: (F_new, tau (6, P), q_new, vc_new).  ``q`` None (hardening
+    off: φ_F = h0, the state is not kept) and ``saturation`` None (cohesion off) read as zeros."""
     U, s, V = signed_svd(F_trial)
     e = np.log(np.maximum(np.abs(s), SIGMA_MIN))  # Hencky strain in principal axes
-    q64 = q.astype(np.float64)
+    n = F_trial.shape[0]
+    if q is None and model.hardening:
+        raise ValueError("q (the hardening state) is required with hardening on")
+    if saturation is None and model.cohesion:
+        raise ValueError("saturation is required with cohesion on")
+    q64 = np.zeros(n) if q is None else q.astype(np.float64)
+    saturation = np.zeros(n) if saturation is None else saturation
     vc64 = vc.astype(np.float64)
     if model.plasticity:
         alpha = dp_alpha(model.friction_angle(q64))  # α from the hardening state before this step

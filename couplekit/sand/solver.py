@@ -57,7 +57,10 @@ class SandSolver:
     colliders: analytic :class:`Collider` list; moving ones are advanced by Δt·velocity every step.
     sdf_collider: optional :class:`SdfCollider` sampled on the nodes (with the per-node friction of a
         :meth:`SdfCollider.union` of solids of different friction).
-    saturation: per-particle saturation S_r,p (P,) driving the cohesion (default 0 = dry).
+    saturation: per-particle saturation S_r,p (P,) driving the cohesion (default 0 = dry). Not allocated
+        (``self.saturation`` None) when the cohesion is compiled out and no saturation is given, unless
+        ``keep_saturation``; the hardening state ``q`` likewise without hardening. :meth:`particles` reports
+        a field not allocated as zeros (made on the host).
     cfl: particle CFL number C_v (Δt ≤ C_v dx / max|v_p|); elastic_cfl: C_e (Δt ≤ C_e dx / c_p).
     cfl_check_every: check the particle CFL every this many steps (0 = never; a violation raises).
     host_atomics: cpu backend only — use the non-deterministic atomic P2G (benchmarking).
@@ -92,6 +95,7 @@ class SandSolver:
         cfl_check_every: int = 20,
         host_atomics: bool = False,
         allow_empty: bool = False,
+        keep_saturation: bool = False,
     ):
         self.backend = backend if isinstance(backend, Backend) else get_backend(backend)
         be, xp = self.backend, self.backend.xp
@@ -132,9 +136,13 @@ class SandSolver:
         self.C = xp.zeros((9, n), dtype=f32)
         self.F = be.asarray(np.repeat(np.eye(3, dtype=f32).reshape(9, 1), n, axis=1), f32)
         self.tau = xp.zeros((6, n), dtype=f32)
-        self.q = xp.zeros(n, dtype=f32)
+        # fields of effects that are compiled out are not allocated (None; the kernels take a placeholder):
+        # q without hardening; the saturation without cohesion, unless it was given (the particles carry
+        # the seeded value as data) or ``keep_saturation`` (a coupled scene: the coupling's moisture writes it)
+        self.q = xp.zeros(n, dtype=f32) if params.hardening else None
         self.vc = xp.zeros(n, dtype=f32)
-        self.saturation = be.asarray(sat, f32)
+        keep = params.cohesion_on() or keep_saturation or saturation is not None
+        self.saturation = be.asarray(sat, f32) if keep else None
         self.volume = be.asarray(vol, f32)
         self.mass = be.asarray(vol * rho, f32)
 
@@ -230,7 +238,7 @@ class SandSolver:
             "mass": vol * rho,
         }
         xp = self.backend.xp
-        for name in _PARTICLE_FIELDS:
+        for name in self._fields():
             grown = xp.concatenate([getattr(self, name), self.backend.asarray(new[name], f32)], axis=-1)
             setattr(self, name, xp.ascontiguousarray(grown))
         self.n_particles = first + k
@@ -345,7 +353,9 @@ class SandSolver:
     def particles(self) -> dict[str, np.ndarray]:
         """Host copies: x, v (3, P); C, F (9, P); tau (6, P); q (hardening), vc, saturation, mass, volume
         (P,); friction_angle (P,) in degrees."""
-        out = {k: self.backend.to_host(getattr(self, k)) for k in _PARTICLE_FIELDS}
+        out = {k: self.backend.to_host(getattr(self, k)) for k in self._fields()}
+        for k in _PARTICLE_FIELDS:  # a field of an effect that is off: zeros, made here on the host
+            out.setdefault(k, np.zeros(self.n_particles, np.float32))
         out["friction_angle"] = np.degrees(self.model.friction_angle(out["q"]))
         return out
 
@@ -380,7 +390,7 @@ class SandSolver:
     # ------------------------------------------------------------------ checkpoint
     def state(self) -> dict[str, np.ndarray]:
         """Everything needed for a bitwise restart (host arrays; scalars as 0-d arrays)."""
-        st = {k: self.backend.to_host(getattr(self, k)) for k in _PARTICLE_FIELDS}
+        st = {k: self.backend.to_host(getattr(self, k)) for k in self._fields()}
         st["time"] = np.array(self.time)
         st["steps"] = np.array(self.steps)
         st["dt"] = np.array(self.dt)
@@ -396,13 +406,17 @@ class SandSolver:
             if not resize:
                 raise ValueError(f"state has {n} particles, this solver {self.n_particles}")
             xp = self.backend.xp
-            for k in _PARTICLE_FIELDS:
-                setattr(self, k, xp.zeros(np.asarray(st[k]).shape, dtype=np.float32))
+            for k in self._fields():
+                setattr(self, k, xp.zeros(np.asarray(st[k]).shape[:-1] + (n,), dtype=np.float32))
             self.n_particles = n
         centres = np.asarray(st["collider_centres"]).reshape(-1, 3)
         if len(centres) != len(self.colliders):
             raise ValueError(f"state has {len(centres)} colliders, this solver {len(self.colliders)}")
-        for k in _PARTICLE_FIELDS:
+        # a field this solver does not allocate (its effect is off) is skipped: a checkpoint written before
+        # those fields went unallocated still loads; one this solver has must be in the state
+        for k in self._fields():
+            if k not in st:
+                raise ValueError(f"state has no {k!r}: it was written with an effect off that is on here")
             getattr(self, k)[...] = self.backend.asarray(np.asarray(st[k]), np.float32)
         self.time = float(st["time"])
         self.steps = int(st["steps"])
@@ -416,6 +430,10 @@ class SandSolver:
             self._sample_sdf()
 
     # ------------------------------------------------------------------ helpers
+    def _fields(self) -> tuple[str, ...]:
+        """The particle fields this solver allocates (:data:`_PARTICLE_FIELDS` less those of effects off)."""
+        return tuple(k for k in _PARTICLE_FIELDS if getattr(self, k, None) is not None)
+
     def _max_speed(self) -> float:
         if self.n_particles == 0:
             return 0.0
