@@ -5,8 +5,10 @@ These are the arrays the solvers allocate for an effect (couplekit.fluid.solver,
 couplekit.scene.forces); tests/test_bench.py checks each against the bytes a scene with the effect on
 allocates more than the same scene with it off.  An effect with 0 bytes either needs no field (volume
 controller: a reduction; the closures: local rates; drag, buoyancy: the force field belongs to the coupling)
-or keeps its field when it is off because a kernel reads it in both variants (source term: the phase-field
-collide kernel reads S_φ, zeros when off), recorded in :data:`KEPT_WHEN_OFF`.  Hardening (q) and cohesion
+or would keep its field when it is off because a kernel reads it in every variant, recorded in
+:data:`KEPT_WHEN_OFF` (none now).  The source term S_φ costs 4 B per cell: without it (fluid-only scenes,
+the Fig. 14 ablation) the phase-field kernels take the ``CK_PF_SOURCE=0`` variant and the field is not
+allocated.  Hardening (q) and cohesion
 (the saturation) cost 4 B per particle each; without them G2P takes the variant that never touches the field
 and the sand solver does not allocate it, except the saturation of a coupled scene, which is the coupling's
 moisture (Eq. 59) cohesion or not (and of particles seeded with a saturation, which carry it as data)."""
@@ -17,10 +19,10 @@ F32 = 4
 
 # effect -> (bytes per padded fluid cell, bytes per sand-grid cell, bytes per particle)
 EFFECT_BYTES = {
-    "phase_field": (F32 * (7 + 1 + 3 + 1), 0, 0),  # h, phi, grad phi, source term
+    "phase_field": (F32 * (7 + 1 + 3), 0, 0),  # h, phi, grad phi
     "surface_tension": (F32 * 1, 0, 0),  # mu
     "volume_controller": (0, 0, 0),
-    "source_term": (0, 0, 0),
+    "source_term": (F32 * 1, 0, 0),  # S_phi (coupled two-phase scenes; compiled out otherwise, CK_PF_SOURCE=0)
     "coupling": (F32 * (1 + 3 + 3 + 1 + 3 + 1) + 1, F32 * 1, 0),  # ε, u_s, force, ε_sand, fluid u, ε_prev, slip
     "drag_buoyancy": (0, 0, 0),
     "retention": (0, F32 * 3, F32 * 1),  # bound_in, bound, d_bound; moisture ratio per particle
@@ -35,9 +37,7 @@ EFFECT_BYTES = {
     "sand_emission": (0, 0, 0),  # the particles it emits (memory_estimate's emitted_particles)
 }
 
-KEPT_WHEN_OFF = {
-    "source_term": "fluid.source_term (4 B/cell): the phase-field collide kernel reads S_φ in every variant",
-}
+KEPT_WHEN_OFF: dict[str, str] = {}
 # kept only in some scenes: the effect's field is another effect's input there
 KEPT_WHEN_OFF_COUPLED = {
     "cohesion": "sand.saturation (4 B/particle): in a coupled scene it is the coupling's moisture (Eq. 59)",

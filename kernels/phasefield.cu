@@ -28,9 +28,15 @@
 #include "lattice.cuh"
 
 // 0: surface tension sigma = 0, the chemical potential (double well + Laplacian) is compiled out.
-// variants: CK_PF_SURFACE_TENSION=0,1
+// variants: CK_PF_SURFACE_TENSION=0,1 CK_PF_SOURCE=0,1
 #ifndef CK_PF_SURFACE_TENSION
 #define CK_PF_SURFACE_TENSION 1
+#endif
+
+// 0: no source term S_phi (a fluid-only scene, or the Fig. 14 ablation): the collide kernel and the volume
+// sums never read `source` (a placeholder may be passed) and sum S_phi = 0 (variants: the line above).
+#ifndef CK_PF_SOURCE
+#define CK_PF_SOURCE 1
 #endif
 
 #define PF_FLUID 0
@@ -324,7 +330,13 @@ PF_INLINE PfCell pf_collide(const PfCell in, const long long c, const long long 
     const float g2_safe = g2 > PF_GRAD_EPS2 ? g2 : PF_GRAD_EPS2;
     const float hscale = g2 > PF_GRAD_EPS2 ? interface_factor * p0 * (1.f - p0) / sqrtf(g2_safe) : 0.f;
     const float hx = hscale * gx, hy = hscale * gy, hz = hscale * gz;
+#if CK_PF_SOURCE
     const float s = source_scale * source[c];
+#else
+    (void)source;
+    (void)source_scale;
+    const float s = 0.f;
+#endif
     const float ux = u[c], uy = u[ncell + c], uz = u[2 * ncell + c];
     // rest population from the exact local balance sum_k h*_k = sum_k h_k + S_phi (the H_k sum to zero
     // and the equilibria to phi); equal to the collision formula for q = 0 up to rounding
@@ -353,7 +365,7 @@ KERNEL void phase_collide_stream(const long long n, float* RESTRICT h /* size: 7
                                  const float* RESTRICT phi /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                                  const float* RESTRICT grad /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
                                  const float* RESTRICT u /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
-                                 const float* RESTRICT source /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                                 const float* RESTRICT source /* size >= 1 */ /* (nx + 2)(ny + 2)(nz + 2); a placeholder with CK_PF_SOURCE=0 */,
                                  const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                                  const int nx, const int ny, const int nz, const int px, const int py,
                                  const int pz, const int parity, const float mobility, const float width,
@@ -410,7 +422,7 @@ KERNEL void phase_collide_stream(const long long n, float* RESTRICT h /* size: 7
 // Global volume sums for the volume controller (Eq. 52), in float64 over interior FLUID cells:
 //   out[0] += sum phi,  out[1] += sum S_phi.  n = ny*nz (one work item per x row).
 KERNEL void phase_volume_sums(const long long n, const float* RESTRICT phi /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
-                              const float* RESTRICT source /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                              const float* RESTRICT source /* size >= 1 */ /* (nx + 2)(ny + 2)(nz + 2); a placeholder with CK_PF_SOURCE=0 */,
                               const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                               double* RESTRICT out /* size: 2 */, const int nx, const int ny, const int nz) {
     const long long sy = (long long)(nx + 2), sz = (long long)(nx + 2) * (ny + 2);
@@ -421,6 +433,7 @@ KERNEL void phase_volume_sums(const long long n, const float* RESTRICT phi /* si
         acc += s;
     }
     REDUCE_SUM_END(out, acc)
+#if CK_PF_SOURCE
     REDUCE_SUM_BEGIN(row, n, acc_s) {
         const long long c0 = 1 + sy * (row % ny + 1) + sz * (row / ny + 1);
         double s = 0.0;
@@ -428,13 +441,16 @@ KERNEL void phase_volume_sums(const long long n, const float* RESTRICT phi /* si
         acc_s += s;
     }
     REDUCE_SUM_END(out + 1, acc_s)
+#else
+    (void)source;  // out[1] stays the 0 the caller zeroed: sum S_phi = 0
+#endif
 }
 
 // As phase_volume_sums with the fluid volume fraction eps of the mixture (Eq. 45's epsilon):
 //   out[0] += sum eps phi (the heavy-fluid volume),  out[1] += sum S_phi.  n = ny*nz.
 KERNEL void phase_volume_sums_eps(const long long n, const float* RESTRICT phi /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                                   const float* RESTRICT eps /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
-                                  const float* RESTRICT source /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                                  const float* RESTRICT source /* size >= 1 */ /* (nx + 2)(ny + 2)(nz + 2); a placeholder with CK_PF_SOURCE=0 */,
                                   const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                                   double* RESTRICT out /* size: 2 */, const int nx, const int ny,
                                   const int nz) {
@@ -447,6 +463,7 @@ KERNEL void phase_volume_sums_eps(const long long n, const float* RESTRICT phi /
         acc += s;
     }
     REDUCE_SUM_END(out, acc)
+#if CK_PF_SOURCE
     REDUCE_SUM_BEGIN(row, n, acc_s) {
         const long long c0 = 1 + sy * (row % ny + 1) + sz * (row / ny + 1);
         double s = 0.0;
@@ -454,4 +471,7 @@ KERNEL void phase_volume_sums_eps(const long long n, const float* RESTRICT phi /
         acc_s += s;
     }
     REDUCE_SUM_END(out + 1, acc_s)
+#else
+    (void)source;  // out[1] stays the 0 the caller zeroed: sum S_phi = 0
+#endif
 }

@@ -157,6 +157,11 @@ class SandFluidCoupler:
         """S_φ (Eq. 45, Eq. 57 with retention) into ``fluid.source_term`` (two-phase fluids only)."""
         f = self.fluid
         if self.two_phase:
+            if f.source_term is None:
+                raise RuntimeError(
+                    "the fluid was built without a source term (FluidSolver(source_term=False)): build it with "
+                    "source_term=True, or step with the source term off (scheduler source_term=False)"
+                )
             self.ops.phase_source(
                 f.fluid_fraction, self.eps_prev, f.phi, self.fluid_u, f.flags, self.d_bound, f.source_term
             )

@@ -115,17 +115,37 @@ class PhaseFieldKernelOps:
     """Phase-field stages as compiled kernels (cuda or cpu backend); same methods as the reference.
 
     ``periodic``: (x, y, z) periodicity; ``surface_tension``: False compiles the chemical potential out
-    (``CK_PF_SURFACE_TENSION=0``) and :meth:`gradients` then takes ``mu=None``.
+    (``CK_PF_SURFACE_TENSION=0``) and :meth:`gradients` then takes ``mu=None``; ``source``: False compiles
+    the source term S_φ out (``CK_PF_SOURCE=0``): :meth:`collide_stream` and :meth:`volume_sums` then take
+    ``source=None`` and the volume sums report Σ S_φ = 0.
     """
 
-    def __init__(self, backend: Backend, periodic: bool | Sequence[bool] = True, surface_tension: bool = True):
+    def __init__(
+        self,
+        backend: Backend,
+        periodic: bool | Sequence[bool] = True,
+        surface_tension: bool = True,
+        source: bool = True,
+    ):
         self.backend = backend
         self.xp = backend.xp
         self.periodic = as_periodic(periodic)
         self.surface_tension = bool(surface_tension)
-        self.module = backend.module(KERNEL_SOURCE, defines={"CK_PF_SURFACE_TENSION": int(self.surface_tension)})
+        self.source = bool(source)
+        self.module = backend.module(
+            KERNEL_SOURCE,
+            defines={"CK_PF_SURFACE_TENSION": int(self.surface_tension), "CK_PF_SOURCE": int(self.source)},
+        )
         self._flags = tuple(int(p) for p in self.periodic)
         self._no_mu = None if self.surface_tension else self.xp.zeros(1, dtype=np.float32)
+        self._no_source = None if self.source else self.xp.zeros(1, dtype=np.float32)  # never read
+
+    def _source(self, source):
+        if self.source:
+            if source is None:
+                raise ValueError("these phase-field ops were built with the source term: pass the S_phi array")
+            return source
+        return self._no_source
 
     def _fn(self, name: str):
         return self.module.function(name)
@@ -167,7 +187,7 @@ class PhaseFieldKernelOps:
         """One step of Eq. 48 with in-place (AA) streaming and the boundary rules of the flags."""
         nz, ny, nx = interior_shape(flags.shape)
         self._fn("phase_collide_stream")(
-            nx * ny * nz, h, phi, grad, u, source, flags, nx, ny, nz, *self._flags, int(parity),
+            nx * ny * nz, h, phi, grad, u, self._source(source), flags, nx, ny, nz, *self._flags, int(parity),
             np.float32(mobility), np.float32(width), np.float32(source_scale),
         )  # fmt: skip
 
@@ -175,6 +195,7 @@ class PhaseFieldKernelOps:
         """(V, sum S_phi) over interior FLUID cells in float64: V = sum phi, or sum eps phi with ``eps``."""
         nz, ny, nx = interior_shape(flags.shape)
         out = self.xp.zeros(2, dtype=np.float64)
+        source = self._source(source)
         if eps is None:
             self._fn("phase_volume_sums")(ny * nz, phi, source, flags, out, nx, ny, nz)
         else:
@@ -184,12 +205,12 @@ class PhaseFieldKernelOps:
 
 
 def make_phase_field_ops(
-    backend: Backend, periodic: bool | Sequence[bool] = True, surface_tension: bool = True
+    backend: Backend, periodic: bool | Sequence[bool] = True, surface_tension: bool = True, source: bool = True
 ) -> PhaseFieldKernelOps | PhaseFieldReferenceOps:
     """Kernel ops on the cuda/cpu backends, the NumPy reference on the numpy backend."""
     if backend.has_kernels:
-        return PhaseFieldKernelOps(backend, periodic, surface_tension)
-    return PhaseFieldReferenceOps(periodic, surface_tension)
+        return PhaseFieldKernelOps(backend, periodic, surface_tension, source)
+    return PhaseFieldReferenceOps(periodic, surface_tension, source)
 
 
 class PhaseFieldRunner:

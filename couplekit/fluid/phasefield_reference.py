@@ -47,13 +47,22 @@ class PhaseFieldReferenceOps:
     """NumPy phase-field stages; same methods and signatures as :class:`PhaseFieldKernelOps`.
 
     ``periodic``: (x, y, z) periodicity (the other faces are given by the ghost cells' flags);
-    ``surface_tension``: whether :meth:`gradients` computes the chemical potential.
+    ``surface_tension``: whether :meth:`gradients` computes the chemical potential; ``source``: whether
+    there is a source term S_φ (False: ``source`` is ``None`` and counts as 0).
     """
 
-    def __init__(self, periodic: bool | Sequence[bool] = True, surface_tension: bool = True):
+    def __init__(self, periodic: bool | Sequence[bool] = True, surface_tension: bool = True, source: bool = True):
         self.periodic = as_periodic(periodic)
         self.surface_tension = bool(surface_tension)
+        self.source = bool(source)
         self.xp = np
+
+    def _source(self, source, flags) -> np.ndarray:
+        if source is None:
+            if self.source:
+                raise ValueError("these phase-field ops were built with the source term: pass the S_phi array")
+            return np.zeros(flags.shape, np.float32)
+        return source
 
     # -------------------------------------------------------------------------------- storage convention
     def _grid(self, flags: np.ndarray) -> _Grid:
@@ -212,6 +221,7 @@ class PhaseFieldReferenceOps:
         """
         grid = self._grid(flags)
         c = grid.cell
+        source = self._source(source, flags)
         f = self._load(h, phi, u, grid, parity)
         phi_c = f.sum(axis=0)  # Eq. 47
         g = grad.reshape(3, -1)[:, c].astype(np.float64)
@@ -233,5 +243,5 @@ class PhaseFieldReferenceOps:
         p = phi[1:-1, 1:-1, 1:-1].astype(np.float64)
         if eps is not None:
             p = p * eps[1:-1, 1:-1, 1:-1].astype(np.float64)
-        s = source[1:-1, 1:-1, 1:-1].astype(np.float64)
+        s = self._source(source, flags)[1:-1, 1:-1, 1:-1].astype(np.float64)
         return float(p[fluid].sum()), float(s[fluid].sum())

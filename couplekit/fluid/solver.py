@@ -203,6 +203,9 @@ class FluidSolver:
     pressure: initial pressure ``(nz, ny, nx)`` (e.g. hydrostatic), default 0.
     mixture: allocate the ``fluid_fraction`` (ε, ones) and ``sand_velocity`` (zeros) inputs.
     external_force: allocate the ``force`` input (force density, e.g. drag; zeros).
+    source_term: allocate the phase field's source ``source_term`` (S_φ, zeros; two-phase only); default
+        ``None`` = with ``mixture`` (the coupling writes it). Without it the phase-field kernels are built with
+        ``CK_PF_SOURCE=0`` (S_φ compiled out) and ``source_term`` is ``None``.
 
     Inputs the coupling fills (padded backend arrays, present only when enabled): ``fluid_fraction``,
     ``sand_velocity``, ``force``, and ``source_term`` (S_φ of the phase field, two-phase only).
@@ -220,6 +223,7 @@ class FluidSolver:
         pressure: np.ndarray | None = None,
         mixture: bool = False,
         external_force: bool = False,
+        source_term: bool | None = None,
     ):
         self.backend = backend
         self.shape = tuple(int(s) for s in shape)
@@ -305,7 +309,8 @@ class FluidSolver:
 
             self._pf = pf
             periodic = tuple(self.boundaries.face(a + "-").kind == "periodic" for a in "xyz")
-            self.pf_ops = pf.make_phase_field_ops(backend, periodic, self.surface_tension)
+            has_source = bool(mixture if source_term is None else source_term)
+            self.pf_ops = pf.make_phase_field_ops(backend, periodic, self.surface_tension, has_source)
             self.beta, self.kappa = pf.chemical_potential_coefficients(params.sigma, params.width)
             phi0 = np.asarray(phi, np.float32)
             if phi0.shape != self.shape:
@@ -316,7 +321,7 @@ class FluidSolver:
             self.grad = xp.zeros((3,) + pshape, dtype=np.float32)
             self.mu = xp.zeros(pshape, dtype=np.float32) if self.surface_tension else None
             self.h = xp.zeros((7,) + pshape, dtype=np.float32)
-            self.source_term = xp.zeros(pshape, dtype=np.float32)
+            self.source_term = xp.zeros(pshape, dtype=np.float32) if has_source else None
             self._setup_inflow_front(flags, wall_u, wall_phi, phi_p)
             self.pf_ops.set_equilibrium(self.h, self.phi, self.velocity, self.flags, 0)
             self._phase_macroscopic()
@@ -487,6 +492,8 @@ class FluidSolver:
             return self.pf_ops.volume_sums(self.phi, self.source_term, self.flags)
         eps = self.fluid_fraction
         volume = self.pf_ops.volume_sums(self.phi, self.source_term, self.flags, eps)[0] + self.held_volume
+        if self.source_term is None:  # S_φ compiled out: nothing for the controller to scale
+            return volume, 0.0
         weighted_source = self.pf_ops.volume_sums(self.source_term, self.source_term, self.flags, eps)[0]
         return volume, weighted_source
 

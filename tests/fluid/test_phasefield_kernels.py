@@ -155,8 +155,37 @@ def test_volume_sums_match_reference(cpu, with_eps):
     assert kernel.volume_sums(phi, s["source"], s["flags"], eps)[0] == pytest.approx(vk, rel=1e-12)
 
 
+@pytest.mark.parametrize("parity", [0, 1])
+def test_source_compiled_out_matches_the_reference_and_a_zero_source(cpu, parity):
+    """CK_PF_SOURCE=0 (no S_φ: fluid-only scenes, the Fig. 14 ablation): collide_stream and the volume sums
+    take source=None, match the reference, and equal the source variant given zeros (the same arithmetic:
+    bitwise); the source-built ops refuse None."""
+    periodic = (False, True, False)
+    s = random_state(70 + parity, periodic)
+    off_k, off_r = PhaseFieldKernelOps(cpu, periodic, source=False), PhaseFieldReferenceOps(periodic, source=False)
+    on_k = PhaseFieldKernelOps(cpu, periodic)
+    h_off, h_ref, h_zero = s["h"].copy(), s["h"].copy(), s["h"].copy()
+    rest = (s["flags"], parity, 0.04, 4.5, 0.6)
+    off_k.collide_stream(h_off, s["phi"], s["grad"], s["u"], None, *rest)
+    off_r.collide_stream(h_ref, s["phi"], s["grad"], s["u"], None, *rest)
+    on_k.collide_stream(h_zero, s["phi"], s["grad"], s["u"], np.zeros_like(s["source"]), *rest)
+    assert np.abs(h_off - h_ref).max() < ATOL
+    assert np.array_equal(h_off, h_zero)
+    assert np.abs(h_off - s["h"]).max() > 1e-2
+    for eps in (None, s["eps"]):
+        vk, sk = off_k.volume_sums(s["phi"], None, s["flags"], eps)
+        vr, sr = off_r.volume_sums(s["phi"], None, s["flags"], eps)
+        assert sk == 0.0 and sr == 0.0
+        assert vk == pytest.approx(vr, rel=1e-12) and vk == pytest.approx(
+            on_k.volume_sums(s["phi"], s["source"], s["flags"], eps)[0], rel=1e-12
+        )
+    for ops in (on_k, PhaseFieldReferenceOps(periodic)):
+        with pytest.raises(ValueError, match="source term"):
+            ops.volume_sums(s["phi"], None, s["flags"])
+
+
 # GPU builds (nvcc sm_80/sm_90 without spills, NVRTC with the backend's options) for both values of
-# CK_PF_SURFACE_TENSION are covered by tests/test_kernel_builds.py through the `// variants:` line.
+# CK_PF_SURFACE_TENSION and CK_PF_SOURCE are covered by tests/test_kernel_builds.py through the `// variants:` lines.
 
 
 def test_full_step_sequence_matches_reference_with_every_boundary(cpu):
