@@ -390,10 +390,14 @@ def build_sand(scene: Scene, backend: Backend, log: Callable[[str], Any]):
     saturation = _initial_saturation(scene, sats, params, log)
     walls = sand_walls(scene)
     collider = None
-    if obstacles:
-        frictions = [b.friction if b.friction is not None else sd.wall_friction for b in obstacles]
-        sdfs = [lambda p, t, s=s: s.sdf(p) for s in solids]
-        collider = SdfCollider.union(sdfs, frictions, mode="separate")
+    frictions = [b.friction if b.friction is not None else sd.wall_friction for b in obstacles]
+    sdfs = [lambda p, t, s=s: s.sdf(p) for s in solids]
+    containers = [b for b in bodies if b.container_until is not None]
+    for b in containers:  # frictionless: a frictional wall would carry part of the block's weight (Janssen)
+        sdfs.append(_container_sdf(b.geometry.solver_shape(dom).bounds(), b.container_until))
+        frictions.append(0.0)
+    if sdfs:
+        collider = SdfCollider.union(sdfs, frictions, mode="separate", moving=bool(containers))
     auto = sch.kind == "subcycle" and sch.substeps == "auto"
     # with substeps = "auto" the scheduler sets the sand's step every step; it starts at the smallest it may take
     dt = scene.time.dt / sch.max_substeps if auto else sand_step(sch.kind, scene.time.dt, sch.substeps, sch.sand_every)
@@ -421,6 +425,29 @@ def sand_walls(scene: Scene):
         w = sd.walls.get(f)
         faces[wall_face(f)] = Wall("separate", sd.wall_friction) if w is None else Wall(w.kind, w.friction)
     return DomainWalls.from_dict(faces, bound=sd.wall_layers)
+
+
+def _container_sdf(bounds, until: float):
+    """SDF of the invisible container of a sand body (``bodies[i].container_until``, paper 000 Fig. 17): the
+    solid is everything outside the vertical prism over the body's bounding box ``bounds`` (lo, hi), at times
+    t < ``until``; from ``until`` on there is no solid (SDF 1e3 m). The array is computed once per state and
+    reused (the collider is resampled every step while a container may still be removed)."""
+    lo, hi = (np.asarray(b, dtype=np.float64)[:2] for b in bounds)
+    cache: dict = {}
+
+    def sdf(points, t):
+        pts = np.asarray(points, dtype=np.float64)
+        key = (t < until, pts.shape)
+        if key not in cache:
+            cache.clear()
+            if t >= until:
+                cache[key] = np.full(pts.shape[0], 1e3)
+            else:  # distance to the nearest side wall, positive inside (the sand's side)
+                xy = pts[:, :2]
+                cache[key] = np.minimum(xy - lo, hi - xy).min(axis=1)
+        return cache[key]
+
+    return sdf
 
 
 def _initial_saturation(scene: Scene, sats: list, params, log: Callable[[str], Any]) -> np.ndarray | None:

@@ -220,3 +220,52 @@ def test_fig15_collapse_makes_a_wave():
     h0 = _fig15_wave(sim)
     _frames(sim, sim.scene.time.frames)
     assert _fig15_wave(sim) > 1.1 * h0
+
+
+def _fig17_run(name: str, frames: int) -> tuple[np.ndarray, np.ndarray, Simulation]:
+    """sand_top (m) and fluid_volume_drift (0 for a sand-only scene) at frames 0 .. ``frames``."""
+    sim = _sim(name)
+    rows = []
+    for i in range(frames + 1):
+        if i:
+            _frames(sim, 1)
+        d = sim.diagnostics()
+        rows.append((d["sand_top"], d.get("fluid_volume_drift", 0.0)))
+    tops, drifts = np.array(rows).T
+    return tops, drifts, sim
+
+
+@pytest.fixture(scope="module")
+def fig17_wet():
+    """The wet Fig. 17 variant to 0.67 s (20 frames, ~50 s on one shared core), shared by two tests."""
+    return _fig17_run("fig17_wet_column", 20)
+
+
+def test_fig17_wet_block_stands_while_dry_block_collapses(fig17_wet):
+    """Fig. 17: both blocks stand in the paper's invisible container until 0.3 s (bodies.container_until).
+    The wet one, with water poured on it, keeps >= 80 % of its height at every frame to 0.67 s (0.37 s after
+    the container went; measured min 95 %: 0.1892 -> 0.1797 m), its top stays wet (saturation above the
+    cohesion onset S1 = 0.05 in most of its upper core: measured 0.11 mean); the dry one falls below 60 % by
+    0.6 s (measured 0.178 -> 0.084 m, 47 %)."""
+    wet, _, sim = fig17_wet
+    assert wet.min() >= 0.8 * wet[0], wet / wet[0]
+    p = sim.particles()
+    x, s = p["x"], p["saturation"]
+    core = (np.abs(x[0] - 0.2) < 0.04) & (np.abs(x[1] - 0.2) < 0.04) & (x[2] > 0.1)
+    assert np.mean(s[core] > 0.05) > 0.5
+    dry, _, _ = _fig17_run("fig17_dry_column", 30)
+    assert dry[15] > 0.9 * dry[0]  # 0.3 s: still in its container
+    assert dry[-1] < 0.6 * dry[0], dry / dry[0]
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="issue 16: after the container goes the water volume drifts to +4.9 % (docs/examples.md, Fig. 17): "
+    "the phase field's transport step, not the source term, and the controller is clamped at eta",
+)
+def test_fig17_wet_block_keeps_its_water_volume(fig17_wet):
+    """Fig. 17's water volume (Σ ε̃ φ + bound water) within 1 % of its start at every frame. Measured: within
+    0.15 % while the block stands in its container (the water soaking into the static block), then +0.9 %,
+    +2.5 %, +3.9 %, +4.9 % at 0.34, 0.40, 0.50, 0.67 s as the dry rim falls away."""
+    _, drift, _ = fig17_wet
+    assert np.abs(drift).max() < 0.01, drift

@@ -297,6 +297,9 @@ class Body:
     friction: float | None = None
     saturation: float | None = None
     """Sand bodies: initial saturation of the particles (None: dry)."""
+    container_until: float | None = None
+    """Sand bodies: time (s) at which the invisible container around the body's bounding box is removed (None:
+    no container; :func:`couplekit.assembly.build_sand`)."""
 
 
 @dataclass(frozen=True)
@@ -732,6 +735,14 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
             )
         if b.saturation is not None:
             _check_saturation(b, i, sand, fluid, problems)
+        if b.container_until is not None and b.kind != "sand":
+            problems.append(
+                Problem(
+                    f"bodies[{i}].container_until",
+                    f"only sand bodies start in a container (this body is {b.kind!r})",
+                    "remove it, or make the body kind = 'sand'",
+                )
+            )
         if b.kind == "obstacle" and any(b.velocity):
             problems.append(
                 Problem(f"bodies[{i}].velocity", "obstacles are fixed", "remove velocity from the obstacle")
@@ -1096,7 +1107,7 @@ def _body(raw: Any, path: str, base_dir: Path, source: dict | None, problems: li
         return None
     return Body(
         v["kind"], v["name"] or path, geo, tuple(v["velocity"]), v["density"], v["retention"], v["friction"],
-        v["saturation"],
+        v["saturation"], v["container_until"],
     )  # fmt: skip
 
 

@@ -679,6 +679,18 @@ BODY_KEYS: list[Key] = [
         lo=0.0,
         hi=1.0,
     ),
+    Key(
+        "container_until",
+        "float",
+        None,
+        "sand bodies: the body starts in an invisible box-shaped container, the vertical walls of its bounding "
+        "box (frictionless, for the sand only: water passes through them), removed at this time (paper 000 "
+        "Fig. 17: the block stands in a container while the water is poured, then the container is removed). "
+        "Default: no container",
+        "s",
+        lo=0.0,
+        lo_open=True,
+    ),
 ]
 """Keys of one ``[[bodies]]`` entry (its shape is the ``geometry`` sub-table)."""
 
