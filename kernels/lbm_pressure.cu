@@ -44,7 +44,7 @@ KERNEL void lbm_macro_pressure(const long long n, const float* RESTRICT f /* siz
 #define LBM_SUM(q) s0 += fj[q];
         LBM_FOR27(LBM_SUM)
 #undef LBM_SUM
-        float divergence = 1.f - s0;
+        float divergence = -s0;  // 1 - sum f: the stored populations are f - w (lbm_core.cuh), sum w = 1
 #if CK_MIXTURE
         // u: the fluid velocity of Eq. 13 (with its half-force shift) from the last collision, not sum f c:
         // sum f c = u - a/2 puts -(a/2).grad eps / eps = (grad p - rho g).grad eps / (2 rho eps) into the

@@ -44,7 +44,7 @@ from .grid import (
     slip_wall_layers,
 )
 from .kernel_ops import KernelOps
-from .reference import ReferenceOps, equilibrium
+from .reference import ReferenceOps, equilibrium, to_stored
 
 
 def _ghost_faces(idx: np.ndarray, pshape: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray]:
@@ -273,8 +273,10 @@ class FluidSolver:
         u0 = np.where(self._fluid_host[None], u0, 0.0)
         vel = wall_u.astype(np.float32)
         vel[(slice(None), *INTERIOR)] = np.where(self._fluid_host[None], u0, vel[(slice(None), *INTERIOR)])
+        # stored as f - w (shifted storage, reference.py); 0 in the ghost / wall cells, which are written before
+        # they are read
         f = np.zeros((27,) + pshape, np.float32)
-        f[(slice(None), *INTERIOR)] = equilibrium(u0)  # parity 0: natural order
+        f[(slice(None), *INTERIOR)] = to_stored(equilibrium(u0))  # parity 0: natural order
         self.f = backend.asarray(f)
         self.velocity = backend.asarray(vel)
         p0 = np.zeros(pshape, np.float32)
