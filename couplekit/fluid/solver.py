@@ -547,7 +547,10 @@ class FluidSolver:
     )  # fmt: skip
 
     def state(self) -> dict[str, np.ndarray]:
-        """Everything a bitwise-exact restart needs (host NumPy copies of padded arrays, plus counters)."""
+        """Everything a bitwise-exact restart needs (host NumPy copies of padded arrays, plus counters).
+
+        ``f`` is the stored form f − w of the populations (shifted storage; :func:`couplekit.fluid.from_stored`
+        gives the full f), as :attr:`f` itself is."""
         out = {k: self.backend.to_host(getattr(self, k)) for k in self._STATE_ARRAYS if getattr(self, k) is not None}
         out["step_count"] = np.array(self.step_count, np.int64)
         out["gamma"] = np.array(self.gamma, np.float64)
