@@ -14,8 +14,8 @@ import pytest
 from couplekit.cli import main
 from couplekit.io import CheckpointError, load_checkpoint
 from couplekit.io.checkpoint import dataset_checksum
-from couplekit.lattice import W27
 from couplekit.io.outputs import OutputFolderError, default_output, prepare_output, run_files
+from couplekit.lattice import W27
 from couplekit.scene import Scene
 from couplekit.simulation import Simulation
 
