@@ -19,7 +19,9 @@ C² k A ⟨|cos|³⟩/⟨cos²⟩ / ν = C² k A (8 / 3π) / ν: 1.7 % at N = 32
 
 Not yet at 1 %: the cpu kernels at N = 64, ν = 1e-4 (the slowest decay here, 0.4 % of the amplitude in 4000
 steps) give 0.969, where the reference with the same float32 storage gives 1.0007 (and float64 storage
-1.0007): a float32 round-off of the kernel's arithmetic that the shifted storage does not remove (before the
+1.0007): a float32 round-off of the kernel's arithmetic that the shifted storage does not remove (the mode changes by
+ν k² ≈ 16 float32 ulps of itself per step there, and the kernel rounds several times per step; amplitude
+1e-2 gives the same 0.969) (before the
 shift the kernels were much further off at every case above); bound 4 % there, written down in
 docs/precision.md.
 """
