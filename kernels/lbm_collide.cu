@@ -67,6 +67,28 @@ LBM_INLINE void chimera_backward2_k0only(float& a0, float& a1, float& a2, const 
     a2 = S + T;
 }
 
+// The same step on shifted values (populations stored as f - w, lbm_core.cuh): inputs k0 - k0_rest, k1,
+// k2 - k0_rest / 3, outputs 2 (f - f_rest) for the line whose rest state (u = 0, at equilibrium) has k0 = k0_rest
+// (and k1 = 0, k2 = k0_rest / 3: its populations are k0_rest (1/6, 2/3, 1/6)).  From the step above with
+// k0 = k0_rest + d0: S = k0 u^2 + 2u k1 + d2 (the rest k2 cancels against the rest f0 + f+-), 2 df0 = 2 (d0 - S),
+// 2 df-+ = S -+ T.  The small non-equilibrium parts are never added to a number of order w: the float32
+// round-off is that of the deviations, not of the populations.  `neg_rest` = -k0_rest (a literal: with 0 the
+// compiler drops the subtraction, which it may not do for an addition of +0).
+LBM_INLINE void chimera_backward2_shift(float& a0, float& a1, float& a2, const float u, const float u2,
+                                        const float uu, const float neg_rest) {
+    const float d0 = a0, k0 = d0 - neg_rest, S = k0 * uu + (u2 * a1 + a2), T = k0 * u + a1, t = d0 - S;
+    a1 = t + t;
+    a0 = S - T;
+    a2 = S + T;
+}
+// rest k0 of the lines of the three backward passes (scaled by 1/8, 1/4, 1/2 for the scaled steps): products of
+// the 1D rest moments (1, 0, 1/3) of the axes still in moment space and the 1D weights (1/6, 2/3, 1/6) of the
+// axes already turned into populations.  Index by cube position: i = 0, 1, 2 <-> order 0, 1, 2 or c = -1, 0, +1.
+#define LBM_M1(i) ((i) == 0 ? 1.f : ((i) == 1 ? 0.f : 1.f / 3.f))
+#define LBM_W1(i) ((i) == 1 ? 2.f / 3.f : 1.f / 6.f)
+#define LBM_REST_Y(i) (0.25f * LBM_W1((i) / 3) * LBM_M1((i) % 3))
+#define LBM_REST_Z(ij) (0.5f * LBM_W1((ij) / 3) * LBM_W1((ij) % 3))
+
 // Forward chimera step along one axis: populations (f-, f0, f+) -> central moments (k0, k1, k2) about u, in place:
 //   k0 = f- + f0 + f+,  k1 = (f+ - f-) - u k0,  k2 = (f+ + f-) - 2u (f+ - f-) + u^2 k0.
 LBM_INLINE void chimera_forward(float& a0, float& a1, float& a2, const float u) {
@@ -120,7 +142,8 @@ LBM_INLINE void lbm_collide_cell(const long long c, float* RESTRICT f, const uns
     float fj[27];
     lbm_load<ODD>(f, c, N, px, pxy, fj);
 
-    // raw moments m0, m_a, m_ab by a forward chimera-style pass (66 additions): along x the line sums
+    // raw moments of the stored deviations f - w (lbm_core.cuh): dm0 = m0 - 1, m_a, dm_aa = m_aa - 1/3, m_ab
+    // (a != b) -- the weights' own moments are 1, 0, 1/3, 0 -- by a forward chimera-style pass (66 additions): along x the line sums
     // X0 = f- + f0 + f+, X1 = f+ - f-, X2 = f+ + f- of the 9 (y, z) lines, then along y, then along z
     float X0[9], X1[9], X2[9];
 #define LBM_XLINE(l)                                                                   \
@@ -145,8 +168,9 @@ LBM_INLINE void lbm_collide_cell(const long long c, float* RESTRICT f, const uns
     }
     LBM_YLINE(0) LBM_YLINE(1) LBM_YLINE(2)
 #undef LBM_YLINE
-    const float mzz = Y00[0] + Y00[2];
-    const float m0 = mzz + Y00[1], mz = Y00[2] - Y00[0];
+    const float mzz = Y00[0] + Y00[2];  // dm_zz (deviation from 1/3), likewise myy, mxx below
+    const float dm0 = mzz + Y00[1], mz = Y00[2] - Y00[0];
+    const float m0 = 1.f + dm0;  // only where it multiplies u u (the central moments below)
     const float my = (Y01[0] + Y01[2]) + Y01[1], myz = Y01[2] - Y01[0];
     const float myy = (Y02[0] + Y02[2]) + Y02[1];
     const float mx = (Y10[0] + Y10[2]) + Y10[1], mxz = Y10[2] - Y10[0];
@@ -189,7 +213,8 @@ LBM_INLINE void lbm_collide_cell(const long long c, float* RESTRICT f, const uns
     ay += force[N + c] * inv_erho;
     az += force[2 * N + c] * inv_erho;
 #endif
-    // pre-collision second central moments about the velocity shifted by the forces so far (all but F_mu)
+    // pre-collision second central moments about the velocity shifted by the forces so far (all but F_mu);
+    // from the deviations: the diagonal ones are kappa_aa - 1/3 (their equilibrium is 0), the rest kappa_ab
     float vk[6];
     lbm_central_second(m0, mx, my, mz, mxx, myy, mzz, mxy, mxz, myz, mx + 0.5f * ax, my + 0.5f * ay, mz + 0.5f * az, vk);
     const float vkxx = vk[0], vkyy = vk[1], vkzz = vk[2], vkxy = vk[3], vkxz = vk[4], vkyz = vk[5];
@@ -214,7 +239,7 @@ LBM_INLINE void lbm_collide_cell(const long long c, float* RESTRICT f, const uns
         // grad^sym u ~ -3 r_s dev(kappa_2) + (2/3)(1 - m0) I from the pre-collision central moments
         // (nu and r_s include the subgrid viscosity)
         const float kxx = vkxx, kyy = vkyy, kzz = vkzz, kxy = vkxy, kxz = vkxz, kyz = vkyz, tr3 = vtr3;
-        const float iso = (2.f / 3.f) * (1.f - m0);
+        const float iso = (-2.f / 3.f) * dm0;  // (2/3)(1 - m0)
         const float s = -3.f * rs;
         const float sxx = s * (kxx - tr3) + iso, syy = s * (kyy - tr3) + iso, szz = s * (kzz - tr3) + iso;
         const float sxy = s * kxy, sxz = s * kxz, syz = s * kyz;
@@ -240,7 +265,8 @@ LBM_INLINE void lbm_collide_cell(const long long c, float* RESTRICT f, const uns
     // velocity with the half-force shift, Eq. 13
     const float ux = mx + 0.5f * ax, uy = my + 0.5f * ay, uz = mz + 0.5f * az;
 
-    // post-collision central moments (rates 1 except r_s on the deviatoric second order; Guo forcing)
+    // post-collision central moments (rates 1 except r_s on the deviatoric second order; Guo forcing); the
+    // diagonal k2 are deviations from 1/3, which kxx - kyy does not see
     float k2[6];
     lbm_central_second(m0, mx, my, mz, mxx, myy, mzz, mxy, mxz, myz, ux, uy, uz, k2);
     const float kxx = k2[0], kyy = k2[1], kzz = k2[2], kxy = k2[3], kxz = k2[4], kyz = k2[5];
@@ -251,8 +277,10 @@ LBM_INLINE void lbm_collide_cell(const long long c, float* RESTRICT f, const uns
     //   K000 = 1, K100 = ax/2, K120 = K102 = ax/6, K122 = ax/18 (alike for y, z), K110 = om kxy, K101 = om kxz,
     //   K011 = om kyz, K200 = (1 + dxy + dxz)/3, K020 = K200 - dxy, K002 = K200 - dxz, K220 = K202 = K022 = 1/9,
     //   K222 = 1/27, K111 = K112 = K121 = K211 = 0.
-    // (all scaled by 1/8 for the scaled chimera steps)
-    const float k200 = (1.f + dxy + dxz) * (1.f / 24.f), dxy8 = 0.125f * dxy, dxz8 = 0.125f * dxz;
+    // (all scaled by 1/8 for the scaled chimera steps).  They are fed in as deviations from the rest state
+    // (K000 = 1, K200 = 1/3, K220 = 1/9, K222 = 1/27 -> 0; K200 -> (dxy + dxz)/3), and the shifted chimera steps
+    // (chimera_backward2_shift with the rest k0 of each line) return f* - w, which is what is stored.
+    const float k200 = (dxy + dxz) * (1.f / 24.f), dxy8 = 0.125f * dxy, dxz8 = 0.125f * dxz;
     const float hax = 0.0625f * ax, hay = 0.0625f * ay, haz = 0.0625f * az;
     const float sax = ax * (1.f / 48.f), say = ay * (1.f / 48.f), saz = az * (1.f / 48.f);
     const float om8 = 0.125f * om;
@@ -286,22 +314,28 @@ LBM_INLINE void lbm_collide_cell(const long long c, float* RESTRICT f, const uns
         float ro = 1.f / (0.5f + lambda_odd / odd_tau);
         ro = (ro < 1.f && nu_ref < odd_nu_max) ? ro : 1.f;
         const float co = 0.125f * (1.f - ro), rf = 2.f - ro;  // k* = (1 - r_o) k + (2 - r_o) k^F / 2
+        // central moments of the populations: those of the stored deviations (the transform is linear) plus
+        // those of the weights w about u, products of the 1D moments (1, -u, 1/3 + u^2) of (1/6, 2/3, 1/6)
         float kc[27];
         {
             float fr[27];
             lbm_load<ODD>(f, c, N, px, pxy, fr);
             lbm_central_moments(fr, ux, uy, uz, kc);
         }
-        K[0] = 0.125f, K[9] = hax, K[18] = k200;
+        const float wx2 = 1.f / 3.f + uxx, wy2 = 1.f / 3.f + uyy, wz2 = 1.f / 3.f + uzz;
+        kc[19] -= wx2 * uz, kc[11] -= ux * wz2, kc[21] -= wx2 * uy, kc[13] -= ux * uy * uz, kc[5] -= uy * wz2;
+        kc[23] -= wx2 * uy * wz2, kc[15] -= ux * wy2, kc[7] -= wy2 * uz, kc[25] -= wx2 * wy2 * uz;
+        kc[17] -= ux * wy2 * wz2;
+        K[0] = 0.f, K[9] = hax, K[18] = k200;
         K[1] = haz, K[10] = om8 * kxz, K[19] = rf * saz + co * kc[19];
-        K[2] = k200 - dxz8, K[11] = rf * sax + co * kc[11], K[20] = 1.f / 72.f;
+        K[2] = k200 - dxz8, K[11] = rf * sax + co * kc[11], K[20] = 0.f;
         K[3] = hay, K[12] = om8 * kxy, K[21] = rf * say + co * kc[21];
         K[4] = om8 * kyz, K[13] = co * kc[13], K[22] = 0.f;
         K[5] = rf * say + co * kc[5], K[14] = 0.f, K[23] = rf * ay * (1.f / 144.f) + co * kc[23];
-        K[6] = k200 - dxy8, K[15] = rf * sax + co * kc[15], K[24] = 1.f / 72.f;
+        K[6] = k200 - dxy8, K[15] = rf * sax + co * kc[15], K[24] = 0.f;
         K[7] = rf * saz + co * kc[7], K[16] = 0.f, K[25] = rf * az * (1.f / 144.f) + co * kc[25];
-        K[8] = 1.f / 72.f, K[17] = rf * ax * (1.f / 144.f) + co * kc[17], K[26] = 1.f / 216.f;
-#define LBM_BACK_X(l) chimera_backward2(K[l], K[9 + (l)], K[18 + (l)], ux, ux2, uxx);
+        K[8] = 0.f, K[17] = rf * ax * (1.f / 144.f) + co * kc[17], K[26] = 0.f;
+#define LBM_BACK_X(l) chimera_backward2_shift(K[l], K[9 + (l)], K[18 + (l)], ux, ux2, uxx, 0.f - 0.125f * LBM_M1((l) / 3) * LBM_M1((l) % 3));
         LBM_REP9(LBM_BACK_X, 0)
 #undef LBM_BACK_X
     }
@@ -309,24 +343,24 @@ LBM_INLINE void lbm_collide_cell(const long long c, float* RESTRICT f, const uns
     (void)lambda_odd;
     (void)odd_nu_max;
     {
-        K[0] = 0.125f, K[9] = hax, K[18] = k200;  // bc = 00
-        chimera_backward2(K[0], K[9], K[18], ux, ux2, uxx);
+        K[0] = 0.f, K[9] = hax, K[18] = k200;  // bc = 00
+        chimera_backward2_shift(K[0], K[9], K[18], ux, ux2, uxx, -0.125f);
         K[1] = haz, K[10] = om8 * kxz, K[19] = saz;  // 01
         chimera_backward2(K[1], K[10], K[19], ux, ux2, uxx);
-        K[2] = k200 - dxz8, K[11] = sax, K[20] = 1.f / 72.f;  // 02
-        chimera_backward2(K[2], K[11], K[20], ux, ux2, uxx);
+        K[2] = k200 - dxz8, K[11] = sax, K[20] = 0.f;  // 02
+        chimera_backward2_shift(K[2], K[11], K[20], ux, ux2, uxx, -1.f / 24.f);
         K[3] = hay, K[12] = om8 * kxy, K[21] = say;  // 10
         chimera_backward2(K[3], K[12], K[21], ux, ux2, uxx);
         chimera_backward2_k0only(K[4], K[13], K[22], om8 * kyz, ux, uxx);                // 11
         chimera_backward2_k1zero(K[5], K[14], K[23], say, ay * (1.f / 144.f), ux, uxx);  // 12
-        K[6] = k200 - dxy8, K[15] = sax, K[24] = 1.f / 72.f;  // 20
-        chimera_backward2(K[6], K[15], K[24], ux, ux2, uxx);
+        K[6] = k200 - dxy8, K[15] = sax, K[24] = 0.f;  // 20
+        chimera_backward2_shift(K[6], K[15], K[24], ux, ux2, uxx, -1.f / 24.f);
         chimera_backward2_k1zero(K[7], K[16], K[25], saz, az * (1.f / 144.f), ux, uxx);  // 21
-        K[8] = 1.f / 72.f, K[17] = ax * (1.f / 144.f), K[26] = 1.f / 216.f;  // 22
-        chimera_backward2(K[8], K[17], K[26], ux, ux2, uxx);
+        K[8] = 0.f, K[17] = ax * (1.f / 144.f), K[26] = 0.f;  // 22
+        chimera_backward2_shift(K[8], K[17], K[26], ux, ux2, uxx, -1.f / 72.f);
     }
 #endif
-#define LBM_BACK_Y(i) chimera_backward2(K[(i) / 3 * 9 + (i) % 3], K[(i) / 3 * 9 + 3 + (i) % 3], K[(i) / 3 * 9 + 6 + (i) % 3], uy, uy2, uyy);
+#define LBM_BACK_Y(i) chimera_backward2_shift(K[(i) / 3 * 9 + (i) % 3], K[(i) / 3 * 9 + 3 + (i) % 3], K[(i) / 3 * 9 + 6 + (i) % 3], uy, uy2, uyy, 0.f - LBM_REST_Y(i));
     LBM_REP9(LBM_BACK_Y, 0)
 #undef LBM_BACK_Y
     // z pass, each line stored as soon as it is final (fewer live values, fewer spills on the host).  The
@@ -342,7 +376,7 @@ LBM_INLINE void lbm_collide_cell(const long long c, float* RESTRICT f, const uns
     else                                                                        \
         f[opposite_dir(QOF27[i]) * sN + c] = K[i];
 #define LBM_BACK_Z(ij)                                                            \
-    chimera_backward2(K[(ij) * 3], K[(ij) * 3 + 1], K[(ij) * 3 + 2], uz, uz2, uzz); \
+    chimera_backward2_shift(K[(ij) * 3], K[(ij) * 3 + 1], K[(ij) * 3 + 2], uz, uz2, uzz, 0.f - LBM_REST_Z(ij)); \
     LBM_PUT((ij) * 3) LBM_PUT((ij) * 3 + 1) LBM_PUT((ij) * 3 + 2)
     LBM_REP9(LBM_BACK_Z, 0)
 #undef LBM_BACK_Z

@@ -1,6 +1,12 @@
 // Shared pieces of the LBM flow kernels: padded-grid indexing, cell flags, the AA-pattern load/store rules
 // with their boundary rules, the isotropic stencils.  Mirrors couplekit/fluid/reference.py (the spec).
 //
+// Shifted storage: the arrays hold f_j - w_j, not f_j (w_j the D3Q27 weight; as lbmpy's and FluidX3D's
+// "delta" populations).  At low viscosity and low speed the non-equilibrium part of f that carries the viscous
+// stress is ~1e-7 of w_j, below float32 round-off of f itself (docs/precision.md).  Streaming, bounce-back
+// (w_opp j = w_j), halo copies and sum f c are the same for f - w; the collision works on the deviations
+// (lbm_collide.cu) and the pressure update takes 1 - sum f = -sum (f - w).
+//
 // Grid: every field has one ghost layer: interior nx*ny*nz, padded Px = nx+2, Py = ny+2, Pz = nz+2, linear
 // padded index x + Px*(y + Py*z).  Distributions are SoA: slot j of cell c is f[j*N + c], N = Px*Py*Pz.
 //

@@ -11,7 +11,7 @@ The D3Q7 phase field lives in :mod:`.phasefield` (its own module and owner).
 
 from .grid import INFLOW, OUTFLOW, WALL, Boundaries, Face
 from .kernel_ops import KernelOps
-from .reference import ReferenceOps, equilibrium
+from .reference import ReferenceOps, equilibrium, from_stored, to_stored
 from .solver import FluidParams, FluidSolver, OddFloorInactiveWarning
 
 __all__ = [
@@ -23,6 +23,8 @@ __all__ = [
     "OddFloorInactiveWarning",
     "ReferenceOps",
     "equilibrium",
+    "from_stored",
+    "to_stored",
     "WALL",
     "INFLOW",
     "OUTFLOW",

@@ -6,6 +6,14 @@ chimera back-transform). Every method has the signature of the matching :class:`
 method. Arrays are padded (see :mod:`couplekit.fluid.grid`): distributions ``f (27, Pz, Py, Px)``, vectors
 ``(3, Pz, Py, Px)``, scalars ``(Pz, Py, Px)``, all float32; flags ``uint8``.
 
+**Shifted storage.** The arrays hold ``f_j − w_j`` (w_j the D3Q27 weight), not ``f_j``, as lbmpy and FluidX3D
+do: the populations are close to w_j and, at low viscosity and low speed, the non-equilibrium part that
+carries the viscous stress is ~1e-7 of them, below the float32 round-off of ``f_j`` itself (docs/precision.md).
+:func:`to_stored` / :func:`from_stored` convert. Here :meth:`ReferenceOps.load` returns the full ``f_j``
+(float64, the shift added back exactly) and :meth:`ReferenceOps.store` subtracts it again in float64, so every
+stage below is written for the full populations; the rules of streaming, bounce-back (w_ĵ = w_j) and the
+ghosts are the same for ``f − w`` and ``f``.
+
 Streaming is the AA pattern (Bailey et al. 2009; lbm-method note §1d) with one copy of f. At an even
 ``parity`` the populations are stored in natural order ``F[j][x] = f_j(x)``; the step collides locally and
 writes ``F[ĵ][x] = f*_j``. At an odd parity ``f_j(x) = F[ĵ][x − c_j]`` (pull) and the step writes
@@ -144,6 +152,23 @@ def equilibrium(u: np.ndarray) -> np.ndarray:
     return np.stack([psi(C27[j, 0], u[0]) * psi(C27[j, 1], u[1]) * psi(C27[j, 2], u[2]) for j in range(27)])
 
 
+def _weights(ndim: int) -> np.ndarray:
+    return W27.reshape((27,) + (1,) * (ndim - 1))
+
+
+def to_stored(f: np.ndarray) -> np.ndarray:
+    """Stored form ``f − w`` (float32) of full populations f (27, ...): what the fluid arrays hold (shifted
+    storage, module docstring); the difference is taken in float64."""
+    f = np.asarray(f, np.float64)
+    return (f - _weights(f.ndim)).astype(np.float32)
+
+
+def from_stored(stored: np.ndarray) -> np.ndarray:
+    """Full populations f = stored + w (float64, 27, ...) of a stored array (``FluidSolver.f``)."""
+    stored = np.asarray(stored, np.float64)
+    return stored + _weights(stored.ndim)
+
+
 class ReferenceOps:
     """NumPy implementation of the fluid stages (see the module docstring for layouts and rules).
 
@@ -176,9 +201,10 @@ class ReferenceOps:
     # ------------------------------------------------------------------------------------------ helpers
     @staticmethod
     def load(f: np.ndarray, flags: np.ndarray, velocity: np.ndarray, parity: int) -> np.ndarray:
-        """The populations f_j(x, t) (27, nz, ny, nx) of every interior cell under the AA read rule of ``parity``."""
+        """The full populations f_j(x, t) (27, nz, ny, nx, float64) of every interior cell under the AA read rule of
+        ``parity``, from the stored f − w (the read rules act on the stored values; w is added at the end)."""
         if parity % 2 == 0:
-            return interior(f).astype(np.float64)
+            return interior(f).astype(np.float64) + _weights(4)
         out = np.empty((27,) + interior(flags).shape)
         out[0] = interior(f[0])
         for j in range(1, 27):
@@ -188,11 +214,13 @@ class ReferenceOps:
             wall_u = shifted(velocity, -c).astype(np.float64)
             bounced = interior(f[j]) + 6.0 * W27[j] * (c[0] * wall_u[0] + c[1] * wall_u[1] + c[2] * wall_u[2])
             out[j] = np.where((nb_flag == FLUID) | (nb_flag == OUTFLOW), pulled, bounced)
-        return out
+        return out + _weights(4)
 
     @staticmethod
     def store(f: np.ndarray, flags: np.ndarray, velocity: np.ndarray, parity: int, fstar: np.ndarray) -> None:
-        """Write post-collision populations of the interior fluid cells under the AA write rule of ``parity``."""
+        """Write post-collision populations ``fstar`` (full f*, float64) of the interior fluid cells under the AA
+        write rule of ``parity``, as f* − w (shifted storage, formed in float64)."""
+        fstar = np.asarray(fstar, np.float64) - _weights(4)
         fluid = interior(flags) == FLUID
         if parity % 2 == 0:
             for j in range(27):

@@ -44,7 +44,7 @@ from .grid import (
     slip_wall_layers,
 )
 from .kernel_ops import KernelOps
-from .reference import ReferenceOps, equilibrium
+from .reference import ReferenceOps, equilibrium, to_stored
 
 
 def _ghost_faces(idx: np.ndarray, pshape: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray]:
@@ -277,8 +277,10 @@ class FluidSolver:
         u0 = np.where(self._fluid_host[None], u0, 0.0)
         vel = wall_u.astype(np.float32)
         vel[(slice(None), *INTERIOR)] = np.where(self._fluid_host[None], u0, vel[(slice(None), *INTERIOR)])
+        # stored as f - w (shifted storage, reference.py); 0 in the ghost / wall cells, which are written before
+        # they are read
         f = np.zeros((27,) + pshape, np.float32)
-        f[(slice(None), *INTERIOR)] = equilibrium(u0)  # parity 0: natural order
+        f[(slice(None), *INTERIOR)] = to_stored(equilibrium(u0))  # parity 0: natural order
         self.f = backend.asarray(f)
         self.velocity = backend.asarray(vel)
         p0 = np.zeros(pshape, np.float32)
@@ -552,7 +554,10 @@ class FluidSolver:
     )  # fmt: skip
 
     def state(self) -> dict[str, np.ndarray]:
-        """Everything a bitwise-exact restart needs (host NumPy copies of padded arrays, plus counters)."""
+        """Everything a bitwise-exact restart needs (host NumPy copies of padded arrays, plus counters).
+
+        ``f`` is the stored form f − w of the populations (shifted storage; :func:`couplekit.fluid.from_stored`
+        gives the full f), as :attr:`f` itself is."""
         out = {k: self.backend.to_host(getattr(self, k)) for k in self._STATE_ARRAYS if getattr(self, k) is not None}
         out["step_count"] = np.array(self.step_count, np.int64)
         out["gamma"] = np.array(self.gamma, np.float64)

@@ -1,6 +1,6 @@
 """HDF5 checkpoints: the scene, the solver states and the run counters, for an exact restart.
 
-Layout: attribute ``format`` = "couplekit-checkpoint", ``version`` = 2, ``scene`` (the scene dict as JSON),
+Layout: attribute ``format`` = "couplekit-checkpoint", ``version`` = 3, ``scene`` (the scene dict as JSON),
 ``meta`` (JSON: step, frame, time, backend, ...), ``checksum`` (SHA-256 of the scene and meta text); one group
 per solver (``fluid``, ``sand``, ``coupler``, ``emission`` for the accumulators of sand-carrying inflows,
 :mod:`couplekit.sand.emission`, and ``scheduler`` for a multi-rate scheduler's state) holding its
@@ -13,6 +13,11 @@ crash never leaves a half-written checkpoint in place.
 :class:`CheckpointError` naming the file and what is wrong: not HDF5, not a couplekit checkpoint, another
 version, the scene or metadata missing or not JSON, a dataset whose bytes do not match its checksum (a file
 changed after it was written). Version-1 checkpoints (before checksums) still load, unverified.
+
+Version 3 stores the fluid populations as the solver holds them since the shifted storage (``fluid/f`` holds
+f − w, :mod:`couplekit.fluid.reference`); versions 1 and 2 stored the full f, and :func:`load_checkpoint`
+converts them (f − w formed in float64, rounded to float32), so such a run restarts, though not bitwise
+identically to the run that wrote it: the populations are rounded once more, ~1e-8 (docs/precision.md).
 """
 
 from __future__ import annotations
@@ -29,9 +34,22 @@ import numpy as np
 __all__ = ["save_checkpoint", "load_checkpoint", "CheckpointError", "FORMAT", "dataset_checksum"]
 
 FORMAT = "couplekit-checkpoint"
-VERSION = 2
-READABLE = (1, 2)
-"""Versions :func:`load_checkpoint` reads (1: no checksums)."""
+VERSION = 3
+READABLE = (1, 2, 3)
+"""Versions :func:`load_checkpoint` reads (1: no checksums; 1 and 2: full populations, converted on load)."""
+SHIFTED_SINCE = 3
+"""First version whose ``fluid/f`` holds f − w (shifted storage)."""
+
+
+def _shift_full_populations(states: dict[str, dict[str, np.ndarray]]) -> None:
+    """Versions before :data:`SHIFTED_SINCE`: the stored full f (27, ...) of the fluid becomes f − w."""
+    fluid = states.get("fluid")
+    if fluid is None or "f" not in fluid:
+        return
+    from ..lattice import W27
+
+    f = np.asarray(fluid["f"], np.float64)
+    fluid["f"] = (f - W27.reshape((27,) + (1,) * (f.ndim - 1))).astype(np.float32)
 
 
 class CheckpointError(ValueError):
@@ -136,4 +154,6 @@ def load_checkpoint(path: str | Path) -> tuple[dict, dict[str, dict[str, np.ndar
                             "damaged after it was written; resume from another checkpoint"
                         )
                 states[name][k] = a
+    if version < SHIFTED_SINCE:
+        _shift_full_populations(states)
     return scene, states, meta

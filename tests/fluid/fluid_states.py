@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from couplekit.fluid.grid import Boundaries, Face, build_flags, outflow_lists, padded_shape, periodic_lists
-from couplekit.fluid.reference import equilibrium
+from couplekit.fluid.reference import equilibrium, to_stored
 
 SHAPE = (6, 7, 9)  # (nz, ny, nx) interior
 
@@ -25,7 +25,7 @@ BOUNDARY_SETS = {
 def random_state(seed: int, boundaries: Boundaries, shape=SHAPE, obstacle: bool = True) -> dict[str, np.ndarray]:
     """Every array a fluid stage reads, float32 and padded, drawn from ``seed``.
 
-    f is an equilibrium at a random velocity (|u| ≲ 0.05) plus 1e-3 noise; φ a diffuse sphere (width 4) with
+    f (stored as f − w) is an equilibrium at a random velocity (|u| ≲ 0.05) plus 1e-3 noise; φ a diffuse sphere (width 4) with
     1e-2 noise, so a little outside [0, 1] as happens near interfaces; ε in [0.6, 1]; small pressure,
     chemical potential and forces.
     """
@@ -42,7 +42,7 @@ def random_state(seed: int, boundaries: Boundaries, shape=SHAPE, obstacle: bool 
     ghost, image = periodic_lists(shape, boundaries)
     out_ghost, out_src = outflow_lists(shape, flags)
     state = {
-        "f": f.astype(np.float32),
+        "f": to_stored(f),  # the fluid arrays hold f - w (shifted storage)
         "flags": flags,
         "velocity": velocity.astype(np.float32),
         "phi": _smooth_phi(rng, pshape).astype(np.float32),

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from couplekit.backend import get_backend
-from couplekit.fluid import KernelOps, ReferenceOps, equilibrium
+from couplekit.fluid import KernelOps, ReferenceOps, equilibrium, from_stored, to_stored
 from couplekit.fluid.grid import Boundaries, build_flags, padded_shape
 from couplekit.lattice import C27, OPP27
 
@@ -27,7 +27,7 @@ def _state(seed):
     u = rng.uniform(-0.08, 0.08, (3,) + pshape)
     f = equilibrium(u) * (1.0 + 0.02 * rng.standard_normal((27,) + pshape)) + 0.002 * rng.standard_normal(pshape)
     flags, _, _ = build_flags(SHAPE, Boundaries())
-    return f.astype(np.float32), flags, np.zeros((3,) + pshape, np.float32), np.zeros(pshape, np.float32)
+    return to_stored(f), flags, np.zeros((3,) + pshape, np.float32), np.zeros(pshape, np.float32)
 
 
 def _collide(ops, f, flags, vel, pbar, nu, g):
@@ -35,7 +35,8 @@ def _collide(ops, f, flags, vel, pbar, nu, g):
     # parity 0: purely local, the post-collision f*_j is stored in slot opp(j) of the same cell
     ops.collide_stream(f, flags, vel, None, None, None, None, pbar, 0, 1.0, 1.0, nu, nu, *g)
     inner = (slice(None), slice(1, -1), slice(1, -1), slice(1, -1))
-    return fpre[inner].astype(np.float64), f[OPP27][inner].astype(np.float64), vel[inner].astype(np.float64)
+    # full populations (the arrays hold f - w)
+    return from_stored(fpre)[inner], from_stored(f[OPP27])[inner], vel[inner].astype(np.float64)
 
 
 @pytest.fixture(params=["numpy", "cpu"])

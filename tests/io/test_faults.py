@@ -13,7 +13,9 @@ import pytest
 
 from couplekit.cli import main
 from couplekit.io import CheckpointError, load_checkpoint
+from couplekit.io.checkpoint import dataset_checksum
 from couplekit.io.outputs import OutputFolderError, default_output, prepare_output, run_files
+from couplekit.lattice import W27
 from couplekit.scene import Scene
 from couplekit.simulation import Simulation
 
@@ -91,10 +93,43 @@ def test_metadata_that_is_not_json_is_named_in_an_unchecksummed_file(checkpoint,
     with h5py.File(path, "r+") as f:
         f.attrs["version"] = 1
         del f.attrs["checksum"]
+        full = f["fluid"]["f"][()].astype(np.float64) + W27.reshape(27, 1, 1, 1)  # versions 1, 2: full f
+        del f["fluid"]["f"]
+        f["fluid"].create_dataset("f", data=full.astype(np.float32))
     assert Simulation.load(path, backend="cpu", threads=1, log=None).step_count == 3
     with h5py.File(path, "r+") as f:
         f.attrs["meta"] = "[1, 2"
     _refused(path, "metadata is not valid JSON")
+
+
+def _as_version_2(src: Path, dst: Path) -> Path:
+    """The checkpoint as version 2 wrote it: full populations f in ``fluid/f`` (now f − w), checksummed."""
+    path = _copy(src, dst)
+    with h5py.File(path, "r+") as f:
+        f.attrs["version"] = 2
+        full = (f["fluid"]["f"][()].astype(np.float64) + W27.reshape(27, 1, 1, 1)).astype(np.float32)
+        del f["fluid"]["f"]
+        ds = f["fluid"].create_dataset("f", data=full)
+        ds.attrs["sha256"] = dataset_checksum(full)
+    return path
+
+
+def test_a_version_2_checkpoint_with_full_populations_still_restarts(checkpoint, tmp_path):
+    """Shifted storage (checkpoint version 3): a version-2 file's full f is converted to f − w on load, and the
+    run continues as the one restarted from the version-3 file, to float32 round-off of the conversion
+    (f rounded at ~6e-8 of w, once)."""
+    path = _as_version_2(checkpoint, tmp_path / "v2.h5")
+    _, states, _ = load_checkpoint(path)
+    _, states3, _ = load_checkpoint(checkpoint)
+    np.testing.assert_allclose(states["fluid"]["f"], states3["fluid"]["f"], rtol=0, atol=1e-7)
+    assert np.abs(states3["fluid"]["f"]).max() < 0.1  # the version-3 file holds f - w (|f - w| << w)
+    old, new = (Simulation.load(p, backend="cpu", threads=1, log=None) for p in (path, checkpoint))
+    assert old.step_count == new.step_count == 3
+    old.step(3)
+    new.step(3)
+    u_old, u_new = (s.fluid.fields()["velocity"] for s in (old, new))
+    assert np.abs(u_new).max() > 1e-5  # the fluid moves, so the comparison means something
+    np.testing.assert_allclose(u_old, u_new, rtol=0, atol=1e-6)
 
 
 def test_files_that_are_not_checkpoints(tmp_path):
