@@ -397,7 +397,9 @@ def build_sand(scene: Scene, backend: Backend, log: Callable[[str], Any]):
         sdfs.append(_container_sdf(b.geometry.solver_shape(dom).bounds(), b.container_until))
         frictions.append(0.0)
     if sdfs:
-        collider = SdfCollider.union(sdfs, frictions, mode="separate", moving=bool(containers))
+        # resampled every step only until the last container is gone (then the SDF is the obstacles' alone)
+        until = max((b.container_until for b in containers), default=float("inf"))
+        collider = SdfCollider.union(sdfs, frictions, mode="separate", moving=bool(containers), moving_until=until)
     auto = sch.kind == "subcycle" and sch.substeps == "auto"
     # with substeps = "auto" the scheduler sets the sand's step every step; it starts at the smallest it may take
     dt = scene.time.dt / sch.max_substeps if auto else sand_step(sch.kind, scene.time.dt, sch.substeps, sch.sand_every)

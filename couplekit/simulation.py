@@ -597,7 +597,7 @@ class Simulation:
         the fixed scale 0 to r_max with retention, else the wet/dry classification S_r,p > (1 − ε_max)/2."""
         if self._preview_colour is None:
             choice = self.scene.outputs.preview_colour
-            wet_possible = self.coupler is not None and self.fluid is not None and self.fluid.phi is not None
+            wet_possible = self.coupler is not None and self.coupler.two_phase
             mode = "wetness" if choice == "wetness" or (choice == "auto" and wet_possible) else "speed"
             r_max = (
                 self.coupler.params.r_max
@@ -631,6 +631,7 @@ class Simulation:
         if o.surface and (o.surface_format or o.vtk):
             self._write_surface(out, indexes, frame, t)
         if o.preview and frame % o.preview_every == 0 and not self._preview_failed:
+            colour_by, moisture_max = self.preview_colouring()
             try:
                 render_preview(
                     out / f"preview_{frame:04d}.png",
@@ -640,8 +641,8 @@ class Simulation:
                     parts,
                     title=f"{self.scene.name}  frame {frame}  t = {t:.4g} s",
                     speed_range=self.preview_scale(),
-                    colour_by=self.preview_colouring()[0],
-                    moisture_max=self.preview_colouring()[1],
+                    colour_by=colour_by,
+                    moisture_max=moisture_max,
                 )
             except Exception as exc:  # a missing OpenGL/EGL library must not stop the simulation
                 self._preview_failed = True

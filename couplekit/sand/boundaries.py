@@ -152,7 +152,8 @@ class SdfCollider:
 
     sdf(points, t): points (N, 3) in metres, t the simulated time; returns (N,) distances, negative inside
     the solid.  velocity: the solid's (uniform) velocity, used by the boundary condition.  moving: resample
-    every step (otherwise once).
+    every step (otherwise once); ``moving_until``: the time after which the SDF no longer changes, so the
+    solver resamples it until its first sample at or after that time and then stops (default: never stops).
     """
 
     sdf: Callable[[np.ndarray, float], np.ndarray]
@@ -160,6 +161,7 @@ class SdfCollider:
     friction: float = 0.0
     velocity: Sequence[float] = (0.0, 0.0, 0.0)
     moving: bool = False
+    moving_until: float = float("inf")
     _params: np.ndarray = field(init=False, repr=False)
     _parts: tuple = field(default=(), init=False, repr=False)
 
@@ -178,6 +180,7 @@ class SdfCollider:
         mode: str = "separate",
         velocity: Sequence[float] = (0.0, 0.0, 0.0),
         moving: bool = False,
+        moving_until: float = float("inf"),
     ) -> SdfCollider:
         """One collider of several solids (SDF the minimum of theirs), each with its own Coulomb friction: at a
         node the friction of the solid whose SDF is smallest there (:meth:`sample`). With equal frictions it is
@@ -191,10 +194,15 @@ class SdfCollider:
         def sdf(points, t):
             return np.min([np.asarray(s(points, t), dtype=np.float64) for s in sdfs], axis=0)
 
-        collider = cls(sdf, mode, frictions[0] if len(set(frictions)) == 1 else max(frictions), velocity, moving)
+        friction = frictions[0] if len(set(frictions)) == 1 else max(frictions)
+        collider = cls(sdf, mode, friction, velocity, moving, moving_until)
         if len(set(frictions)) > 1:
             collider._parts = tuple(zip(sdfs, frictions, strict=True))
         return collider
+
+    def changes_after(self, t: float) -> bool:
+        """Whether a sample taken at time ``t`` may be out of date later (a moving SDF not yet at rest)."""
+        return self.moving and t < self.moving_until
 
     @property
     def per_node_friction(self) -> bool:

@@ -337,7 +337,7 @@ class SandSolver:
                 moved = True
         if moved:
             self._upload_colliders()
-        if self.sdf_collider is not None and self.sdf_collider.moving:
+        if self.sdf_collider is not None and self.sdf_collider.changes_after(self._sdf_time):
             self._sample_sdf()
 
     def step(self, n: int = 1) -> None:
@@ -446,6 +446,7 @@ class SandSolver:
     def _sample_sdf(self) -> None:
         pts = node_positions(self.shape, self.dx)
         phi, mu = self.sdf_collider.sample(pts, self.time)
+        self._sdf_time = self.time  # when this sample was taken (SdfCollider.changes_after)
         self._sdf = self.backend.asarray(np.asarray(phi, dtype=np.float64).reshape(self.shape), np.float32)
         self._sdf_friction = None if mu is None else self.backend.asarray(mu.reshape(self.shape), np.float32)
 

@@ -203,3 +203,31 @@ def test_moving_colliders_push_the_sand(cpu):
     vn = (n * f["velocity"]).sum(axis=0)
     sel = (phi <= 0) & (f["mass"] > 0) & (x > 0) & (x < 19) & (y > 0) & (y < 11) & (z > 0) & (z < 11)
     assert sel.sum() > 10 and np.all(vn[sel] >= -1e-6)
+
+
+def test_moving_sdf_collider_is_resampled_until_it_comes_to_rest(cpu):
+    """SdfCollider(moving=True, moving_until=T): sampled at construction and after every step while the last
+    sample was taken before T, once at or after T (the state at rest), then never again; without
+    ``moving_until`` every step. The wall at x = 0.05 m is removed at T (the container of
+    ``bodies[].container_until``): after T the sampled SDF is the one without it."""
+    from couplekit.sand import SdfCollider
+
+    dx, dt, until = 0.01, 2e-4, 5.5 * 2e-4
+    calls: list[float] = []
+
+    def wall(p, t):
+        calls.append(t)
+        return p[:, 0] - 0.05 if t < until else np.full(p.shape[0], 1e3)
+
+    body = seed_box((0.06, 0.03, 0.02), (0.1, 0.07, 0.05), dx, ppc=2)
+    sol = SandSolver(cpu, (8, 10, 16), dx, dt, SandParams(), body.x, body.volume,
+                     sdf_collider=SdfCollider(wall, "separate", moving=True, moving_until=until))  # fmt: skip
+    sol.step(10)
+    # at construction (t = 0) and after steps 1..6 (t = 6 dt is the first sample at or after T)
+    assert len(calls) == 7 and calls[-1] == pytest.approx(6 * dt) and calls[-2] < until
+    assert float(sol.backend.to_host(sol._sdf).min()) > 1.0  # the wall is gone from the sampled SDF
+    calls.clear()
+    always = SandSolver(cpu, (8, 10, 16), dx, dt, SandParams(), body.x, body.volume,
+                        sdf_collider=SdfCollider(wall, "separate", moving=True))  # fmt: skip
+    always.step(10)
+    assert len(calls) == 11
