@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import copy
 
+import numpy as np
+
 from ..assembly import CouplingUnavailableError
 from ..effect_memory import effect_memory
 from .memory import allocated_summary
@@ -157,15 +159,6 @@ def measure(data: dict, backend: str = "cpu", steps: int = 10, repeats: int = 3)
     }
 
 
-def _quantile(xs: list[float], q: float) -> float:
-    """Linear-interpolated quantile of ``xs`` (NumPy's default method)."""
-    ys = sorted(xs)
-    pos = q * (len(ys) - 1)
-    lo = int(pos)
-    hi = min(lo + 1, len(ys) - 1)
-    return ys[lo] + (pos - lo) * (ys[hi] - ys[lo])
-
-
 def median_interval(xs: list[float], level: float = 0.95) -> tuple[float, float]:
     """Distribution-free confidence interval of the median: the order statistics x_(k), x_(n+1-k) with the
     largest k for which P(Binomial(n, 1/2) < k) ≤ (1 − level)/2 (the whole range for fewer than 6 values)."""
@@ -186,12 +179,12 @@ def ratio_summary(block_ratios: list[float]) -> dict:
     """Median, quartiles, extremes and the 95 % confidence interval of the median of the per-pair on/off
     time ratios, and whether the cost is resolved: it is not when that interval contains 1.0 (the scatter of
     the pairs, over their number, is larger than the effect's own size |median − 1|)."""
-    med = _quantile(block_ratios, 0.5)
+    med = float(np.quantile(block_ratios, 0.5))
     lo, hi = median_interval(block_ratios)
     return {
         "ratio_median": med,
-        "ratio_q1": _quantile(block_ratios, 0.25),
-        "ratio_q3": _quantile(block_ratios, 0.75),
+        "ratio_q1": float(np.quantile(block_ratios, 0.25)),
+        "ratio_q3": float(np.quantile(block_ratios, 0.75)),
         "ratio_min": min(block_ratios),
         "ratio_max": max(block_ratios),
         "ratio_ci95": [lo, hi],
@@ -259,7 +252,7 @@ def measure_pair(
     for state, (scene, sim) in built.items():
         blocks = stages[state]
         res[state] = {
-            "s_per_step": _quantile(times[state], 0.5),
+            "s_per_step": float(np.quantile(times[state], 0.5)),
             "stages_ms_per_step": {k: 1e3 * sum(b.get(k, 0.0) for b in blocks) / len(blocks) for k in blocks[0]},
             **_memory(scene, sim),
         }
@@ -277,7 +270,7 @@ def stage_cost(pair: dict, own: tuple[str, ...]) -> dict:
         for a, b, t in zip(on, off, t_off, strict=True)
     ]
     lo, hi = median_interval(fr)
-    return {"stages": list(own), "fraction_median": _quantile(fr, 0.5), "fraction_ci95": [lo, hi],
+    return {"stages": list(own), "fraction_median": float(np.quantile(fr, 0.5)), "fraction_ci95": [lo, hi],
             "resolved": not (lo <= 0.0 <= hi)}  # fmt: skip
 
 
