@@ -112,12 +112,27 @@ def run_case(radius_cells: float, xi: float, t_end: float, backend: str) -> dict
     }
 
 
+def radius_and_width(text: str) -> tuple[float, float]:
+    """An ``--also`` case R:XI (radius in cells, interface width) as floats; argparse reports a bad one."""
+    try:
+        r, xi = (float(v) for v in text.split(":"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected RADIUS_CELLS:WIDTH, e.g. 1.74:8, got {text!r}") from None
+    if not (r > 0 and xi > 0):
+        raise argparse.ArgumentTypeError(f"radius and width must be > 0, got {text!r}")
+    return r, xi
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--radii", type=float, nargs="+", default=[1.74, 2.0, 2.4, 3.0])
     ap.add_argument("--widths", type=float, nargs="+", default=[4.0])
     ap.add_argument(
-        "--also", nargs="*", default=["1.74:8"], help="extra R:XI cases (default the small variant's 1.74:8)"
+        "--also",
+        nargs="*",
+        type=radius_and_width,
+        default=[(1.74, 8.0)],
+        help="extra R:XI cases (default the small variant's 1.74:8)",
     )
     ap.add_argument(
         "--time",
@@ -131,7 +146,7 @@ def main() -> None:
     results = []
     print("r (cells)  xi   centre - Archimedes (cells)  (radii)   lowest bottom  surface   wall s")
     cases = [(r, xi) for r in a.radii for xi in a.widths]
-    cases += [(float(c.split(":")[0]), float(c.split(":")[1])) for c in a.also]
+    cases += list(a.also)
     for r, xi in cases:
         res = run_case(r, xi, a.time, a.backend)
         results.append(res)
