@@ -545,7 +545,7 @@ def build_scheduler(scene: Scene, fluid, sand, coupler, *, timing: bool = True, 
 _FLUID_FLOATS_PER_CELL = 27 + 3 + 3 + 1 + 1  # f, velocity, wall velocity, p, pbar
 _PHASE_FLOATS_PER_CELL = 7 + 1 + 3 + 1 + 1  # h, phi, grad phi, mu, source term (an upper bound: mu only
 # with surface tension, the source term only in coupled scenes with it on; effect_memory counts them exactly)
-_SAND_FLOATS_PER_NODE = 1 + 3 + 1 + 3 + 3 + 1  # mass, momentum, volume, velocity, f_ext, sdf
+_SAND_FLOATS_PER_NODE = 1 + 3 + 1 + 1  # mass, momentum (overwritten by the velocity: SandSolver.grid_v), volume, sdf
 _SAND_FLOATS_PER_PARTICLE = 3 + 3 + 9 + 9 + 6 + 1 + 1 + 1 + 1 + 1  # x v C F tau q vc saturation mass volume
 
 

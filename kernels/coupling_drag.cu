@@ -4,7 +4,7 @@
 //
 // Called between the MPM P2G and the MPM grid update.  One pass over the interior cells:
 //   rho     = rho_l + (rho_h - rho_l) clamp(phi)             (lattice density; rho_h when CK_TWO_PHASE=0)
-//   F_b     = -V_cell eps_s rho g                           (Eq. 31, SI newtons) -> written to f_ext
+//   F_b     = -V_cell eps_s rho g                           (Eq. 31, SI newtons) -> dt F_b added to (mv)_i
 //   v*      = ((mv)_i + dt F_b) / m_i + dt g                 (sand velocity after the explicit forces, SI;
 //                                                             the elastic impulse is already in (mv)_i)
 //   in lattice units (V_cell = 1, mass_scale = kg per lattice mass, velocity_scale = m/s per lattice
@@ -23,9 +23,9 @@
 //   backward Euler on the exchange, implicit in |u - v| too:   r' = r* / (1 + k |r'|),  k = dt beta (1/m_s + 1/m_f)
 //           |r'| = 2 |r*| / (1 + sqrt(1 + 4 k |r*|)),  r* = u* - v*
 //   J       = m_s m_f / (m_s + m_f) (r* - r')               (impulse on the sand; the fluid gets -J)
-// Outputs: (mv)_i += J (SI), force = -J / dt_lattice (lattice force density for the fluid's forcing term),
-// f_ext = F_b.  Nodes without sand mass, or whose cell is not a FLUID cell (flags != 0), get f_ext = 0 and
-// force = 0 and keep their momentum: there is no fluid there to exchange momentum with (a reaction written
+// Outputs: (mv)_i += J + dt F_b (SI; the grid update then divides by m_i and adds dt g), force = -J / dt_lattice
+// (lattice force density for the fluid's forcing term).  Nodes without sand mass, or whose cell is not a FLUID
+// cell (flags != 0), get force = 0 and keep their momentum: there is no fluid there to exchange momentum with (a reaction written
 // into an obstacle cell would be lost).  Sand spilling (B-spline weights) into obstacle cells therefore
 // feels no buoyancy there; keep fluid obstacles and sand colliders on the same cells.
 // variants: CK_TWO_PHASE=0,1
@@ -45,7 +45,7 @@ DEVICE float coupling_drag_fraction(const float kr) {
 
 KERNEL void coupling_drag_buoyancy(
     const long long n, const float* RESTRICT grid_m /* size: nx * ny * nz */,
-    float* RESTRICT grid_mv /* size: 3 * nx * ny * nz */, float* RESTRICT f_ext /* size: 3 * nx * ny * nz */,
+    float* RESTRICT grid_mv /* size: 3 * nx * ny * nz */,
     float* RESTRICT force /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
     const float* RESTRICT u /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */, const float* RESTRICT phi /* size >= 1 */,
     const float* RESTRICT eps_sand /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
@@ -100,12 +100,9 @@ KERNEL void coupling_drag_buoyancy(
         force[c] = -Jx * inv_dtl;
         force[N + c] = -Jy * inv_dtl;
         force[2 * N + c] = -Jz * inv_dtl;
-        f_ext[i] = fbx;
-        f_ext[ncell + i] = fby;
-        f_ext[2 * ncell + i] = fbz;
-        grid_mv[i] += Jx * momentum_scale;
-        grid_mv[ncell + i] += Jy * momentum_scale;
-        grid_mv[2 * ncell + i] += Jz * momentum_scale;
+        grid_mv[i] += Jx * momentum_scale + dt * fbx;
+        grid_mv[ncell + i] += Jy * momentum_scale + dt * fby;
+        grid_mv[2 * ncell + i] += Jz * momentum_scale + dt * fbz;
     }
 #if !CK_TWO_PHASE
     (void)phi;

@@ -1,10 +1,15 @@
 // MPM grid update (paper 000 Eqs. 26, 29; notes Secs. 1.3-1.4): node velocity from momentum, explicit
 // forces, then boundary conditions.  One thread per node; n = nx*ny*nz.
 //
-//   v_i = (mv)_i / m_i + dt (g + f_ext,i / m_i)      (m_i > 0; empty nodes get v = 0)
+//   v_i = (mv)_i / m_i + dt g      (m_i > 0; empty nodes get v = 0)
 //
-// f_ext is a per-node force (N) supplied by the caller: zeros for dry sand, drag + buoyancy (Eq. 26) when
-// coupled to the fluid.  The elastic force is already in (mv)_i (fused P2G).
+// The elastic force is already in (mv)_i (fused P2G), and so are the coupling's forces: the drag impulse and
+// dt times the buoyancy (Eq. 26), added by coupling_drag_buoyancy between P2G and this update.  No node
+// force field is kept (12 B per cell less; issue 14's memory budget).
+//
+// In place: grid_v may be the same array as grid_mv (SandSolver allocates one array for both): each node's
+// three momentum components are read before its velocity is written, and no other node's are read, so the
+// two pointers carry no RESTRICT.
 //
 // Boundary conditions act on the velocity relative to the boundary, v_rel = v - v_obj(x_i), with n the
 // outward normal of the solid (pointing into the sand):
@@ -115,8 +120,8 @@ DEVICE float mpm_collider_sdf(const float* RESTRICT c, const float px, const flo
     return phi;
 }
 
-KERNEL void mpm_grid_update(const long long n, const float* RESTRICT grid_m, const float* RESTRICT grid_mv,
-                            const float* RESTRICT f_ext, float* RESTRICT grid_v, const int nx, const int ny,
+KERNEL void mpm_grid_update(const long long n, const float* RESTRICT grid_m, const float* grid_mv,
+                            float* grid_v, const int nx, const int ny,
                             const int nz, const float dx, const float dt, const float gx, const float gy,
                             const float gz, const int bound, const float* RESTRICT walls,
                             const float* RESTRICT colliders, const int ncolliders, const float* RESTRICT sdf,
@@ -129,9 +134,9 @@ KERNEL void mpm_grid_update(const long long n, const float* RESTRICT grid_m, con
         float vx = 0.f, vy = 0.f, vz = 0.f;
         if (m > 0.f) {
             const float inv_m = 1.f / m;
-            vx = (grid_mv[i] + dt * f_ext[i]) * inv_m + dt * gx;
-            vy = (grid_mv[ncell + i] + dt * f_ext[ncell + i]) * inv_m + dt * gy;
-            vz = (grid_mv[2 * ncell + i] + dt * f_ext[2 * ncell + i]) * inv_m + dt * gz;
+            vx = grid_mv[i] * inv_m + dt * gx;
+            vy = grid_mv[ncell + i] * inv_m + dt * gy;
+            vz = grid_mv[2 * ncell + i] * inv_m + dt * gz;
             // domain walls: walls[2*face] = mode, walls[2*face+1] = friction; faces -x,+x,-y,+y,-z,+z
             if (x < bound) mpm_apply_bc(vx, vy, vz, 1.f, 0.f, 0.f, (int)walls[0], walls[1], 0.f, 0.f, 0.f);
             if (x >= nx - bound) mpm_apply_bc(vx, vy, vz, -1.f, 0.f, 0.f, (int)walls[2], walls[3], 0.f, 0.f, 0.f);

@@ -48,7 +48,7 @@ KERNEL_TRAFFIC: dict[str, Traffic] = {
         "particle",
         "x read+write, v write, C write, F read+write, tau write, q read+write, vc read+write, saturation",
     ),
-    "mpm_grid_update": Traffic(F4 + 3 * F4 + 3 * F4 + 3 * F4, "cell", "m, mv, f_ext read, v write"),
+    "mpm_grid_update": Traffic(F4 + 3 * F4 + 3 * F4, "cell", "m, mv read, v written over mv"),
     "mpm_clear_grid": Traffic(F4 + 3 * F4 + F4, "cell", "m, mv, volume written"),
 }
 

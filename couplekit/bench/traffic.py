@@ -67,7 +67,7 @@ SAND_STAGE_BYTES_PER_PARTICLE = {
 }
 SAND_STAGE_BYTES_PER_NODE = {
     "mpm_p2g": (1 + 3 + 1) * F32 * 2,  # clear and accumulate mass, momentum, volume
-    "mpm_grid_update": (1 + 3 + 3 + 3 + 1) * F32,  # mass, momentum, velocity write, f_ext, sdf
+    "mpm_grid_update": (1 + 3 + 3 + 1) * F32,  # mass, momentum read, velocity written over it, sdf
     "mpm_g2p": 3 * F32,  # velocity read
 }
 

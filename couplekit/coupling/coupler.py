@@ -4,13 +4,13 @@ Algorithm 1 between :class:`couplekit.sand.solver.SandSolver` and :class:`couple
 The coupler owns what belongs to neither solver: the padded sand fraction, last step's porosity, and with
 water retention the bound water R, its increment dR and the particles' moisture ratio r_p.  It writes the
 fluid's inputs (``fluid_fraction``, ``force``, ``source_term``, ``sand_velocity``) and the sand's
-(``grid_mv`` drag impulse, ``f_ext`` buoyancy, ``saturation``).  One lockstep step, in Algorithm 1's order::
+(``grid_mv``: drag and buoyancy impulses; ``saturation``).  One lockstep step, in Algorithm 1's order::
 
     sand.p2g()                 # Eq. 24
     coupler.fluid_velocity()   # u = Σ_j f_j c_j of the fluid's current populations (Eq. 13, no force shift)
     coupler.fractions()        # Eqs. 25, 33, 53–56 (retention), fluid_fraction
     coupler.phase_source()     # Eqs. 45 / 57 -> fluid.source_term (two-phase fluid only)
-    coupler.exchange()         # Eq. 31 buoyancy -> sand.f_ext, implicit drag -> sand.grid_mv, fluid.force
+    coupler.exchange()         # Eq. 31 buoyancy and implicit drag -> sand.grid_mv, drag -> fluid.force
     sand.grid_update()         # Eqs. 26, 29 and the sand's boundaries
     coupler.moisture()         # Eqs. 58, 59 -> sand.saturation (before G2P moves the particles)
     sand.g2p()                 # Eq. 30
@@ -167,13 +167,13 @@ class SandFluidCoupler:
             )
 
     def exchange(self, u=None, force=None) -> None:
-        """Buoyancy (Eq. 31) into ``sand.f_ext``; implicit drag over the sand's Δt into ``sand.grid_mv`` and
+        """Buoyancy (Eq. 31, as the impulse Δt F_b) and implicit drag over the sand's Δt into ``sand.grid_mv``, and
         −J/Δt into ``fluid.force`` (or ``force``), exchanged with the fluid velocity ``fluid_u`` (or ``u``, a
         padded velocity: what a sand substep sees of the fluid, schedulers/subcycle.py)."""
         s, f = self.sand, self.fluid
         prm = f.params
         self.ops.drag_buoyancy(
-            s.grid_m, s.grid_mv, s.f_ext, f.force if force is None else force, self.fluid_u if u is None else u,
+            s.grid_m, s.grid_mv, f.force if force is None else force, self.fluid_u if u is None else u,
             f.phi, self.eps_sand, f.fluid_fraction, f.flags, self.units, s.gravity, prm.rho_h, prm.rho_l, s.dt,
         )  # fmt: skip
 

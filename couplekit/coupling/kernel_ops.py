@@ -92,7 +92,6 @@ class KernelOps:
         self,
         grid_m,
         grid_mv,
-        f_ext,
         force,
         u,
         phi,
@@ -105,12 +104,12 @@ class KernelOps:
         rho_l: float,
         dt: float | None = None,
     ) -> None:
-        """Buoyancy into ``f_ext`` (N), implicit drag impulse into ``grid_mv`` and −J/Δt into ``force``."""
+        """Implicit drag impulse J + Δt × buoyancy into ``grid_mv`` and −J/Δt into ``force``."""
         nz, ny, nx = grid_m.shape
         p = self.params
         mass_scale, velocity_scale, dt, dt_lattice = drag_scales(units, dt)
         self._fn("coupling_drag.cu", "coupling_drag_buoyancy", "CK_TWO_PHASE")(
-            nx * ny * nz, grid_m, grid_mv, f_ext, force, u, self._opt(phi, self.two_phase, "phi"), eps_sand,
+            nx * ny * nz, grid_m, grid_mv, force, u, self._opt(phi, self.two_phase, "phi"), eps_sand,
             eps_fluid, flags, np.int32(nx), np.int32(ny), np.int32(nz), np.float32(dt), np.float32(dt_lattice),
             *(np.float32(g) for g in gravity), np.float32(mass_scale), np.float32(velocity_scale),
             np.float32(rho_h), np.float32(rho_l), np.float32(p.drag_coefficient), np.float32(p.drag_exponent),

@@ -204,7 +204,6 @@ class ReferenceOps:
         self,
         grid_m,
         grid_mv,
-        f_ext,
         force,
         u,
         phi,
@@ -217,8 +216,8 @@ class ReferenceOps:
         rho_l: float,
         dt: float | None = None,
     ) -> None:
-        """Buoyancy into ``f_ext`` (N), implicit drag impulse J added to ``grid_mv`` (kg·m/s) and −J/Δt to
-        the fluid ``force`` (lattice force density).  See kernels/coupling_drag.cu for the formulas
+        """Implicit drag impulse J and Δt × buoyancy F_b (Eq. 31) added to ``grid_mv`` (kg·m/s), −J/Δt to the
+        fluid ``force`` (lattice force density); the sand's grid update then takes v = (mv)/m + Δt g (Eq. 29).  See kernels/coupling_drag.cu for the formulas
         (notes §3.4).  ``u`` must be the fluid's current macroscopic velocity Σ_j f_j c_j (populations after
         the last streaming, no force shift), not the post-collision velocity field of a Guo-forced step:
         with that stale value strong drag makes the LBM unstable (kernels/coupling_drag.cu).
@@ -256,8 +255,7 @@ class ReferenceOps:
         impulse = (m_s * m_f / (m_s + m_f)) * (r_star - r_new)  # J on the sand = m_s (v' − v*)
         impulse = np.where(active, impulse, 0.0)
         f_b = np.where(active, f_b, 0.0)
-        grid_mv[...] = grid_mv.astype(np.float64) + impulse * mass_scale * velocity_scale
-        f_ext[...] = f_b
+        grid_mv[...] = grid_mv.astype(np.float64) + (impulse * mass_scale * velocity_scale + dt * f_b)  # Eq. 26
         _interior(force)[...] = -impulse / dt_lattice  # F_d = −𝔽_d / V_cell (§4.3)
 
     # ------------------------------------------------------------------ multi-rate coupling (schedulers/subcycle.py)

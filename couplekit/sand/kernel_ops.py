@@ -92,7 +92,6 @@ class KernelOps:
         self,
         grid_m,
         grid_mv,
-        f_ext,
         grid_v,
         dx: float,
         dt: float,
@@ -106,7 +105,8 @@ class KernelOps:
         sdf_params,
         sdf_friction=None,
     ) -> None:
-        """v_i = (mv)_i/m_i + Δt (g + f_ext/m_i) on nodes with mass (Eq. 29), then boundary conditions.
+        """v_i = (mv)_i/m_i + Δt g on nodes with mass (Eq. 29), then boundary conditions.  ``grid_v`` may be
+        ``grid_mv`` itself (in place, as SandSolver does); the coupling's forces are already in ``grid_mv``.
 
         ``sdf_friction``: the SDF collider's Coulomb friction per node (nz, ny, nx), or None for its one friction
         ``sdf_params[1]``."""
@@ -116,7 +116,6 @@ class KernelOps:
             nx * ny * nz,
             grid_m,
             grid_mv,
-            f_ext,
             grid_v,
             np.int32(nx),
             np.int32(ny),

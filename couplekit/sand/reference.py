@@ -165,7 +165,6 @@ class ReferenceOps:
         self,
         grid_m,
         grid_mv,
-        f_ext,
         grid_v,
         dx: float,
         dt: float,
@@ -179,7 +178,8 @@ class ReferenceOps:
         sdf_params,
         sdf_friction=None,
     ) -> None:
-        """v_i = (mv)_i/m_i + Δt (g + f_ext/m_i) on nodes with mass (Eq. 29), then boundary conditions.
+        """v_i = (mv)_i/m_i + Δt g on nodes with mass (Eq. 29), then boundary conditions.  ``grid_v`` may be
+        ``grid_mv`` itself (in place, as SandSolver does); the coupling's forces are already in ``grid_mv``.
 
         ``sdf_friction``: the SDF collider's Coulomb friction per node (nz, ny, nx), or None for its one friction
         ``sdf_params[1]``."""
@@ -189,8 +189,7 @@ class ReferenceOps:
         inv = np.where(has, 1.0 / np.where(has, m, 1.0), 0.0)
         g = np.asarray(gravity, dtype=np.float64)
         mv = grid_mv.astype(np.float64).reshape(3, -1)
-        fe = f_ext.astype(np.float64).reshape(3, -1)
-        vel = np.where(has, (mv + dt * fe) * inv + dt * g[:, None], 0.0).T  # (N, 3)
+        vel = np.where(has, mv * inv + dt * g[:, None], 0.0).T  # (N, 3)  Eq. 29
         z, y, xx = np.meshgrid(np.arange(nz), np.arange(ny), np.arange(nx), indexing="ij")
         idx = {"x": xx.ravel(), "y": y.ravel(), "z": z.ravel()}
         size = {"x": nx, "y": ny, "z": nz}

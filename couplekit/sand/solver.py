@@ -3,9 +3,10 @@
 One step (paper 000 Alg. 1, MPM lines) is three stages, each an ops call:
 
 1. :meth:`SandSolver.p2g` — node mass, momentum (with the stress impulse) and sand volume (Eqs. 24, 25, 27);
-2. :meth:`SandSolver.grid_update` — node velocity with gravity and the external node force ``f_ext``
-   (Eq. 29), then walls and colliders; the fluid coupling writes drag and buoyancy into ``f_ext`` between
-   stages 1 and 2 (zeros for dry sand);
+2. :meth:`SandSolver.grid_update` — node velocity with gravity (Eq. 29), then walls and colliders, in place:
+   ``grid_v`` is the same array as ``grid_mv``, momentum before this stage and velocity after it (one
+   3-vector per node instead of two).  Other forces on the nodes go into ``grid_mv`` as impulses between
+   stages 1 and 2: the fluid coupling adds its drag impulse and Δt × buoyancy there (Eq. 26);
 3. :meth:`SandSolver.g2p` — particle velocity, APIC affine matrix, F update with Drucker–Prager
    plasticity, Kirchhoff stress for the next P2G, advection (Eq. 30).
 
@@ -148,10 +149,10 @@ class SandSolver:
 
         self.grid_m = xp.zeros(self.shape, dtype=f32)
         self.grid_mv = xp.zeros((3, *self.shape), dtype=f32)
+        """Node momentum (kg m/s) from P2G to the grid update, which overwrites it with the node velocity."""
         self.grid_vol = xp.zeros(self.shape, dtype=f32)
-        self.grid_v = xp.zeros((3, *self.shape), dtype=f32)
-        self.f_ext = xp.zeros((3, *self.shape), dtype=f32)
-        """External node force (N), added by the grid update; the fluid coupling writes drag/buoyancy here."""
+        self.grid_v = self.grid_mv
+        """Node velocity (m/s) after the grid update: the same array as ``grid_mv`` (module docstring)."""
 
         self._walls = be.asarray(pack_walls(self.walls), f32)
         self._sdf = xp.zeros(self.shape if sdf_collider else (1,), dtype=f32)
@@ -293,11 +294,10 @@ class SandSolver:
         )
 
     def grid_update(self) -> None:
-        """Stage 2: node velocities with gravity and ``f_ext``, then boundary conditions."""
+        """Stage 2: node velocities with gravity, then boundary conditions, in place (``grid_v is grid_mv``)."""
         self.ops.grid_update(
             self.grid_m,
             self.grid_mv,
-            self.f_ext,
             self.grid_v,
             self.dx,
             self.dt,

@@ -1,8 +1,9 @@
 """Physics of the drag/buoyancy stage (paper 000 §4.3, notes/mpm-method.md §§3.2–3.5), on the cpu kernels
 (the kernels equal the NumPy reference, test_coupling_kernels.py).
 
-The sand grid update is mimicked by Eq. 29 without boundaries: v = ((mv) + Δt f_ext)/m + Δt g, exactly
-what couplekit.sand's grid update does on nodes away from walls and colliders.
+The sand grid update is mimicked by Eq. 29 without boundaries: v = (mv)/m + Δt g, with the drag impulse and
+Δt × buoyancy already added to (mv) by the exchange, exactly what couplekit.sand's grid update does on nodes
+away from walls and colliders.
 """
 
 from __future__ import annotations
@@ -19,21 +20,20 @@ from couplekit.units import Units
 F32 = float(np.finfo(np.float32).eps)
 
 
-def _grid_update(m, mv, f_ext, dt, g):
+def _grid_update(m, mv, dt, g):
     """Eq. 29 on nodes with mass (no boundaries): the sand's grid velocity after all forces."""
     g = np.asarray(g, np.float64).reshape(3, 1, 1, 1)
     mm = m.astype(np.float64)
     has = mm > 0
-    return np.where(has, (mv.astype(np.float64) + dt * f_ext) / np.where(has, mm, 1.0) + dt * g, 0.0)
+    return np.where(has, mv.astype(np.float64) / np.where(has, mm, 1.0) + dt * g, 0.0)
 
 
 def _exchange(ops, st, eps_sand, eps_fluid, units=UNITS, gravity=(0.0, 0.0, 0.0)):
     mv = st["grid_mv"].copy()
-    f_ext = np.zeros((3, *st["grid_m"].shape), np.float32)
     force = np.zeros((3, *eps_sand.shape), np.float32)
-    ops.drag_buoyancy(st["grid_m"], mv, f_ext, force, st["u"], st["phi"], eps_sand, eps_fluid, st["flags"], units,
+    ops.drag_buoyancy(st["grid_m"], mv, force, st["u"], st["phi"], eps_sand, eps_fluid, st["flags"], units,
                       gravity, RHO_H, RHO_L)  # fmt: skip
-    return mv, f_ext, force
+    return mv, force
 
 
 def _fractions(ops, st, shape=SHAPE):
@@ -55,8 +55,7 @@ def test_exchange_conserves_momentum_and_never_overshoots(cpu, c_drag):
     ops = KernelOps(cpu, CouplingParams(drag_coefficient=c_drag), two_phase=True)
     st = grid_state(np.random.default_rng(10), ops.params)
     es, ef = _fractions(ops, st)
-    mv, f_ext, force = _exchange(ops, st, es, ef)
-    assert not f_ext.any(), "no gravity, no buoyancy"
+    mv, force = _exchange(ops, st, es, ef)
     mscale, vscale = UNITS.rho * UNITS.dx**3, UNITS.dx / UNITS.dt
     sand = (mv.astype(np.float64) - st["grid_mv"]) / (mscale * vscale)  # lattice momentum gained by the sand
     fluid = force[:, 1:-1, 1:-1, 1:-1].astype(np.float64)  # lattice momentum gained by the fluid (Δt = 1)
@@ -98,9 +97,8 @@ def test_repeated_strong_exchange_relaxes_monotonically(cpu):
     mv = st["grid_mv"].copy()
     slip = []
     for _ in range(200):
-        f_ext = np.zeros((3, *SHAPE), np.float32)
         force = np.zeros_like(u)
-        ops.drag_buoyancy(st["grid_m"], mv, f_ext, force, u, st["phi"], es, ef, st["flags"], UNITS, (0, 0, 0),
+        ops.drag_buoyancy(st["grid_m"], mv, force, u, st["phi"], es, ef, st["flags"], UNITS, (0, 0, 0),
                           RHO_H, RHO_L)  # fmt: skip
         u[:, 1:-1, 1:-1, 1:-1] += np.where(active, force[:, 1:-1, 1:-1, 1:-1] / m_f, 0.0).astype(np.float32)
         v = mv / np.where(active, m, 1.0) / vscale
@@ -142,12 +140,18 @@ def test_buoyancy_balances_hydrostatics(cpu, sand_density):
     st = _uniform_node_state(eps, sand_density)
     es, ef = _fractions(ops, st, shape=(2, 2, 2))
     g = (0.0, 0.0, -9.81)
-    mv, f_ext, force = _exchange(ops, st, es, ef, gravity=g)
+    mv, force = _exchange(ops, st, es, ef, gravity=g)
     rho_si = RHO_H * UNITS.rho
     grad_p = rho_si * np.asarray(g)  # hydrostatic pressure gradient ∇p = ρ g
     want = -(eps * UNITS.dx**3) * grad_p
-    np.testing.assert_allclose(f_ext.reshape(3, -1).T, np.broadcast_to(want, (8, 3)), rtol=1e-6, atol=1e-12)
-    v = _grid_update(st["grid_m"], mv, f_ext, UNITS.dt, g)
+    # the buoyancy alone: with a vanishing drag coefficient the exchange adds exactly Δt F_b to the momentum
+    # (the state starts at rest, so mv − 0 = Δt F_b; float32 of one product)
+    no_drag = KernelOps(cpu, CouplingParams(drag_coefficient=1e-30), two_phase=True)
+    mv_b, force_b = _exchange(no_drag, st, es, ef, gravity=g)
+    assert np.abs(force_b).max() < 1e-20, "buoyancy is not exchanged with the fluid (its reaction is the pressure)"
+    f_b = mv_b.reshape(3, -1).T.astype(np.float64) / UNITS.dt
+    np.testing.assert_allclose(f_b, np.broadcast_to(want, (8, 3)), rtol=1e-6, atol=1e-12)
+    v = _grid_update(st["grid_m"], mv, UNITS.dt, g)
     accel = v[2] / UNITS.dt
     want_a = (1.0 - rho_si / sand_density) * g[2]
     # drag acts on the slip created within the step, so compare with the implicit first-step value
@@ -163,8 +167,8 @@ def test_neutral_sand_stays_at_rest(cpu):
     es, ef = _fractions(ops, st, shape=(2, 2, 2))
     g = (0.0, -9.81, 0.0)
     for _ in range(50):
-        mv, f_ext, force = _exchange(ops, st, es, ef, gravity=g)
-        v = _grid_update(st["grid_m"], mv, f_ext, UNITS.dt, g)
+        mv, force = _exchange(ops, st, es, ef, gravity=g)
+        v = _grid_update(st["grid_m"], mv, UNITS.dt, g)
         st["grid_mv"] = (st["grid_m"] * v).astype(np.float32)
     assert np.abs(v).max() < 1e-6 * 9.81 * UNITS.dt * 50
 
@@ -208,8 +212,8 @@ def _settle(ops, cases, units):
     steps = int(25 * (v_t / (2 * g_eff)).max() / units.dt)  # relaxation time of quadratic drag: v_t / (2 g_eff)
     assert steps < 20000, steps
     for _ in range(steps):
-        mv, f_ext, _ = _exchange(ops, st, es, ef, units=units, gravity=g)
-        v = _grid_update(st["grid_m"], mv, f_ext, units.dt, g)
+        mv, _ = _exchange(ops, st, es, ef, units=units, gravity=g)
+        v = _grid_update(st["grid_m"], mv, units.dt, g)
         st["grid_mv"] = (st["grid_m"] * v).astype(np.float32)
     return v[2].ravel(), v_t, g_eff
 

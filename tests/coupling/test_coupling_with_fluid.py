@@ -51,7 +51,6 @@ def test_total_momentum_is_conserved_with_the_fluid_solver(cpu1, c_drag):
     water = np.zeros(SHAPE, np.float32)
     ops.fractions(grid_vol, None, None, None, es, ef, None, None, water, UNITS.dx, (True, True, True))
     fluid.fluid_fraction[...] = ef
-    f_ext = np.zeros((3, *SHAPE), np.float32)
 
     u_now = np.zeros((3, *padded), np.float32)
 
@@ -71,7 +70,7 @@ def test_total_momentum_is_conserved_with_the_fluid_solver(cpu1, c_drag):
     impulse = np.zeros(3)
     slips = [slip()]
     for _ in range(150):
-        ops.drag_buoyancy(grid_m, grid_mv, f_ext, fluid.force, u_now, None, es, ef, fluid.flags, UNITS,
+        ops.drag_buoyancy(grid_m, grid_mv, fluid.force, u_now, None, es, ef, fluid.flags, UNITS,
                           (0.0, 0.0, 0.0), 1.0, 1.0)  # fmt: skip
         impulse += -fluid.force[:, 1:-1, 1:-1, 1:-1].astype(np.float64).sum(axis=(1, 2, 3))
         fluid.step(1)

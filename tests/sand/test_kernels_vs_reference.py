@@ -75,21 +75,24 @@ def _boundary_setup(rng):
     return walls, colliders, sdf, sdf_params
 
 
+@pytest.mark.parametrize("in_place", [False, True], ids=["separate", "in_place"])
 @pytest.mark.parametrize("with_sdf", [0, 1])
-def test_grid_update_matches_reference(kops, rops, with_sdf):
+def test_grid_update_matches_reference(kops, rops, with_sdf, in_place):
+    """Kernel = reference, with the velocity written to its own array or over the momentum (SandSolver's
+    layout: grid_v is grid_mv); the momentum carries a random external impulse, as the coupling's is."""
     rng = np.random.default_rng(4)
     p = particles(rng)
     gm, gmv, gvol = grids()
     rops.p2g(p["x"], p["v"], p["C"], p["tau"], p["mass"], p["volume"], gm, gmv, gvol, DX, DT)
-    f_ext = (1e-3 * rng.normal(size=(3, *SHAPE))).astype(np.float32)
+    gmv += (DT * 1e-3 * rng.normal(size=(3, *SHAPE))).astype(np.float32)
     walls, colliders, sdf, sdf_params = _boundary_setup(rng)
     out = []
     for ops in (kops, rops):
-        gv = np.full((3, *SHAPE), np.nan, np.float32)
+        mv = gmv.copy()
+        gv = mv if in_place else np.full((3, *SHAPE), np.nan, np.float32)
         ops.grid_update(
             gm,
-            gmv,
-            f_ext,
+            mv,
             gv,
             DX,
             DT,
@@ -103,6 +106,8 @@ def test_grid_update_matches_reference(kops, rops, with_sdf):
             sdf_params,
         )
         out.append(gv)
+        if not in_place:
+            np.testing.assert_array_equal(mv, gmv)  # the momentum is input only
     assert np.all(np.isfinite(out[0]))
     assert _rel(out[0], out[1]) < 1e-5
     # the boundary conditions did something: sticky -x wall nodes are at rest (the SDF collider, applied

@@ -125,7 +125,7 @@ def test_grid_update_with_node_friction_matches_reference(kops, rops, per_node):
     p = particles(rng)
     gm, gmv, gvol = grids()
     rops.p2g(p["x"], p["v"], p["C"], p["tau"], p["mass"], p["volume"], gm, gmv, gvol, DX, DT)
-    f_ext = (1e-3 * rng.normal(size=(3, *SHAPE))).astype(np.float32)
+    gmv += (DT * 1e-3 * rng.normal(size=(3, *SHAPE))).astype(np.float32)  # an external impulse, as the coupling's
     walls = DomainWalls.from_dict({"-z": Wall("separate", 0.5)})
     sdf = (rng.random(SHAPE) - 0.3).astype(np.float32)
     sdf_params = np.array([2, 0.4, 0.1, 0.0, -0.1], np.float32)
@@ -134,7 +134,7 @@ def test_grid_update_with_node_friction_matches_reference(kops, rops, per_node):
     for ops in (kops, rops):
         gv = np.full((3, *SHAPE), np.nan, np.float32)
         ops.grid_update(
-            gm, gmv, f_ext, gv, DX, DT, (0.0, -1.0, -9.81), walls.bound, pack_walls(walls), pack_colliders([]), 0,
+            gm, gmv, gv, DX, DT, (0.0, -1.0, -9.81), walls.bound, pack_walls(walls), pack_colliders([]), 0,
             sdf, 1, sdf_params, sdf_friction=mu if per_node else None,
         )  # fmt: skip
         out.append(gv)
@@ -144,7 +144,7 @@ def test_grid_update_with_node_friction_matches_reference(kops, rops, per_node):
     if per_node:  # the field is read: the result differs from the one friction of sdf_params
         one = np.full((3, *SHAPE), np.nan, np.float32)
         rops.grid_update(
-            gm, gmv, f_ext, one, DX, DT, (0.0, -1.0, -9.81), walls.bound, pack_walls(walls), pack_colliders([]), 0,
+            gm, gmv, one, DX, DT, (0.0, -1.0, -9.81), walls.bound, pack_walls(walls), pack_colliders([]), 0,
             sdf, 1, sdf_params,
         )  # fmt: skip
         assert float(np.max(np.abs(one - out[1]))) > 1e-3 * scale

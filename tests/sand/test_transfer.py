@@ -57,7 +57,6 @@ def test_transfer_conserves_mass_and_momentum(kops):
     kops.grid_update(
         gm,
         gmv,
-        np.zeros_like(gv),
         gv,
         DX,
         1e-4,
@@ -98,7 +97,6 @@ def test_apic_preserves_rigid_rotation(kops):
     kops.grid_update(
         gm,
         gmv,
-        np.zeros_like(gv),
         gv,
         DX,
         0.0,
