@@ -3,7 +3,7 @@
 //   v_p     = sum_i w_ip v_i                                   (Eq. 30)
 //   C_p     = (4/dx^2) sum_i w_ip v_i (x_i - x_p)^T            (APIC affine velocity, B D^-1)
 //   F_trial = (I + dt C_p) F_p                                 (MLS: grad v ~ C)
-//   F_p, q_p, vc_p <- return mapping of F_trial (mpm_model.cuh)
+//   F_p, q_p, vc_p <- return mapping of F_trial (mpm_model.cuh; keep < 1: viscoplastic overstress)
 //   tau_p   = Kirchhoff stress of the new F_p (for the next P2G)
 //   x_p    += dt v_p
 //

@@ -22,7 +22,10 @@ Defaults and their sources:
 Consequence of the hardening, measured (tests/sand/test_validation.py): the sand hardens while it flows
 (a collapsing column's particles end at a mean φ_F of 31–41°), and a Drucker–Prager deposit stands at its
 friction angle, so column-collapse runouts fall 44–53 % short of Lube et al. 2004.  A constant 20°
-(``hardening=False, h0=20``) reproduces Lube's scaling within 20 % at aspect ratios 0.5 and 2.
+(``hardening=False, h0=20``) reproduces Lube's scaling within 20 % at aspect ratios 0.5 and 2, and with
+``viscosity=1.5`` (Pa s) it does so on every grid tested (R0 = 6–16 cells, planar L0 = 8–24): without a rate
+dependence the collapse does not converge with the grid (issue 16, docs/sand-validation.md).  The default
+viscosity is 0 (the paper's rate-independent Klár return).
 """
 
 from __future__ import annotations
