@@ -22,12 +22,13 @@ KERNEL void mpm_svd3_batch(const long long n, const float* RESTRICT A, float* RE
 }
 
 // F (9, n) in: trial deformation gradient; out: elastic F after plasticity.  tau (6, n) out: Kirchhoff
-// stress (xx, yy, zz, yz, xz, xy).  q, vc (n) in/out: hardening and volume-correction states.
+// stress (xx, yy, zz, yz, xz, xy).  q, vc (n) in/out: hardening and volume-correction states.  keep: the
+// fraction of the Case III return applied (mpm_return_map; 1 = rate-independent).
 KERNEL void mpm_constitutive_batch(const long long n, float* RESTRICT F, float* RESTRICT tau, float* RESTRICT q,
                                    float* RESTRICT vc, const float* RESTRICT saturation, const float mu,
                                    const float lambda, const float h0, const float h1, const float h2,
                                    const float h3, const float c_max, const float S1, const float S2,
-                                   const float S3) {
+                                   const float S3, const float keep) {
     FOR_EACH(p, n) {
         float f[9], U[9], e0, e1, e2, t[6];
         for (int j = 0; j < 9; ++j) f[j] = F[j * n + p];
@@ -42,7 +43,7 @@ KERNEL void mpm_constitutive_batch(const long long n, float* RESTRICT F, float* 
         const float S = 0.f;
 #endif
         float vcp = vc[p];
-        mpm_constitutive(f, U, e0, e1, e2, qp, vcp, S, mu, lambda, h0, h1, h2, h3, c_max, S1, S2, S3);
+        mpm_constitutive(f, U, e0, e1, e2, qp, vcp, S, mu, lambda, h0, h1, h2, h3, c_max, S1, S2, S3, keep);
         mpm_kirchhoff(U, e0, e1, e2, mu, lambda, t);
         for (int j = 0; j < 9; ++j) F[j * n + p] = f[j];
         for (int j = 0; j < 6; ++j) tau[j * n + p] = t[j];

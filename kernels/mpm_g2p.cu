@@ -3,7 +3,7 @@
 //   v_p     = sum_i w_ip v_i                                   (Eq. 30)
 //   C_p     = (4/dx^2) sum_i w_ip v_i (x_i - x_p)^T            (APIC affine velocity, B D^-1)
 //   F_trial = (I + dt C_p) F_p                                 (MLS: grad v ~ C)
-//   F_p, q_p, vc_p <- return mapping of F_trial (mpm_model.cuh)
+//   F_p, q_p, vc_p <- return mapping of F_trial (mpm_model.cuh; keep < 1: viscoplastic overstress)
 //   tau_p   = Kirchhoff stress of the new F_p (for the next P2G)
 //   x_p    += dt v_p
 //
@@ -175,7 +175,7 @@ MPM_INLINE void mpm_g2p_yield(const float qp, const float S, const float h0, con
 // vectorises over a batch.
 MPM_INLINE void mpm_g2p_finish(const float* ft, const float* Us, const float* sig, const float* Vs,
                                const long long ld, const float alpha, const float cC, const float mu,
-                               const float lambda, float* Fo, float* to, float* qo, float* vco,
+                               const float lambda, const float keep, float* Fo, float* to, float* qo, float* vco,
                                const long long ldo) {
     float U[9], Fn[9];
     MPM_UNROLL_9
@@ -193,7 +193,7 @@ MPM_INLINE void mpm_g2p_finish(const float* ft, const float* Us, const float* si
     (void)qo;
 #endif
 #if MPM_PLASTICITY
-    qp += mpm_return_map(e0, e1, e2, vcp, alpha, cC, mu, lambda);
+    qp += mpm_return_map(e0, e1, e2, vcp, alpha, cC, mu, lambda, keep);
     const float s0 = mpm_expf(e0), s1 = mpm_expf(e1), s2 = mpm_expf(e2);
     MPM_UNROLL
     for (int r = 0; r < 3; ++r)
@@ -202,7 +202,7 @@ MPM_INLINE void mpm_g2p_finish(const float* ft, const float* Us, const float* si
             Fn[3 * r + c] = U[3 * r] * s0 * Vs[(3 * c) * ld] + U[3 * r + 1] * s1 * Vs[(3 * c + 1) * ld] +
                             U[3 * r + 2] * s2 * Vs[(3 * c + 2) * ld];
 #else
-    (void)Vs, (void)alpha, (void)cC;
+    (void)Vs, (void)alpha, (void)cC, (void)keep;
 #endif
     float t[6];
     mpm_kirchhoff(U, e0, e1, e2, mu, lambda, t);
@@ -235,7 +235,7 @@ KERNEL void mpm_g2p(const long long n, float* RESTRICT x, float* RESTRICT v, flo
                     const float* RESTRICT saturation, const float* RESTRICT grid_v, const int nx, const int ny,
                     const int nz, const float dx, const float dt, const float mu, const float lambda,
                     const float h0, const float h1, const float h2, const float h3, const float c_max,
-                    const float S1, const float S2, const float S3) {
+                    const float S1, const float S2, const float S3, const float keep) {
     const long long np = n;
     const long long ncell = (long long)nx * ny * nz;
     const float inv_dx = 1.f / dx;
@@ -247,7 +247,7 @@ KERNEL void mpm_g2p(const long long n, float* RESTRICT x, float* RESTRICT v, flo
 #if MPM_PLASTICITY
         mpm_g2p_yield(MPM_Q_OF(q, p), MPM_S_OF(p), h0, h1, h2, h3, c_max, S1, S2, S3, alpha, cC);
 #endif
-        mpm_g2p_finish(ft, U, sig, V, 1, alpha, cC, mu, lambda, F + p, tau + p, q + p, vc + p, np);
+        mpm_g2p_finish(ft, U, sig, V, 1, alpha, cC, mu, lambda, keep, F + p, tau + p, q + p, vc + p, np);
     }
 #else
     // Batches of B particles, one particle per SIMD lane in the `omp simd` loops: (a) transfer (the grid
@@ -306,8 +306,8 @@ KERNEL void mpm_g2p(const long long n, float* RESTRICT x, float* RESTRICT v, flo
 #endif
         CK_PRAGMA(omp simd)
         for (int j = 0; j < B; ++j)
-            mpm_g2p_finish(ft + j, U + j, sig + j, V + j, B, alpha[j], cC[j], mu, lambda, Fs + j, ts + j, qs + j,
-                           vcs + j, ld);
+            mpm_g2p_finish(ft + j, U + j, sig + j, V + j, B, alpha[j], cC[j], mu, lambda, keep, Fs + j, ts + j,
+                           qs + j, vcs + j, ld);
         if (!full) {
             for (int j = 0; j < cnt; ++j) {
                 const long long p = p0 + j;

@@ -61,10 +61,16 @@ DEVICE float mpm_cohesion(const float S, const float c_max, const float S1, cons
 // Drucker-Prager return mapping of the principal Hencky strains e (in/out), Klar et al. 2016 Sec. 7.3.
 //   alpha: DP coefficient (before this step's projection), cC: cohesion (stress units, Eq. 28),
 //   vc: volume-correction log-volume (in/out), returns the plastic increment dq for the hardening.
+//   keep: the fraction of the Case III return applied this step, 1 / (1 + t_r / dt) with the relaxation
+//   time t_r = eta / mu of a viscosity eta (Duvaut-Lions viscoplasticity; 1 = rate-independent Klar).
+//   In steady flow the deviator left outside the cone is the overstress 2 eta D (eta * shear rate in
+//   simple shear), for any dt: a rate dependence that makes the flowing sand's problem well-posed, so
+//   that a collapse converges with the grid (docs/sand-validation.md).  The apex (Case II) is still
+//   projected at once.
 // Cohesion shifts the apex of the cone into tension by delta_c = cC / (3 alpha (3 lambda + 2 mu)) in each
 // principal strain (exact for Hencky: a hydrostatic shift of the stress by cC / (3 alpha)).
 DEVICE float mpm_return_map(float& e0, float& e1, float& e2, float& vc, const float alpha, const float cC,
-                            const float mu, const float lambda) {
+                            const float mu, const float lambda, const float keep) {
     const float tr_trial = e0 + e1 + e2;
     const float kappa3 = 3.f * lambda + 2.f * mu;
 #if MPM_VOLUME_CORRECTION
@@ -97,9 +103,10 @@ DEVICE float mpm_return_map(float& e0, float& e1, float& e2, float& vc, const fl
             n1 = a1;
             n2 = a2;
         } else {
-            // Case III: shrink the deviatoric part onto the cone (trace kept); dnorm > 0 here
-            const float k = dgamma / dnorm;
-            dq = dgamma;
+            // Case III: shrink the deviatoric part onto the cone (trace kept), by the fraction keep of the
+            // way (viscoplastic overstress); dnorm > 0 here
+            dq = keep * dgamma;
+            const float k = dq / dnorm;
             n0 = a0 - k * d0;
             n1 = a1 - k * d1;
             n2 = a2 - k * d2;
@@ -120,12 +127,15 @@ DEVICE float mpm_return_map(float& e0, float& e1, float& e2, float& vc, const fl
 DEVICE void mpm_constitutive(float F[9], float U[9], float& e0, float& e1, float& e2, float& q, float& vc,
                              const float S, const float mu, const float lambda, const float h0, const float h1,
                              const float h2, const float h3, const float c_max, const float S1, const float S2,
-                             const float S3) {
+                             const float S3, const float keep) {
     float sig[3], V[9];
     mpm_svd3(F, U, sig, V);
     e0 = logf(fmaxf(fabsf(sig[0]), MPM_SIGMA_MIN));
     e1 = logf(fmaxf(fabsf(sig[1]), MPM_SIGMA_MIN));
     e2 = logf(fmaxf(fabsf(sig[2]), MPM_SIGMA_MIN));
+#if !MPM_PLASTICITY
+    (void)keep;
+#endif
 #if MPM_PLASTICITY
     const float alpha = mpm_dp_alpha(mpm_friction_angle(q, h0, h1, h2, h3));
 #if MPM_COHESION
@@ -133,7 +143,7 @@ DEVICE void mpm_constitutive(float F[9], float U[9], float& e0, float& e1, float
 #else
     const float cC = 0.f;
 #endif
-    q += mpm_return_map(e0, e1, e2, vc, alpha, cC, mu, lambda);
+    q += mpm_return_map(e0, e1, e2, vc, alpha, cC, mu, lambda, keep);
     const float s0 = expf(e0), s1 = expf(e1), s2 = expf(e2);
     for (int r = 0; r < 3; ++r)
         for (int c = 0; c < 3; ++c)

@@ -154,6 +154,7 @@ class KernelOps:
             np.float32(dx),
             np.float32(dt),
             *model.scalars(),
+            np.float32(model.plastic_fraction(dt)),
         )
 
     def svd3(self, A):
@@ -166,8 +167,9 @@ class KernelOps:
         self._module("mpm_constitutive.cu").function("mpm_svd3_batch")(n, A, U, s, V)
         return U, s, V
 
-    def constitutive(self, F, tau, q, vc, saturation, model: ConstitutiveModel) -> None:
-        """F_trial (9, P) -> elastic F after plasticity, tau (6, P), q, vc (in place)."""
+    def constitutive(self, F, tau, q, vc, saturation, model: ConstitutiveModel, dt: float | None = None) -> None:
+        """F_trial (9, P) -> elastic F after plasticity, tau (6, P), q, vc (in place); ``dt`` the step for the
+        viscoplastic overstress (:meth:`ConstitutiveModel.plastic_fraction`; None: rate-independent)."""
         self._module("mpm_constitutive.cu", model.defines()).function("mpm_constitutive_batch")(
             F.shape[1],
             F,
@@ -176,4 +178,5 @@ class KernelOps:
             vc,
             self._no_field if saturation is None else saturation,
             *model.scalars(),
+            np.float32(model.plastic_fraction(dt)),
         )

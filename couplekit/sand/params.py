@@ -22,7 +22,10 @@ Defaults and their sources:
 Consequence of the hardening, measured (tests/sand/test_validation.py): the sand hardens while it flows
 (a collapsing column's particles end at a mean φ_F of 31–41°), and a Drucker–Prager deposit stands at its
 friction angle, so column-collapse runouts fall 44–53 % short of Lube et al. 2004.  A constant 20°
-(``hardening=False, h0=20``) reproduces Lube's scaling within 20 % at aspect ratios 0.5 and 2.
+(``hardening=False, h0=20``) reproduces Lube's scaling within 20 % at aspect ratios 0.5 and 2, and with
+``viscosity=1.5`` (Pa s) it does so on every grid tested (R0 = 6–16 cells, planar L0 = 8–24): without a rate
+dependence the collapse does not converge with the grid (issue 16, docs/sand-validation.md).  The default
+viscosity is 0 (the paper's rate-independent Klár return).
 """
 
 from __future__ import annotations
@@ -47,6 +50,12 @@ class SandParams:
     hardening: False keeps φ_F = h0 (then h0 is the constant friction angle).
     cohesion: False compiles cohesion out; None (default) turns it on when cohesion_max > 0.
     volume_correction: Tampubolon et al. 2017 volume correction.
+    viscosity: viscoplastic overstress η (Pa s) of the Drucker–Prager flow, Duvaut–Lions form: the deviatoric
+        stress may exceed the cone by 2 η D (D the deviatoric rate of deformation; η γ̇ in simple shear),
+        relaxing with t_r = η / μ.  0 (default) is the rate-independent return of Klár et al. 2016.
+        Constant-friction plasticity is ill-posed in transient flow, so a collapse does not converge with
+        the grid without it (docs/sand-validation.md: 1.5 Pa s makes the planar runout converge at 8–24
+        cells, 0 lets it grow 1.43 → 1.92).
     """
 
     density: float = 2200.0
@@ -64,6 +73,7 @@ class SandParams:
     hardening: bool = True
     cohesion: bool | None = None
     volume_correction: bool = True
+    viscosity: float = 0.0
     extra: dict = field(default_factory=dict, compare=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -83,6 +93,8 @@ class SandParams:
             )
         if self.h2 < 0:
             problems.append(f"h2 must be >= 0, got {self.h2}")
+        if not self.viscosity >= 0:
+            problems.append(f"viscosity must be >= 0 Pa s, got {self.viscosity}")
         if problems:
             raise ValueError("invalid SandParams: " + "; ".join(problems))
 
@@ -123,6 +135,7 @@ class SandParams:
             hardening=self.hardening,
             cohesion=self.cohesion_on(),
             volume_correction=self.volume_correction,
+            viscosity=self.viscosity,
         )
 
 
@@ -144,6 +157,15 @@ class ConstitutiveModel:
     hardening: bool = True
     cohesion: bool = False
     volume_correction: bool = True
+    viscosity: float = 0.0
+
+    def plastic_fraction(self, dt: float | None) -> float:
+        """The fraction 1 / (1 + t_r / Δt) of the Drucker–Prager (Case III) return applied in one step of Δt,
+        t_r = η / μ (Duvaut–Lions viscoplastic overstress 2 η D; the kernels' ``keep``).  1 (rate-independent)
+        without viscosity, or when no Δt is given (``dt`` None or <= 0)."""
+        if not self.viscosity > 0 or dt is None or not dt > 0:
+            return 1.0
+        return 1.0 / (1.0 + self.viscosity / (self.mu * dt))
 
     def defines(self) -> dict[str, int]:
         """Preprocessor switches of mpm_model.cuh."""

@@ -101,8 +101,13 @@ def hencky_return_map(
     mu: float,
     lam: float,
     volume_correction: bool,
+    keep: float = 1.0,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Drucker–Prager projection of principal Hencky strains e (P, 3) (Klár et al. 2016 §7.3, Eq. 28).
+
+    ``keep``: the fraction of the Case III return applied (Duvaut–Lions viscoplastic overstress,
+    :meth:`~couplekit.sand.params.ConstitutiveModel.plastic_fraction`; 1 = rate-independent): the deviator
+    is shrunk by keep·δγ, so that keep·δγ is also the plastic increment.
 
     Returns (e_new, dq, vc_new).  Cohesion moves the cone apex into tension by
     δ_c = c_C / (3 α (3λ + 2μ)) per principal strain; the volume correction (Tampubolon et al. 2017) adds
@@ -120,12 +125,12 @@ def hencky_return_map(
     case3 = ~case2 & (dgamma > 0)  # outside the cone: shrink the deviator onto it
     e_new = a.copy()
     e_new[case2] = 0.0
-    k = np.where(case3, dgamma / np.where(dnorm > 0, dnorm, 1.0), 0.0)
+    k = np.where(case3, keep * dgamma / np.where(dnorm > 0, dnorm, 1.0), 0.0)
     e_new -= k[:, None] * dev * case3[:, None]
     # plastic increment (hardening): Case II removes the trial elastic strain about the apex, e − δ_c
     # (Klár's ‖ε‖_F; not ‖a‖, which also holds the stored volume-correction gain v_c/3 — no flow of this
     # step), Case III the deviatoric amount δγ
-    dq = np.where(case2, np.linalg.norm(e - dc[:, None], axis=1), np.where(case3, dgamma, 0.0))
+    dq = np.where(case2, np.linalg.norm(e - dc[:, None], axis=1), np.where(case3, keep * dgamma, 0.0))
     e_new += dc[:, None]
     vc_new = vc + e.sum(axis=1) - e_new.sum(axis=1) if volume_correction else vc
     return e_new, dq, vc_new
@@ -238,7 +243,7 @@ class ReferenceOps:
         F_trial[lost] = _mat(F)[lost]  # a lost particle's deformation is not updated (its v, C, x are NaN)
         v_new[lost] = np.nan
         C_new[lost] = np.nan
-        F_new, tau_new, q_new, vc_new = _constitutive(F_trial, q, vc, saturation, model)
+        F_new, tau_new, q_new, vc_new = _constitutive(F_trial, q, vc, saturation, model, model.plastic_fraction(dt))
         F[...] = F_new.reshape(-1, 9).T
         C[...] = C_new.reshape(-1, 9).T
         tau[...] = tau_new
@@ -257,9 +262,10 @@ class ReferenceOps:
         U, s, V = signed_svd(_mat(A))
         return (U.reshape(-1, 9).T.astype(np.float32), s.T.astype(np.float32), V.reshape(-1, 9).T.astype(np.float32))
 
-    def constitutive(self, F, tau, q, vc, saturation, model: ConstitutiveModel) -> None:
-        """F_trial (9, P) -> elastic F after plasticity, tau (6, P), q, vc (in place)."""
-        F_new, tau_new, q_new, vc_new = _constitutive(_mat(F), q, vc, saturation, model)
+    def constitutive(self, F, tau, q, vc, saturation, model: ConstitutiveModel, dt: float | None = None) -> None:
+        """F_trial (9, P) -> elastic F after plasticity, tau (6, P), q, vc (in place); ``dt`` the step for the
+        viscoplastic overstress (None: rate-independent)."""
+        F_new, tau_new, q_new, vc_new = _constitutive(_mat(F), q, vc, saturation, model, model.plastic_fraction(dt))
         F[...] = F_new.reshape(-1, 9).T
         tau[...] = tau_new
         if q is not None:
@@ -267,8 +273,9 @@ class ReferenceOps:
         vc[...] = vc_new
 
 
-def _constitutive(F_trial: np.ndarray, q, vc, saturation, model: ConstitutiveModel):
-    """Hencky + Drucker–Prager on (P, 3, 3) trial F: (F_new, tau (6, P), q_new, vc_new).  ``q`` None (hardening
+def _constitutive(F_trial: np.ndarray, q, vc, saturation, model: ConstitutiveModel, keep: float = 1.0):
+    """Hencky + Drucker–Prager on (P, 3, 3) trial F: (F_new, tau (6, P), q_new, vc_new); ``keep`` the fraction
+    of the Case III return applied (:func:`hencky_return_map`).  ``q`` None (hardening
     off: φ_F = h0, the state is not kept) and ``saturation`` None (cohesion off) read as zeros."""
     U, s, V = signed_svd(F_trial)
     e = np.log(np.maximum(np.abs(s), SIGMA_MIN))  # Hencky strain in principal axes
@@ -283,7 +290,7 @@ def _constitutive(F_trial: np.ndarray, q, vc, saturation, model: ConstitutiveMod
     if model.plasticity:
         alpha = dp_alpha(model.friction_angle(q64))  # α from the hardening state before this step
         cohesion = model.cohesion_of(saturation)  # c_C(S_r,p), Eq. 28
-        e, dq, vc64 = hencky_return_map(e, vc64, alpha, cohesion, model.mu, model.lam, model.volume_correction)
+        e, dq, vc64 = hencky_return_map(e, vc64, alpha, cohesion, model.mu, model.lam, model.volume_correction, keep)
         q64 = q64 + dq
         F_new = np.einsum("pab,pb,pcb->pac", U, np.exp(e), V)  # F = U exp(ε) Vᵀ
     else:

@@ -1,6 +1,6 @@
 """Constitutive model: yield surface after return mapping, no tension without cohesion, the hardening
-curve, the cohesion trapezoid, the volume-correction cycle.  Run on the kernel (cpu build); the kernel is
-checked against the NumPy reference in test_kernels_vs_reference.py.
+curve, the cohesion trapezoid, the volume-correction cycle, the viscous overstress.  Run on the kernel (cpu
+build); the kernel is checked against the NumPy reference in test_kernels_vs_reference.py.
 """
 
 from __future__ import annotations
@@ -150,3 +150,37 @@ def test_hardening_counts_plastic_flow_not_stored_volume_gain(kops, rops, cohesi
         F = np.ascontiguousarray((1.01 * math.exp(dc) * np.eye(3)).reshape(9, 1).astype(np.float32))
         ops.constitutive(F, np.zeros((6, 1), np.float32), q, vc, sat, model)
         assert q[0] == pytest.approx(math.sqrt(3) * math.log(1.01), abs=2e-6)
+
+
+def _sheared_overstress(ops, viscosity: float, dt: float, rate: float = 20.0, steps: int = 300) -> float:
+    """Steady simple shear (v_x = rate z) of a particle under a mean compression of 1e-3 per axis, one
+    constitutive update per step of ``dt``: the deviatoric Kirchhoff stress beyond the 20 deg cone,
+    ||dev tau|| + alpha tr tau (Pa), averaged over the last 50 steps."""
+    model = SandParams(hardening=False, h0=20.0, cohesion_max=0.0, volume_correction=False, viscosity=viscosity).model()
+    F = np.diag(np.full(3, math.exp(-1e-3)))
+    step = np.eye(3)
+    step[0, 2] = dt * rate  # F_trial = (I + dt L) F
+    vc = np.zeros(1, np.float32)
+    excess = []
+    for _ in range(steps):
+        Ft = np.ascontiguousarray((step @ F).reshape(9, 1).astype(np.float32))
+        tau = np.zeros((6, 1), np.float32)
+        ops.constitutive(Ft, tau, None, vc, None, model, dt)
+        F = Ft.reshape(3, 3).astype(np.float64)
+        t = tau[:, 0].astype(np.float64)
+        tr = t[:3].sum()
+        dev = np.linalg.norm(np.concatenate([t[:3] - tr / 3, math.sqrt(2.0) * t[3:]]))
+        excess.append(dev + float(dp_alpha(math.radians(20.0))) * tr)
+    return float(np.mean(excess[-50:]))
+
+
+@pytest.mark.parametrize("dt", [5e-5, 2e-4])
+def test_viscous_overstress_is_eta_times_shear_rate_at_any_dt(kops, rops, dt):
+    """SandParams.viscosity (Duvaut-Lions): in steady plastic shear the stress stays outside the cone by
+    2 eta D, i.e. ||dev tau|| exceeds the cone by sqrt(2) eta rate in simple shear, whatever the step (here
+    dt = 5e-5 and 2e-4 s, keep = 0.82 and 0.95 at eta = 1.5 Pa s); the kernel and the reference agree; without
+    viscosity the stress sits on the cone (measured 42.41-42.43 Pa against sqrt(2) eta rate = 42.43 Pa)."""
+    eta, rate = 1.5, 20.0
+    for ops in (kops, rops):
+        assert _sheared_overstress(ops, eta, dt, rate) == pytest.approx(math.sqrt(2.0) * eta * rate, rel=0.01)
+        assert abs(_sheared_overstress(ops, 0.0, dt, rate)) < 0.5  # Pa, against a cone of ~560 Pa

@@ -122,6 +122,9 @@ MODELS = {
     "sand_no_hardening": SandParams(hardening=False, h0=30.0, volume_correction=False),
     "sand_cohesive_no_hardening": SandParams(hardening=False, h0=30.0, cohesion_max=2000.0),
     "elastic": SandParams(plasticity=False, youngs_modulus=1e5),
+    # the viscoplastic overstress (keep = 0.69 at DT = 1e-4 s; 1.5 Pa s is the Lube-calibrated sand's)
+    "sand_viscous": SandParams(cohesion_max=0.0, viscosity=6.0),
+    "sand_viscous_no_hardening": SandParams(hardening=False, h0=20.0, viscosity=1.5),
 }
 
 
@@ -173,7 +176,7 @@ def test_constitutive_kernel_matches_reference(kops, rops, name):
     out = []
     for ops in (kops, rops):
         st = [F.copy(), np.zeros((6, n), np.float32), q.copy() if model.hardening else None, vc.copy()]
-        ops.constitutive(*st, sat if model.cohesion else None, model)
+        ops.constitutive(*st, sat if model.cohesion else None, model, DT)
         out.append(st)
     (Fk, tk, qk, vk), (Fr, tr, qr, vr) = out
     if not model.hardening:
