@@ -362,6 +362,7 @@ def build_sand(scene: Scene, backend: Backend, log: Callable[[str], Any]):
         cohesion_s2=s2,
         cohesion_s3=s3,
         hardening=eff.hardening,
+        viscosity=sd.viscosity,
     )
     xs, vols, vels, dens, retains, sats = [], [], [], [], [], []
     size = np.asarray(dom.size)

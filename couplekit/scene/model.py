@@ -185,6 +185,8 @@ class Sand:
     with ``wall_friction``."""
     grain_diameter: float | None = None
     """Drag option: None for paper 000's one-ball drag area, a grain diameter (m) for the grains' area."""
+    viscosity: float = 0.0
+    """Viscoplastic overstress η (Pa s) of the plastic flow (SandParams.viscosity); 0: rate-independent."""
 
     @property
     def particles_per_axis(self) -> int:
@@ -970,6 +972,7 @@ def _sand(snd: dict, problems: list[Problem]) -> Sand | None:
         snd["wall_layers"],
         snd["periodic_walls"],
         grain_diameter=snd.get("grain_diameter"),
+        viscosity=snd["viscosity"],
     )
 
 

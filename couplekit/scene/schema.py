@@ -489,6 +489,16 @@ SECTIONS: dict[str, list[Key]] = {
             lo=0.0,
             lo_open=True,
         ),
+        Key(
+            "viscosity",
+            "float",
+            0.0,
+            "viscoplastic overstress η of the Drucker–Prager flow (SandParams.viscosity, Duvaut–Lions): 0 (default) "
+            "is the paper's rate-independent return, whose granular-collapse runout grows with resolution; 1.5 Pa s "
+            "makes the Lube-calibrated collapse converge (docs/sand-validation.md)",
+            "Pa s",
+            lo=0.0,
+        ),
     ],
     "outputs": [
         Key("directory", "str", None, "output folder (default runs/<scene.name>; `couplekit run --out` overrides it)"),

@@ -251,3 +251,18 @@ def test_container_refused_on_other_bodies():
     d["bodies"][1].pop("container_until")
     d["bodies"][0]["container_until"] = 0.0
     assert "bodies[0].container_until" in _refused(d)
+
+
+# ------------------------------------------------------------------------------------------ sand.viscosity
+def test_sand_viscosity_reaches_the_sand_solver_and_refuses_bad_values(cpu):
+    """``sand.viscosity`` (Pa s, default 0: the paper's rate-independent return) is the SandParams.viscosity
+    of the assembled solver, and a negative, NaN or non-number value is refused naming the key."""
+    d = tiny_sand()
+    assert assemble(Scene.from_dict(d), cpu, timing=False).sand.params.viscosity == 0.0
+    d["sand"]["viscosity"] = 1.5
+    scene = Scene.from_dict(d)
+    assert scene.sand.viscosity == 1.5
+    assert assemble(scene, cpu, timing=False).sand.params.viscosity == 1.5
+    for bad in (-1.0, float("nan"), "thick"):
+        d["sand"]["viscosity"] = bad
+        assert "sand.viscosity" in _refused(d), bad
