@@ -199,7 +199,6 @@ def test_water_jet_into_air_800_to_1_from_an_outlet_stays_finite(cpu):
     assert axis[:4].min() > 0.95 and phi[2, 6, 0] < 0.5, (np.round(axis, 2), phi[2, 6, 0])
 
 
-@pytest.mark.xfail(strict=True, reason="known defect: narrow outlet jets diverge at 800:1 (see docstring)")
 @pytest.mark.parametrize("width,u_in", [(2.0, 0.02), (4.0, 0.08)], ids=["xi2_u0.02", "xi4_u0.08"])
 def test_narrow_outlet_jet_diverges(cpu, width, u_in):
     """KNOWN DEFECT, pinned: a water jet from a 4 × 4-cell outlet into air at 800:1 (12 × 12 × 24, ν = 0.01,
