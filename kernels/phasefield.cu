@@ -7,7 +7,8 @@
 //   scalars (NZ, NY, NX), vectors (3, NZ, NY, NX), h (7, NZ, NY, NX), float32; linear index
 //   c = X + NX*(Y + NY*Z); slot q of cell c at h[q*NCELL + c], NCELL = NX*NY*NZ.
 //   flags (NZ, NY, NX) uint8, the flow's cell flags: FLUID 0 (updated), WALL 1 (solid / wall: no-flux
-//   bounce-back), INFLOW 2 (h enters at equilibrium with the phi and velocity stored at that cell),
+//   bounce-back), INFLOW 2 (bounce-back plus the advective flux phi_b d_q.u_b of the phi and velocity stored at
+//   that cell: exactly phi_b u_b.n enters per face link, the fluid's volume flux times the carried phase value),
 //   OUTFLOW 3 (zero-gradient equilibrium: h enters at equilibrium with this cell's own phi and velocity).
 //   Ghost cells on non-periodic axes must be WALL/INFLOW/OUTFLOW (grid.build_flags, phasefield.pad_flags).
 //
@@ -19,8 +20,10 @@
 //   odd parity:  f_q = h[opp q][c - d_q] (pull); store h[q][c + d_q] = f*_q (push).  Boundary rules, odd only:
 //     pull from WALL c - d_q:              f_q = h[q][c]       (own f*_{opp q} of the even step: bounce-back)
 //     push to WALL c + d_q:                h[opp q][c] = f*_q  (read back at the next even step)
-//     pull from INFLOW p / push to INFLOW m: the equilibrium w_q phi_b (1 + d_q.u_b / cs^2) with phi_b, u_b
-//                                          stored at the inflow cell (written to h[opp q][c] on a push);
+//     pull from INFLOW p / push to INFLOW m: as a WALL plus 2 w_q phi_b d_q.u_b / cs^2 (q the direction into the
+//                                          cell) with phi_b, u_b stored at the inflow cell, so that the link's
+//                                          net flux is phi_b d_q.u_b: no diffusive or interface flux crosses
+//                                          an inflow, the water it delivers is u_in x area x phi_b (pf_inflow);
 //     OUTFLOW: the same with this cell's u and phi; on a pull phi solves phi = sum of the other populations
 //                                          + its own outflow equilibria; on a push phi = sum_k f*_k.
 // After an even step the populations sit in reversed slots, after an odd step in natural order.
@@ -91,6 +94,15 @@ PF_INLINE float pf_feq(const int q, const float phi, const float ux, const float
     return W7[q] * phi * (1.f + pf_dot(q, ux, uy, uz) / CS2_7);
 }
 
+// The flux part of an inflow link (q: the direction from the inflow cell into the fluid cell): the population that
+// enters is the bounced-back one plus 2 w_q phi_b d_q.u_b / cs^2, so the link's net flux is phi_b d_q.u_b (8 w_q = 1
+// with w_q = 1/8, cs^2 = 1/4).  The former equilibrium inflow, h = w_q phi_b (1 + d_q.u_b / cs^2), added a
+// diffusive exchange (phi_b - phi) / 8 that no counter flux balanced, and how much water it let in depended on the
+// cells' phase values (measured: 0.96 u_in A for a 6 x 6 outlet at xi = 4; test_inflow_region).
+PF_INLINE float pf_inflow(const int q, const float phi_b, const float ux, const float uy, const float uz) {
+    return 2.f * W7[q] * phi_b * pf_dot(q, ux, uy, uz) / CS2_7;
+}
+
 // Pre-collision populations of fluid cell nb[0] at step parity `odd` (AA read rule with boundary rules).
 DEVICE void pf_load(const float* RESTRICT h, const unsigned char* RESTRICT flags, const float* RESTRICT phi,
                     const float* RESTRICT u, const long long ncell, const long long nb[7], const int odd,
@@ -112,7 +124,7 @@ DEVICE void pf_load(const float* RESTRICT h, const unsigned char* RESTRICT flags
         if (kind == PF_FLUID) {
             v = h[pf_opp(q) * ncell + p];
         } else if (kind == PF_INFLOW) {
-            v = pf_feq(q, phi[p], u[p], u[ncell + p], u[2 * ncell + p]);
+            v = h[q * ncell + c] + pf_inflow(q, phi[p], u[p], u[ncell + p], u[2 * ncell + p]);
         } else if (kind == PF_OUTFLOW) {
             outflow_weight += pf_feq(q, 1.f, ux, uy, uz);
         } else {
@@ -150,7 +162,7 @@ DEVICE void pf_store(float* RESTRICT h, const unsigned char* RESTRICT flags, con
         if (kind == PF_FLUID) {
             h[q * ncell + m] = f[q];
         } else if (kind == PF_INFLOW) {
-            h[qo * ncell + c] = pf_feq(qo, phi[m], u[m], u[ncell + m], u[2 * ncell + m]);
+            h[qo * ncell + c] = f[q] + pf_inflow(qo, phi[m], u[m], u[ncell + m], u[2 * ncell + m]);
         } else if (kind == PF_OUTFLOW) {
             h[qo * ncell + c] = pf_feq(qo, phi_post, u[c], u[ncell + c], u[2 * ncell + c]);
         } else {
@@ -184,7 +196,9 @@ KERNEL void phase_set_equilibrium(const long long n,
                 const int kind = flags[p];
                 if (kind == PF_FLUID) h[pf_opp(q) * ncell + p] = feq;
                 else if (kind == PF_WALL) h[q * ncell + c] = feq;
-                // INFLOW / OUTFLOW links: the load rule computes the value
+                else if (kind == PF_INFLOW)
+                    h[q * ncell + c] = feq - pf_inflow(q, phi[p], u[p], u[ncell + p], u[2 * ncell + p]);
+                // OUTFLOW links: the load rule computes the value
             }
         }
     }
@@ -298,12 +312,12 @@ struct PfCell {
     float f0, f1, f2, f3, f4, f5, f6;
 };
 
-// Post-collision value of one moving population q (Eq. 48): relaxation to h_q^eq plus the interface and
-// source terms; accumulates -h*_q into the compensated rest balance.
-PF_INLINE float pf_relax(const int q, const float fq, const float p0, const float ux, const float uy, const float uz,
-                         const float hx, const float hy, const float hz, const float s, const float omega,
-                         float& rest, float& rest_comp) {
-    const float post = fq - omega * (fq - pf_feq(q, p0, ux, uy, uz)) + W7[q] * (pf_dot(q, hx, hy, hz) + s);
+// Post-collision value of one moving population q (Eq. 48): relaxation to h_q^eq (feq) plus the interface and
+// source terms, minus `sym`, the two-relaxation-time part of the pair q, opp q (pf_collide); accumulates -h*_q
+// into the compensated rest balance.
+PF_INLINE float pf_relax(const int q, const float fq, const float feq, const float sym, const float hx, const float hy,
+                         const float hz, const float s, const float omega, float& rest, float& rest_comp) {
+    const float post = fq - omega * (fq - feq) - sym + W7[q] * (pf_dot(q, hx, hy, hz) + s);
     pf_accumulate(rest, rest_comp, -post);
     return post;
 }
@@ -311,7 +325,7 @@ PF_INLINE float pf_relax(const int q, const float fq, const float p0, const floa
 // Collision of Eq. 48 of cell c (see phase_collide_stream): pre-collision populations in, post out.
 PF_INLINE PfCell pf_collide(const PfCell in, const long long c, const long long ncell, const float* RESTRICT grad,
                             const float* RESTRICT u, const float* RESTRICT source, const float omega,
-                            const float interface_factor, const float source_scale) {
+                            const float interface_factor, const float source_scale, const float omega_plus) {
     // Eq. 47 with compensated sums: together with the rest population below, Sigma phi changes per step
     // only by the source and one float32 rounding per cell (plain float32 sums drifted ~50x more in
     // steady states, where the same rounding repeats every step)
@@ -342,13 +356,22 @@ PF_INLINE PfCell pf_collide(const PfCell in, const long long c, const long long 
     // and the equilibria to phi); equal to the collision formula for q = 0 up to rounding
     float rest = mass, rest_comp = mass_comp;
     pf_accumulate(rest, rest_comp, s);
+    // two relaxation times (TRT): the symmetric part (n_q + n_opp q) / 2 of the non-equilibrium n = h - h^eq of
+    // each pair relaxes at omega_plus instead of omega (the antisymmetric part, which carries the flux and sets
+    // M, keeps omega): h*_q = h_q - omega n_q - (omega_plus - omega) (n_q + n_opp q) / 2 + ...  With
+    // omega_plus = omega (trt_lambda = 0) the correction is exactly 0: Eq. 48's single rate.
+    const float e1 = pf_feq(1, p0, ux, uy, uz), e2 = pf_feq(2, p0, ux, uy, uz), e3 = pf_feq(3, p0, ux, uy, uz);
+    const float e4 = pf_feq(4, p0, ux, uy, uz), e5 = pf_feq(5, p0, ux, uy, uz), e6 = pf_feq(6, p0, ux, uy, uz);
+    const float dw = 0.5f * (omega_plus - omega);
+    const float s12 = dw * ((in.f1 - e1) + (in.f2 - e2)), s34 = dw * ((in.f3 - e3) + (in.f4 - e4));
+    const float s56 = dw * ((in.f5 - e5) + (in.f6 - e6));
     PfCell out;
-    out.f1 = pf_relax(1, in.f1, p0, ux, uy, uz, hx, hy, hz, s, omega, rest, rest_comp);
-    out.f2 = pf_relax(2, in.f2, p0, ux, uy, uz, hx, hy, hz, s, omega, rest, rest_comp);
-    out.f3 = pf_relax(3, in.f3, p0, ux, uy, uz, hx, hy, hz, s, omega, rest, rest_comp);
-    out.f4 = pf_relax(4, in.f4, p0, ux, uy, uz, hx, hy, hz, s, omega, rest, rest_comp);
-    out.f5 = pf_relax(5, in.f5, p0, ux, uy, uz, hx, hy, hz, s, omega, rest, rest_comp);
-    out.f6 = pf_relax(6, in.f6, p0, ux, uy, uz, hx, hy, hz, s, omega, rest, rest_comp);
+    out.f1 = pf_relax(1, in.f1, e1, s12, hx, hy, hz, s, omega, rest, rest_comp);
+    out.f2 = pf_relax(2, in.f2, e2, s12, hx, hy, hz, s, omega, rest, rest_comp);
+    out.f3 = pf_relax(3, in.f3, e3, s34, hx, hy, hz, s, omega, rest, rest_comp);
+    out.f4 = pf_relax(4, in.f4, e4, s34, hx, hy, hz, s, omega, rest, rest_comp);
+    out.f5 = pf_relax(5, in.f5, e5, s56, hx, hy, hz, s, omega, rest, rest_comp);
+    out.f6 = pf_relax(6, in.f6, e6, s56, hx, hy, hz, s, omega, rest, rest_comp);
     out.f0 = rest + rest_comp;
     return out;
 }
@@ -359,6 +382,8 @@ PF_INLINE PfCell pf_collide(const PfCell in, const long long c, const long long 
 //         factor makes the recovered counter-flux M H, notes §1c pitfall)
 //   S_k = w_k gamma S_phi  (Eq. 51, source corrected by the volume controller factor gamma, Eq. 52)
 //   omega = 1/tau, tau = M / cs^2 + 1/2 (mobility M, cs^2 = 1/4)
+//   trt_lambda > 0: two relaxation times, the pairs' symmetric non-equilibrium relaxed at omega_plus with
+//         (1/omega - 1/2)(1/omega_plus - 1/2) = trt_lambda (Ginzburg's "magic" product; 0 = Eq. 48's single rate)
 // grad: grad phi of the same step (phase_gradients); u: fluid velocity (and the velocity of INFLOW cells);
 // phi: read only at INFLOW cells (their phase value); source: S_phi.  n = nx*ny*nz.
 KERNEL void phase_collide_stream(const long long n, float* RESTRICT h /* size: 7 * (nx + 2) * (ny + 2) * (nz + 2) */,
@@ -369,9 +394,10 @@ KERNEL void phase_collide_stream(const long long n, float* RESTRICT h /* size: 7
                                  const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                                  const int nx, const int ny, const int nz, const int px, const int py,
                                  const int pz, const int parity, const float mobility, const float width,
-                                 const float source_scale) {
+                                 const float source_scale, const float trt_lambda) {
     const long long ncell = (long long)(nx + 2) * (ny + 2) * (nz + 2);
     const float omega = 1.f / (mobility / CS2_7 + 0.5f);
+    const float omega_plus = trt_lambda > 0.f ? 1.f / (0.5f + trt_lambda / (1.f / omega - 0.5f)) : omega;
     const float interface_factor = (1.f - 0.5f * omega) * 4.f / width;
     // two loops, so that the local even step has no neighbour logic and vectorises on the host
     if (!(parity & 1)) {
@@ -387,7 +413,7 @@ KERNEL void phase_collide_stream(const long long n, float* RESTRICT h /* size: 7
             in.f4 = h[4 * ncell + c];
             in.f5 = h[5 * ncell + c];
             in.f6 = h[6 * ncell + c];
-            const PfCell out = pf_collide(in, c, ncell, grad, u, source, omega, interface_factor, source_scale);
+            const PfCell out = pf_collide(in, c, ncell, grad, u, source, omega, interface_factor, source_scale, omega_plus);
             h[c] = out.f0;  // store in the opposite slots (AA even step)
             h[2 * ncell + c] = out.f1;
             h[ncell + c] = out.f2;
@@ -412,7 +438,7 @@ KERNEL void phase_collide_stream(const long long n, float* RESTRICT h /* size: 7
             in.f4 = f[4];
             in.f5 = f[5];
             in.f6 = f[6];
-            const PfCell out = pf_collide(in, c, ncell, grad, u, source, omega, interface_factor, source_scale);
+            const PfCell out = pf_collide(in, c, ncell, grad, u, source, omega, interface_factor, source_scale, omega_plus);
             const float post[7] = {out.f0, out.f1, out.f2, out.f3, out.f4, out.f5, out.f6};
             pf_store(h, flags, phi, u, ncell, nb, 1, post);
         }

@@ -22,8 +22,10 @@ Storage: the flow's padded grid (:mod:`couplekit.fluid.grid`)
   float32, C order (x contiguous).  Interior cell (x, y, z) is at padded index ``[z+1, y+1, x+1]``.
 * ``flags``: the flow's padded uint8 cell flags (``grid.build_flags``, or :func:`pad_flags` for walls
   and obstacles): FLUID 0 cells are updated; WALL 1 is a no-flux wall (halfway bounce-back of h, Sigma phi
-  conserved); INFLOW 2 feeds h^eq(phi_in, u_in) with the phase value and velocity stored at that cell
-  (``phi`` and ``u`` there); OUTFLOW 3 feeds the zero-gradient equilibrium h^eq(phi, u) of the cell itself.
+  conserved); INFLOW 2 is that wall plus the advective flux phi_in d_q.u_in of the phase value and velocity
+  stored at that cell (``phi`` and ``u`` there): each face link lets in exactly phi_in u_in.n, no diffusive
+  or interface flux (:func:`inflow_flux`); OUTFLOW 3 feeds the zero-gradient equilibrium h^eq(phi, u) of the
+  cell itself.
   Ghost cells of non-periodic axes must not be FLUID (:func:`check_flags`).
 * D3Q7 directions in the order of :mod:`couplekit.lattice`: rest, (+x, -x), (+y, -y), (+z, -z); weights
   1/4, 1/8 (cs^2 = 1/4).
@@ -183,12 +185,14 @@ class PhaseFieldKernelOps:
         mobility: float,
         width: float,
         source_scale: float = 1.0,
+        trt_lambda: float = 0.0,
     ) -> None:
-        """One step of Eq. 48 with in-place (AA) streaming and the boundary rules of the flags."""
+        """One step of Eq. 48 with in-place (AA) streaming and the boundary rules of the flags (``trt_lambda``:
+        see :meth:`PhaseFieldReferenceOps.collide_stream`)."""
         nz, ny, nx = interior_shape(flags.shape)
         self._fn("phase_collide_stream")(
             nx * ny * nz, h, phi, grad, u, self._source(source), flags, nx, ny, nz, *self._flags, int(parity),
-            np.float32(mobility), np.float32(width), np.float32(source_scale),
+            np.float32(mobility), np.float32(width), np.float32(source_scale), np.float32(trt_lambda),
         )  # fmt: skip
 
     def volume_sums(self, phi, source, flags, eps=None) -> tuple[float, float]:

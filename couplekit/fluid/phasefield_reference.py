@@ -43,6 +43,20 @@ def _feq(q, phi, u):
     return W7[q] * phi * (1.0 + (C7[q].astype(np.float64) @ u) / CS2_7)
 
 
+def _inflow(q, phi_b, u_b):
+    """The flux part 2 w_q phi_b d_q . u_b / cs^2 of an inflow link (q: from the inflow cell into the fluid): the
+    entering population is the bounced-back one plus this, so the link's net flux is phi_b d_q . u_b."""
+    return 2.0 * W7[q] * phi_b * (C7[q].astype(np.float64) @ u_b) / CS2_7
+
+
+def trt_omega_plus(omega: float, trt_lambda: float) -> float:
+    """Rate of the symmetric non-equilibrium of the two-relaxation-time collision: (1/omega - 1/2)(1/omega_plus
+    - 1/2) = trt_lambda; omega itself (Eq. 48's single rate) when trt_lambda is 0."""
+    if trt_lambda <= 0.0:
+        return omega
+    return 1.0 / (0.5 + trt_lambda / (1.0 / omega - 0.5))
+
+
 class PhaseFieldReferenceOps:
     """NumPy phase-field stages; same methods and signatures as :class:`PhaseFieldKernelOps`.
 
@@ -84,7 +98,7 @@ class PhaseFieldReferenceOps:
             kind = grid.flags[p]
             pulled = H[OPP7[q], p]  # AA pull
             bounced = H[q, c]  # own f*_{opp q} of the even step: bounce-back from a wall
-            inflow = _feq(q, P[p], U[:, p])  # equilibrium with the inflow cell's phi and velocity
+            inflow = bounced + _inflow(q, P[p], U[:, p])  # bounce-back plus phi_b d_q . u_b of the inflow cell
             f[q] = np.select([kind == FLUID, kind == WALL, kind == INFLOW], [pulled, bounced, inflow], 0.0)
             outflow_weight += np.where(kind == OUTFLOW, _feq(q, 1.0, U[:, c]), 0.0)
         # zero-gradient outflow: equilibrium with the cell's own phi, phi = known + phi * outflow_weight
@@ -116,12 +130,13 @@ class PhaseFieldReferenceOps:
             wall = kind == WALL
             H[qo, c[wall]] = fs[q, wall]  # bounce-back, read at the next even step
             inflow = kind == INFLOW
-            H[qo, c[inflow]] = _feq(qo, P[m[inflow]], U[:, m[inflow]])
+            H[qo, c[inflow]] = fs[q, inflow] + _inflow(qo, P[m[inflow]], U[:, m[inflow]])
             out = kind == OUTFLOW
             H[qo, c[out]] = _feq(qo, phi_post[out], U[:, c[out]])
 
-    def _unload(self, h, feq: np.ndarray, grid: _Grid, parity: int) -> None:
-        """Write f (7, ncells) so that loading at ``parity`` returns it in every interior fluid cell."""
+    def _unload(self, h, feq: np.ndarray, grid: _Grid, parity: int, phi=None, u=None) -> None:
+        """Write f (7, ncells) so that loading at ``parity`` returns it in every interior fluid cell (``phi``,
+        ``u``: the inflow cells' values, needed at odd parity for the inflow links)."""
         H = h.reshape(7, -1)
         fluid = grid.fluid
         c = grid.cell[fluid]
@@ -135,6 +150,11 @@ class PhaseFieldReferenceOps:
             kind = grid.flags[p]
             H[OPP7[q], p[kind == FLUID]] = f[q, kind == FLUID]
             H[q, c[kind == WALL]] = f[q, kind == WALL]
+            inflow = kind == INFLOW
+            if inflow.any():
+                pb = phi.reshape(-1)[p[inflow]].astype(np.float64)
+                ub = u.reshape(3, -1)[:, p[inflow]].astype(np.float64)
+                H[q, c[inflow]] = f[q, inflow] - _inflow(q, pb, ub)
 
     # ------------------------------------------------------------------------------------------- physics
     def set_equilibrium(self, h, phi, u, flags, parity: int) -> None:
@@ -144,7 +164,7 @@ class PhaseFieldReferenceOps:
         P = phi.reshape(-1)[c].astype(np.float64)
         U = u.reshape(3, -1)[:, c].astype(np.float64)
         feq = np.stack([_feq(q, P, U) for q in range(7)])
-        self._unload(h, feq.astype(np.float32), grid, parity)
+        self._unload(h, feq.astype(np.float32), grid, parity, phi, u)
 
     def macroscopic(self, h, phi, u, flags, parity: int) -> None:
         """phi = sum_k h_k (Eq. 47) in interior fluid cells; see the kernel for ghost, wall and inflow cells.
@@ -211,12 +231,16 @@ class PhaseFieldReferenceOps:
         mobility: float,
         width: float,
         source_scale: float = 1.0,
+        trt_lambda: float = 0.0,
     ) -> None:
         """One step of Eq. 48 with in-place (AA) streaming and the boundary rules of the flags.
 
         h*_k = h_k - omega (h_k - h_k^eq) + (1 - omega/2) H_k + S_k, omega = 1/(M/cs^2 + 1/2),
         H_k = w_k d_k . H, H = (4/W) phi (1 - phi) grad phi / |grad phi| (Eqs. 49–50),
         S_k = w_k gamma S_phi (Eq. 51, gamma = ``source_scale`` from Eq. 52).
+        ``trt_lambda`` > 0: two relaxation times (TRT, Ginzburg 2005): of the non-equilibrium n = h - h^eq, the
+        symmetric part (n_k + n_opp k)/2 of each pair relaxes at omega_plus (:func:`trt_omega_plus`), the
+        antisymmetric part (which carries the flux, so M) at omega; 0 is Eq. 48's single rate.
         ``phi`` is read only at INFLOW cells (the phase value they carry).
         """
         grid = self._grid(flags)
@@ -235,6 +259,11 @@ class PhaseFieldReferenceOps:
         U = u.reshape(3, -1)[:, c].astype(np.float64)
         feq = np.stack([_feq(q, phi_c, U) for q in range(7)])
         post = f - omega * (f - feq) + (1.0 - 0.5 * omega) * H_k + S_k  # Eq. 48
+        if trt_lambda > 0.0:
+            n = f - feq
+            sym = 0.5 * (n + n[OPP7])
+            sym[0] = n[0]  # the rest population is its own pair
+            post -= (trt_omega_plus(omega, trt_lambda) - omega) * sym
         self._store(h, phi, u, post.astype(np.float32).astype(np.float64), grid, parity)
 
     def volume_sums(self, phi, source, flags, eps=None) -> tuple[float, float]:

@@ -90,6 +90,14 @@ class FluidParams:
     exactly.
     ``smagorinsky``: Smagorinsky constant C of a subgrid viscosity ν_t = (C Δx)² |S̄| added to ν (0 = off, the
     default and the paper's model); 0.1–0.17 is usual for under-resolved turbulent flows.
+    ``phase_trt_lambda``: Λ_h of a two-relaxation-time collision of the phase field (the symmetric
+    non-equilibrium of each population pair relaxed at ω₊ with (1/ω − ½)(1/ω₊ − ½) = Λ_h; the mobility is
+    unchanged; 0 = the paper's single rate, Eq. 48). ``None`` (default): :data:`PHASE_TRT_LAMBDA_INFLOW` when the
+    boundaries have an inflow (a face or a region), else 0 (:meth:`phase_lambda_for`). Why: with the single rate
+    (ω = 1.72 at M = 0.02) the front an inflow builds at the face has a tail alternating in sign (φ < 0 in the
+    second layer from step 5 on); where that meets air (ρ_l) next to a cell with φ ≈ 0.1, the adjacent density
+    ratio passes ~100 and the pressure update (Eq. 39) and −∇p̄/ρ grow a period-2 mode there (narrow outlets
+    diverged at 800:1, tests/fluid/test_inflow_region.py). Two rates make that tail monotone.
 
     **Defaults differ from a scene's.** ``FluidParams()`` is the paper's collision on a generic fluid, what the
     solver validations test; a scene's ``[fluid]`` table defaults to the paper's viscosities with the
@@ -128,6 +136,7 @@ class FluidParams:
     smagorinsky: float = 0.0
     odd_lambda: float = 0.0
     odd_nu_max: float = 5e-4
+    phase_trt_lambda: float | None = None
 
     def __post_init__(self) -> None:
         for name in ("rho_h", "rho_l", "nu_h", "nu_l", "mobility", "width"):
@@ -135,6 +144,8 @@ class FluidParams:
                 raise ValueError(f"FluidParams.{name} must be > 0, got {getattr(self, name)}")
         if self.sigma < 0 or self.eta < 0:
             raise ValueError("FluidParams.sigma and .eta must be >= 0")
+        if self.phase_trt_lambda is not None and not 0.0 <= self.phase_trt_lambda <= 1.0:
+            raise ValueError(f"FluidParams.phase_trt_lambda must be None or in [0, 1], got {self.phase_trt_lambda}")
         if not self.odd_nu_max > 0:
             raise ValueError(f"FluidParams.odd_nu_max must be > 0, got {self.odd_nu_max}")
         if not 0.0 <= self.odd_lambda <= 1.0:
@@ -172,6 +183,13 @@ class FluidParams:
         values.update(overrides)
         return cls(**values)
 
+    def phase_lambda_for(self, has_inflow: bool) -> float:
+        """The phase field's TRT Λ_h a solver uses: ``phase_trt_lambda``, or when that is None
+        :data:`PHASE_TRT_LAMBDA_INFLOW` with an inflow and 0 (the paper's Eq. 48) without."""
+        if self.phase_trt_lambda is not None:
+            return float(self.phase_trt_lambda)
+        return PHASE_TRT_LAMBDA_INFLOW if has_inflow else 0.0
+
     def odd_reference_viscosity(self, two_phase: bool = True) -> float:
         """ν_ref of the odd-moment rate: the lowest molecular viscosity (ν_h single-phase, min(ν_h, ν_l))."""
         return min(self.nu_h, self.nu_l) if two_phase else self.nu_h
@@ -181,6 +199,18 @@ class FluidParams:
         (:func:`~couplekit.fluid.reference.odd_rates`); False means the solver runs the paper's rate 1."""
         nu_ref = self.odd_reference_viscosity(two_phase)
         return self.odd_lambda > 0 and nu_ref < min(2.0 * self.odd_lambda / 3.0, self.odd_nu_max)
+
+
+PHASE_TRT_LAMBDA_INFLOW = 0.1
+"""Λ_h of the phase field's two-relaxation-time collision in a fluid with an inflow (``FluidParams.phase_trt_lambda``
+= None): a measured window, not an optimum. On the outlet jets of tests/fluid/test_inflow_region.py (12 × 12 × 24,
+800:1, M = 0.02, ν = 0.01) with 1/12 a 6 × 6 outlet at ξ = 3, u = 0.08 still diverged (step 100); 0.1, 1/8, 1/6
+and 1/4 ran every outlet of ≥ 3 cells at ξ ≥ 3 to 0.08. But examples/fig04_colander_small.toml (a disc outlet in
+the ceiling at lattice speed 0.036, ν_h = 1e-4) diverged with 1/8 and 1/6 (steps 640, 730: φ = −0.03 in the
+ceiling's first layer beside the outlet) and ran its 12 tested frames with 0, 1/12 and 0.1. Larger values also
+make drops at ξ = 2 diverge sooner (a drop through still air at u = 0.02: step 160 with 1/4, 520 with 1/6; the
+single rate ran it 600 steps), and at Fig. 1's viscosities (ν_l = 0.1) 1/6 ran 4-cell outlets at 0.08 where 0.1
+diverges (couplekit.scene.model.water_outlet_speed_limit limits those)."""
 
 
 class OddFloorInactiveWarning(UserWarning):
@@ -266,6 +296,7 @@ class FluidSolver:
 
         flags, wall_u, wall_phi = build_flags(self.shape, self.boundaries, solid)
         self._fluid_host = flags[INTERIOR] == FLUID
+        self.phase_trt_lambda = params.phase_lambda_for(bool((flags == INFLOW).any()))
         ghost, image = periodic_lists(self.shape, self.boundaries)
         out_ghost, out_src = outflow_lists(self.shape, flags)
         self.flags = backend.asarray(flags)
@@ -338,8 +369,9 @@ class FluidSolver:
         The controller (Eq. 52) steers the phase volume towards ``volume0``; with an inflow or outflow face
         that target must follow what the faces let in and out, else it fights the jet (it turned the sand's
         source term into a sink of the inflowing water). Per step the target moves by the water flux through
-        the open faces, Σ φ u·n_in over the interior cells behind face-adjacent inflow and outflow ghosts
-        (their current φ and velocity, n_in the inward normal, unit face area)."""
+        the open faces (n_in the inward normal, unit face area): Σ φ_b u_b·n_in over the face-adjacent inflow
+        ghosts (their carried phase value and velocity: exactly what the phase field's inflow links let in,
+        ``kernels/phasefield.cu`` pf_inflow), and Σ φ u·n_in over the interior cells behind the outflow ghosts."""
         self._open_in = self._open_out = None
         self._closed_box = not bool(np.isin(flags, (INFLOW, OUTFLOW)).any())
         if not self.two_phase or self.params.eta <= 0:
@@ -348,7 +380,7 @@ class FluidSolver:
         n_in, src = _ghost_faces(idx, flags.shape)
         keep = (np.abs(n_in).sum(axis=0) == 1) & (flags.reshape(-1)[src] == FLUID)  # face ghosts before fluid
         if keep.any():
-            self._open_in = (self.backend.asarray(src[keep]), n_in[:, keep])
+            self._open_in = (self.backend.asarray(idx[keep]), n_in[:, keep])  # the ghosts: φ_b, u_b
         n_in, _ = _ghost_faces(out_ghost, flags.shape)  # out_src: the same nearest interior cells
         keep = np.abs(n_in).sum(axis=0) == 1
         if keep.any():
@@ -356,7 +388,8 @@ class FluidSolver:
 
     def _open_face_volume(self) -> float:
         """Water volume (float64) the inflow faces let in minus what the outflow faces let out in one step:
-        Σ φ u·n_in over the interior cells behind the open faces (n_in the inward normal)."""
+        Σ φ u·n_in over the inflow ghosts and over the interior cells behind the outflow ghosts (n_in the
+        inward normal)."""
         dv = 0.0
         for open_cells in (self._open_in, self._open_out):
             if open_cells is None:
@@ -442,6 +475,7 @@ class FluidSolver:
                 ops.fold(self.f, self._ghost, self._image)
                 ops.outflow_fix(self.f, self._out_ghost, self._out_src)
             if self.two_phase:
+                self._set_inflow_front()  # first: the controller's target counts the inflow's φ_b of this step
                 if prm.eta > 0:
                     if self._open_in is not None or self._open_out is not None:
                         self.volume0 += self._open_face_volume()
@@ -450,10 +484,9 @@ class FluidSolver:
                     source_scale = self._interface_correction(volume, source_sum)
                 else:
                     source_scale = self.gamma
-                self._set_inflow_front()
                 self.pf_ops.collide_stream(
                     self.h, self.phi, self.grad, self.velocity, self.source_term, self.flags, self.step_count,
-                    prm.mobility, prm.width, source_scale,
+                    prm.mobility, prm.width, source_scale, self.phase_trt_lambda,
                 )  # fmt: skip
             self.step_count += 1
             if self.two_phase:

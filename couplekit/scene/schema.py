@@ -825,8 +825,10 @@ INFLOW_KEYS: list[Key] = [
         "face",
         "'face': the whole face (its domain.boundary must be 'inflow'); 'rect' or 'disc': an outlet in the face "
         "(a jet), the rest of the face keeps its domain.boundary ('wall' or 'outflow'); several outlets may "
-        "share a face if they do not overlap. Keep an outlet at least ~1.5 interface widths across: narrower "
-        "water jets into air diverge at lattice speeds near 0.08 (measured, tests/fluid/test_inflow_region.py)",
+        "share a face if they do not overlap. A water outlet needs fluid.interface_width >= 3 and, above lattice "
+        "speed 0.02, at least 3 cells across; with an air_lattice_viscosity above 0.01 and under 8 cells across "
+        "(interface_width < 6) its lattice speed is limited to 0.04 (width < 4) or 0.06 (measured to diverge "
+        "beyond: couplekit.scene.model.water_outlet_speed_limit, tests/fluid/test_inflow_region.py)",
         choices=("face", "rect", "disc"),
     ),
     Key(

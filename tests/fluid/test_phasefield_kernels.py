@@ -78,6 +78,63 @@ def test_collide_stream_matches_reference(cpu, periodic, parity):
     assert np.abs(h_k - s["h"]).max() > 1e-2
 
 
+@pytest.mark.parametrize("parity", [0, 1])
+def test_collide_stream_trt_matches_reference_and_conserves(cpu, parity):
+    """The two-relaxation-time collision (trt_lambda = 1/6): kernel = reference, it differs from the single rate,
+    and a closed box (walls only, no source) keeps Σφ to float32 round-off."""
+    periodic = PERIODIC_CASES[1]
+    s = random_state(40 + parity, periodic)
+    kernel, ref = PhaseFieldKernelOps(cpu, periodic), PhaseFieldReferenceOps(periodic)
+    h_k, h_r, h_bgk = s["h"].copy(), s["h"].copy(), s["h"].copy()
+    args = (s["phi"], s["grad"], s["u"], s["source"], s["flags"], parity, 0.02, 4.0, 0.6)
+    kernel.collide_stream(h_k, *args, trt_lambda=1.0 / 6.0)
+    ref.collide_stream(h_r, *args, trt_lambda=1.0 / 6.0)
+    kernel.collide_stream(h_bgk, *args)
+    assert np.abs(h_k - h_r).max() < ATOL
+    assert np.abs(h_k - h_bgk).max() > 1e-3
+    walls = random_state(50 + parity, periodic, boundary_kinds=(WALL,))
+    zero = np.zeros_like(walls["source"])
+    h = walls["h"].copy()
+    phi0 = np.zeros(padded_shape(SHAPE), np.float32)
+    kernel.macroscopic(h, phi0, walls["u"], walls["flags"], parity)
+    kernel.collide_stream(
+        h, walls["phi"], walls["grad"], walls["u"], zero, walls["flags"], parity, 0.02, 4.0, 1.0, trt_lambda=0.25
+    )
+    phi1 = np.zeros(padded_shape(SHAPE), np.float32)
+    kernel.macroscopic(h, phi1, walls["u"], walls["flags"], parity + 1)
+    fluid = walls["flags"][1:-1, 1:-1, 1:-1] == FLUID
+    v0, v1 = (float(p[1:-1, 1:-1, 1:-1][fluid].astype(np.float64).sum()) for p in (phi0, phi1))
+    assert abs(v1 - v0) < 1e-4 * max(1.0, abs(v0)), (v0, v1)
+
+
+@pytest.mark.parametrize("parity", [0, 1])
+def test_inflow_link_lets_in_exactly_phi_b_u_b(cpu, parity):
+    """An inflow face (x-) carrying φ_b = 0.7 at u = (0.05, 0, 0) into a box of φ = 0.2 at rest, every other face a
+    wall: one step changes Σφ by exactly φ_b u_x × (face cells), whatever the cells' phase values (no diffusive
+    or interface exchange across an inflow), kernel and reference alike."""
+    periodic = (False, False, False)
+    nz, ny, nx = SHAPE
+    flags = pad_flags(None, SHAPE, periodic)
+    flags[1:-1, 1:-1, 0] = INFLOW
+    pshape = padded_shape(SHAPE)
+    phi = np.zeros(pshape, np.float32)
+    phi[1:-1, 1:-1, 1:-1] = 0.2
+    phi[flags == INFLOW] = 0.7
+    u = np.zeros((3, *pshape), np.float32)
+    u[0][flags == INFLOW] = 0.05
+    for ops in (PhaseFieldKernelOps(cpu, periodic), PhaseFieldReferenceOps(periodic)):
+        h = np.zeros((7, *pshape), np.float32)
+        ops.set_equilibrium(h, phi, u, flags, parity)
+        p0, p1 = phi.copy(), phi.copy()
+        ops.macroscopic(h, p0, u, flags, parity)
+        grad = np.zeros((3, *pshape), np.float32)
+        grad[0, 1:-1, 1:-1, 1:-1] = -0.05  # an interface normal, so the counter flux H is not zero
+        ops.collide_stream(h, p0, grad, u, np.zeros(pshape, np.float32), flags, parity, 0.02, 4.0)
+        ops.macroscopic(h, p1, u, flags, parity + 1)
+        dv = float(p1[1:-1, 1:-1, 1:-1].astype(np.float64).sum() - p0[1:-1, 1:-1, 1:-1].astype(np.float64).sum())
+        assert abs(dv - 0.7 * 0.05 * ny * nz) < 1e-5, (type(ops).__name__, dv, 0.7 * 0.05 * ny * nz)
+
+
 @pytest.mark.parametrize("periodic", PERIODIC_CASES)
 @pytest.mark.parametrize("parity", [0, 1])
 def test_macroscopic_matches_reference(cpu, periodic, parity):
@@ -96,16 +153,19 @@ def test_macroscopic_matches_reference(cpu, periodic, parity):
 
 @pytest.mark.parametrize("periodic", PERIODIC_CASES[:2])
 @pytest.mark.parametrize("parity", [0, 1])
-def test_set_equilibrium_matches_reference_and_loads_back(cpu, periodic, parity):
-    s = random_state(30 + parity, periodic, boundary_kinds=(WALL,))
+@pytest.mark.parametrize("kinds", [(WALL,), (WALL, INFLOW)], ids=["walls", "inflow"])
+def test_set_equilibrium_matches_reference_and_loads_back(cpu, periodic, parity, kinds):
+    s = random_state(30 + parity, periodic, boundary_kinds=kinds)
     kernel, ref = PhaseFieldKernelOps(cpu, periodic), PhaseFieldReferenceOps(periodic)
     h_k = np.zeros((7, *padded_shape(SHAPE)), dtype=np.float32)
     h_r = h_k.copy()
     kernel.set_equilibrium(h_k, s["phi"], s["u"], s["flags"], parity)
     ref.set_equilibrium(h_r, s["phi"], s["u"], s["flags"], parity)
     assert np.abs(h_k - h_r).max() < ATOL
-    # loading at the same parity gives back phi = sum_k h_k^eq in fluid cells
+    # loading at the same parity gives back phi = sum_k h_k^eq in fluid cells (inflow cells keep the phase
+    # value they carry, which their links' flux part reads)
     phi = np.zeros(padded_shape(SHAPE), dtype=np.float32)
+    phi[s["flags"] == INFLOW] = s["phi"][s["flags"] == INFLOW]
     kernel.macroscopic(h_k, phi, s["u"], s["flags"], parity)
     fluid = s["flags"][1:-1, 1:-1, 1:-1] == FLUID
     assert np.abs(phi[1:-1, 1:-1, 1:-1] - s["phi"][1:-1, 1:-1, 1:-1])[fluid].max() < ATOL
