@@ -45,6 +45,32 @@
 #define CK_MIN_BLOCKS_PER_SM 2
 #endif
 
+// Storage of the populations f (D3Q27) and h (D3Q7): CK_STORAGE_FP16 = 0 (float32, the default) or 1 (IEEE
+// binary16 bits, arithmetic stays float32; docs/precision.md "fp16 storage").  Kernels declare the arrays as
+// `ck_store_t*` (couplekit.backend.signature resolves it with the module's defines: float32, or a float16 /
+// uint16 array) and read / write them only through
+//   CK_LOAD(p, i, scale)      -> float value of element i  (stored / scale; fp32: p[i])
+//   CK_STORE(p, i, v, scale)  stores v * scale rounded to the storage type  (fp32: p[i] = v)
+// scale: CK_F_SCALE for f - w, CK_H_SCALE for h - CK_H_REST w_q (powers of two, so the scaling is exact).
+// Rounding is round-to-nearest-even on both paths (host: _Float16 conversion, GCC >= 12 on x86-64 / F16C;
+// CUDA: cvt.rn.f16.f32), as NumPy's float16, so the reference rounds alike; a value beyond 65504 / scale
+// becomes +-inf (not a clamp), which the divergence checks see.  The Python twins of the constants:
+// couplekit.fluid.storage (a test reads them from here).
+#ifndef CK_STORAGE_FP16
+#define CK_STORAGE_FP16 0
+#endif
+#if CK_STORAGE_FP16
+#define CK_F_SCALE 32768.f
+#define CK_H_SCALE 32768.f
+#ifndef CK_H_REST
+#define CK_H_REST 1.f
+#endif
+#else
+#define CK_F_SCALE 1.f
+#define CK_H_SCALE 1.f
+#define CK_H_REST 0.f
+#endif
+
 #if defined(__CUDACC__)
 // ---------------------------------------------------------------------------------------------- CUDA
 // NVRTC has no host headers: nothing may be included here (math functions are built in).
@@ -54,6 +80,28 @@
 #define RESTRICT __restrict__
 #define CK_ON_GPU 1
 #define CK_NANF __int_as_float(0x7fc00000)
+
+#if CK_STORAGE_FP16
+// binary16 bits <-> float by the PTX conversions (no header: NVRTC has none); .rn = round to nearest even,
+// out of range -> inf
+typedef unsigned short ck_store_t;
+DEVICE float ck_half_to_float_(const unsigned short b) {
+    float v;
+    asm("cvt.f32.f16 %0, %1;" : "=f"(v) : "h"(b));
+    return v;
+}
+DEVICE unsigned short ck_float_to_half_(const float v) {
+    unsigned short b;
+    asm("cvt.rn.f16.f32 %0, %1;" : "=h"(b) : "f"(v));
+    return b;
+}
+#define CK_LOAD(p, i, scale) (ck_half_to_float_((p)[i]) * (1.f / (scale)))
+#define CK_STORE(p, i, v, scale) ((p)[i] = ck_float_to_half_((v) * (scale)))
+#else
+typedef float ck_store_t;
+#define CK_LOAD(p, i, scale) ((p)[i])
+#define CK_STORE(p, i, v, scale) ((p)[i] = (v))
+#endif
 
 #define CK_THREAD_INDEX ((long long)blockIdx.x * (long long)blockDim.x + (long long)threadIdx.x)
 #define CK_THREAD_STRIDE ((long long)blockDim.x * (long long)gridDim.x)
@@ -120,6 +168,17 @@ DEVICE double ck_warp_sum(double v) {
 #define CONSTANT static constexpr
 #define RESTRICT __restrict__
 #define CK_NANF __builtin_nanf("")
+
+#if CK_STORAGE_FP16
+// _Float16: IEEE binary16 with round-to-nearest-even conversions (GCC 12 on x86-64; F16C vectorises them)
+typedef _Float16 ck_store_t;
+#define CK_LOAD(p, i, scale) ((float)(p)[i] * (1.f / (scale)))
+#define CK_STORE(p, i, v, scale) ((p)[i] = (_Float16)((v) * (scale)))
+#else
+typedef float ck_store_t;
+#define CK_LOAD(p, i, scale) ((p)[i])
+#define CK_STORE(p, i, v, scale) ((p)[i] = (v))
+#endif
 #define CK_MAX_THREADS 1024
 
 #define CK_PRAGMA(x) _Pragma(#x)

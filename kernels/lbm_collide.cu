@@ -14,7 +14,11 @@
 // variants: CK_TWO_PHASE=0,1 CK_SURFACE_TENSION=0,1 CK_MIXTURE=0,1 CK_EXT_FORCE=1
 // variants: CK_LES=1 CK_ODD_RATE=1
 // variants: CK_TWO_PHASE=1 CK_SURFACE_TENSION=1 CK_MIXTURE=1 CK_EXT_FORCE=1 CK_LES=1 CK_ODD_RATE=1
+// variants: CK_STORAGE_FP16=1 CK_TWO_PHASE=0,1 CK_SURFACE_TENSION=0,1 CK_MIXTURE=0,1 CK_EXT_FORCE=1
+// variants: CK_STORAGE_FP16=1 CK_TWO_PHASE=1 CK_SURFACE_TENSION=1 CK_MIXTURE=1 CK_EXT_FORCE=1 CK_LES=1 CK_ODD_RATE=1
 // (CK_EXT_FORCE=0 compiles a strict subset of the =1 code, so the GPU build checks only =1)
+// CK_STORAGE_FP16 (common.cuh): f held as binary16 (f - w) * CK_F_SCALE, float32 arithmetic; the lines with it
+// build the effect sets of the first line and the all-closures set
 #include "common.cuh"
 #include "lattice.cuh"
 #include "lbm_core.cuh"
@@ -132,7 +136,7 @@ LBM_INLINE void lbm_central_second(const float m0, const float mx, const float m
 // one fluid cell: load, forces, collision, store (ODD = parity & 1; MODE: how the stencils learn the kind of a
 // neighbour, see lbm_gradient; `mask` = lbm_link_mask of c for LBM_NB_MASK)
 template <int ODD, int MODE>
-LBM_INLINE void lbm_collide_cell(const long long c, float* RESTRICT f, const unsigned char* RESTRICT flags,
+LBM_INLINE void lbm_collide_cell(const long long c, ck_store_t* RESTRICT f, const unsigned char* RESTRICT flags,
                                  float* RESTRICT vel, const float* RESTRICT phi, const float* RESTRICT mu,
                                  const float* RESTRICT eps, const float* RESTRICT force,
                                  const float* RESTRICT pbar, const int px, const long long pxy, const long long N,
@@ -372,9 +376,9 @@ LBM_INLINE void lbm_collide_cell(const long long c, float* RESTRICT f, const uns
     const long long spxy = CK_PER_ITEM(pxy), sN = CK_PER_ITEM(N);
 #define LBM_PUT(i)                                                              \
     if (ODD)                                                                    \
-        f[QOF27[i] * sN + c + LBM_OFFSET(QOF27[i], spx, spxy)] = K[i];          \
+        CK_STORE(f, QOF27[i] * sN + c + LBM_OFFSET(QOF27[i], spx, spxy), K[i], CK_F_SCALE); \
     else                                                                        \
-        f[opposite_dir(QOF27[i]) * sN + c] = K[i];
+        CK_STORE(f, opposite_dir(QOF27[i]) * sN + c, K[i], CK_F_SCALE);
 #define LBM_BACK_Z(ij)                                                            \
     chimera_backward2_shift(K[(ij) * 3], K[(ij) * 3 + 1], K[(ij) * 3 + 2], uz, uz2, uzz, 0.f - LBM_REST_Z(ij)); \
     LBM_PUT((ij) * 3) LBM_PUT((ij) * 3 + 1) LBM_PUT((ij) * 3 + 2)
@@ -386,7 +390,7 @@ LBM_INLINE void lbm_collide_cell(const long long c, float* RESTRICT f, const uns
     vel[2 * N + c] = uz;
 }
 
-KERNEL void lbm_collide_stream(const long long n, float* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
+KERNEL void lbm_collide_stream(const long long n, ck_store_t* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
                                const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                                float* RESTRICT vel /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
                                const float* RESTRICT phi, const float* RESTRICT mu, const float* RESTRICT eps,

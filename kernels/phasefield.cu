@@ -28,7 +28,7 @@
 #include "lattice.cuh"
 
 // 0: surface tension sigma = 0, the chemical potential (double well + Laplacian) is compiled out.
-// variants: CK_PF_SURFACE_TENSION=0,1 CK_PF_SOURCE=0,1
+// variants: CK_PF_SURFACE_TENSION=0,1 CK_PF_SOURCE=0,1 CK_STORAGE_FP16=0,1
 #ifndef CK_PF_SURFACE_TENSION
 #define CK_PF_SURFACE_TENSION 1
 #endif
@@ -37,6 +37,18 @@
 // sums never read `source` (a placeholder may be passed) and sum S_phi = 0 (variants: the line above).
 #ifndef CK_PF_SOURCE
 #define CK_PF_SOURCE 1
+#endif
+
+// Storage of h: ck_store_t (common.cuh).  float32 holds h itself; with CK_STORAGE_FP16 the binary16 slots hold
+// (h_q - CK_H_REST w_q) * CK_H_SCALE: h shifted by the weights of phi = 1 (docs/precision.md "fp16 storage":
+// in the water bulk the stored values are then the small flux parts, whose rounding is small; phi = 0 is h = 0,
+// stored -w_q exactly).  w_q is the same for a slot and its opposite, so the shift follows the slot.
+#if CK_STORAGE_FP16
+#define PF_LD(h, q, i) (CK_LOAD(h, i, CK_H_SCALE) + CK_H_REST * W7[q])
+#define PF_ST(h, q, i, v) CK_STORE(h, i, (v) - CK_H_REST * W7[q], CK_H_SCALE)
+#else
+#define PF_LD(h, q, i) ((h)[i])
+#define PF_ST(h, q, i, v) ((h)[i] = (v))
 #endif
 
 #define PF_FLUID 0
@@ -92,17 +104,17 @@ PF_INLINE float pf_feq(const int q, const float phi, const float ux, const float
 }
 
 // Pre-collision populations of fluid cell nb[0] at step parity `odd` (AA read rule with boundary rules).
-DEVICE void pf_load(const float* RESTRICT h, const unsigned char* RESTRICT flags, const float* RESTRICT phi,
+DEVICE void pf_load(const ck_store_t* RESTRICT h, const unsigned char* RESTRICT flags, const float* RESTRICT phi,
                     const float* RESTRICT u, const long long ncell, const long long nb[7], const int odd,
                     float f[7]) {
     const long long c = nb[0];
     if (!odd) {
         PF_UNROLL
-        for (int q = 0; q < 7; ++q) f[q] = h[q * ncell + c];
+        for (int q = 0; q < 7; ++q) f[q] = PF_LD(h, q, q * ncell + c);
         return;
     }
     const float ux = u[c], uy = u[ncell + c], uz = u[2 * ncell + c];
-    f[0] = h[c];
+    f[0] = PF_LD(h, 0, c);
     float known = f[0], outflow_weight = 0.f;
     PF_UNROLL
     for (int q = 1; q < 7; ++q) {
@@ -110,13 +122,13 @@ DEVICE void pf_load(const float* RESTRICT h, const unsigned char* RESTRICT flags
         const int kind = flags[p];
         float v = 0.f;
         if (kind == PF_FLUID) {
-            v = h[pf_opp(q) * ncell + p];
+            v = PF_LD(h, q, pf_opp(q) * ncell + p);
         } else if (kind == PF_INFLOW) {
             v = pf_feq(q, phi[p], u[p], u[ncell + p], u[2 * ncell + p]);
         } else if (kind == PF_OUTFLOW) {
             outflow_weight += pf_feq(q, 1.f, ux, uy, uz);
         } else {
-            v = h[q * ncell + c];
+            v = PF_LD(h, q, q * ncell + c);
         }
         f[q] = v;
         known += v;
@@ -131,16 +143,16 @@ DEVICE void pf_load(const float* RESTRICT h, const unsigned char* RESTRICT flags
 }
 
 // AA write rule: post-collision populations of fluid cell nb[0] at step parity `odd`.
-DEVICE void pf_store(float* RESTRICT h, const unsigned char* RESTRICT flags, const float* RESTRICT phi,
+DEVICE void pf_store(ck_store_t* RESTRICT h, const unsigned char* RESTRICT flags, const float* RESTRICT phi,
                      const float* RESTRICT u, const long long ncell, const long long nb[7], const int odd,
                      const float f[7]) {
     const long long c = nb[0];
     if (!odd) {
         PF_UNROLL
-        for (int q = 0; q < 7; ++q) h[pf_opp(q) * ncell + c] = f[q];
+        for (int q = 0; q < 7; ++q) PF_ST(h, q, pf_opp(q) * ncell + c, f[q]);
         return;
     }
-    h[c] = f[0];
+    PF_ST(h, 0, c, f[0]);
     const float phi_post = f[0] + f[1] + f[2] + f[3] + f[4] + f[5] + f[6];
     PF_UNROLL
     for (int q = 1; q < 7; ++q) {
@@ -148,20 +160,20 @@ DEVICE void pf_store(float* RESTRICT h, const unsigned char* RESTRICT flags, con
         const int kind = flags[m];
         const int qo = pf_opp(q);
         if (kind == PF_FLUID) {
-            h[q * ncell + m] = f[q];
+            PF_ST(h, q, q * ncell + m, f[q]);
         } else if (kind == PF_INFLOW) {
-            h[qo * ncell + c] = pf_feq(qo, phi[m], u[m], u[ncell + m], u[2 * ncell + m]);
+            PF_ST(h, qo, qo * ncell + c, pf_feq(qo, phi[m], u[m], u[ncell + m], u[2 * ncell + m]));
         } else if (kind == PF_OUTFLOW) {
-            h[qo * ncell + c] = pf_feq(qo, phi_post, u[c], u[ncell + c], u[2 * ncell + c]);
+            PF_ST(h, qo, qo * ncell + c, pf_feq(qo, phi_post, u[c], u[ncell + c], u[2 * ncell + c]));
         } else {
-            h[qo * ncell + c] = f[q];
+            PF_ST(h, qo, qo * ncell + c, f[q]);
         }
     }
 }
 
 // h := a state that loads (at parity t) as h^eq(phi, u) in every interior fluid cell.  n = nx*ny*nz.
 KERNEL void phase_set_equilibrium(const long long n,
-                                  float* RESTRICT h /* size: 7 * (nx + 2) * (ny + 2) * (nz + 2) */,
+                                  ck_store_t* RESTRICT h /* size: 7 * (nx + 2) * (ny + 2) * (nz + 2) */,
                                   const float* RESTRICT phi /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                                   const float* RESTRICT u /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
                                   const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
@@ -178,12 +190,12 @@ KERNEL void phase_set_equilibrium(const long long n,
         for (int q = 0; q < 7; ++q) {
             const float feq = pf_feq(q, p0, ux, uy, uz);
             if (!(parity & 1) || q == 0) {
-                h[q * ncell + c] = feq;
+                PF_ST(h, q, q * ncell + c, feq);
             } else {
                 const long long p = nb[pf_opp(q)];
                 const int kind = flags[p];
-                if (kind == PF_FLUID) h[pf_opp(q) * ncell + p] = feq;
-                else if (kind == PF_WALL) h[q * ncell + c] = feq;
+                if (kind == PF_FLUID) PF_ST(h, q, pf_opp(q) * ncell + p, feq);
+                else if (kind == PF_WALL) PF_ST(h, q, q * ncell + c, feq);
                 // INFLOW / OUTFLOW links: the load rule computes the value
             }
         }
@@ -195,7 +207,7 @@ KERNEL void phase_set_equilibrium(const long long n,
 // image is one) gets 0; INFLOW cells, ghost or interior, keep the phase value they carry (set by the
 // caller).  n = (nx+2)*(ny+2)*(nz+2).
 KERNEL void phase_macroscopic(const long long n,
-                              const float* RESTRICT h /* size: 7 * (nx + 2) * (ny + 2) * (nz + 2) */,
+                              const ck_store_t* RESTRICT h /* size: 7 * (nx + 2) * (ny + 2) * (nz + 2) */,
                               float* RESTRICT phi /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                               const float* RESTRICT u /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
                               const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
@@ -303,7 +315,17 @@ struct PfCell {
 PF_INLINE float pf_relax(const int q, const float fq, const float p0, const float ux, const float uy, const float uz,
                          const float hx, const float hy, const float hz, const float s, const float omega,
                          float& rest, float& rest_comp) {
-    const float post = fq - omega * (fq - pf_feq(q, p0, ux, uy, uz)) + W7[q] * (pf_dot(q, hx, hy, hz) + s);
+    float post = fq - omega * (fq - pf_feq(q, p0, ux, uy, uz)) + W7[q] * (pf_dot(q, hx, hy, hz) + s);
+#if CK_STORAGE_FP16
+    // rounded to the storage here, so that the rest population (the exact balance) takes the six moving
+    // populations' rounding: sum phi then changes per cell by the rounding of h_0 - w_0 alone (which is small
+    // in the water bulk), not by seven binary16 roundings
+    {
+        ck_store_t r;
+        CK_STORE(&r, 0, post - CK_H_REST * W7[q], CK_H_SCALE);
+        post = CK_LOAD(&r, 0, CK_H_SCALE) + CK_H_REST * W7[q];
+    }
+#endif
     pf_accumulate(rest, rest_comp, -post);
     return post;
 }
@@ -361,7 +383,7 @@ PF_INLINE PfCell pf_collide(const PfCell in, const long long c, const long long 
 //   omega = 1/tau, tau = M / cs^2 + 1/2 (mobility M, cs^2 = 1/4)
 // grad: grad phi of the same step (phase_gradients); u: fluid velocity (and the velocity of INFLOW cells);
 // phi: read only at INFLOW cells (their phase value); source: S_phi.  n = nx*ny*nz.
-KERNEL void phase_collide_stream(const long long n, float* RESTRICT h /* size: 7 * (nx + 2) * (ny + 2) * (nz + 2) */,
+KERNEL void phase_collide_stream(const long long n, ck_store_t* RESTRICT h /* size: 7 * (nx + 2) * (ny + 2) * (nz + 2) */,
                                  const float* RESTRICT phi /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                                  const float* RESTRICT grad /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
                                  const float* RESTRICT u /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
@@ -380,21 +402,21 @@ KERNEL void phase_collide_stream(const long long n, float* RESTRICT h /* size: 7
             const long long c = (x + 1) + sy * (y + 1) + sz * (z + 1);
             if (flags[c] != PF_FLUID) continue;
             PfCell in;
-            in.f0 = h[c];
-            in.f1 = h[ncell + c];
-            in.f2 = h[2 * ncell + c];
-            in.f3 = h[3 * ncell + c];
-            in.f4 = h[4 * ncell + c];
-            in.f5 = h[5 * ncell + c];
-            in.f6 = h[6 * ncell + c];
+            in.f0 = PF_LD(h, 0, c);
+            in.f1 = PF_LD(h, 1, ncell + c);
+            in.f2 = PF_LD(h, 2, 2 * ncell + c);
+            in.f3 = PF_LD(h, 3, 3 * ncell + c);
+            in.f4 = PF_LD(h, 4, 4 * ncell + c);
+            in.f5 = PF_LD(h, 5, 5 * ncell + c);
+            in.f6 = PF_LD(h, 6, 6 * ncell + c);
             const PfCell out = pf_collide(in, c, ncell, grad, u, source, omega, interface_factor, source_scale);
-            h[c] = out.f0;  // store in the opposite slots (AA even step)
-            h[2 * ncell + c] = out.f1;
-            h[ncell + c] = out.f2;
-            h[4 * ncell + c] = out.f3;
-            h[3 * ncell + c] = out.f4;
-            h[6 * ncell + c] = out.f5;
-            h[5 * ncell + c] = out.f6;
+            PF_ST(h, 0, c, out.f0);  // store in the opposite slots (AA even step)
+            PF_ST(h, 2, 2 * ncell + c, out.f1);
+            PF_ST(h, 1, ncell + c, out.f2);
+            PF_ST(h, 4, 4 * ncell + c, out.f3);
+            PF_ST(h, 3, 3 * ncell + c, out.f4);
+            PF_ST(h, 6, 6 * ncell + c, out.f5);
+            PF_ST(h, 5, 5 * ncell + c, out.f6);
         }
     } else {
         FOR_EACH_CELL(x, y, z, nx, ny, nz) {
