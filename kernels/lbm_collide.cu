@@ -144,7 +144,7 @@ LBM_INLINE void lbm_collide_cell(const long long c, ck_store_t* RESTRICT f, cons
                                  const float gx, const float gy, const float gz, const float c_les,
                                  const float lambda_odd, const float odd_nu_max, const unsigned int mask) {
     float fj[27];
-    lbm_load<ODD>(f, c, N, px, pxy, fj);
+    lbm_load_scaled<ODD>(f, c, N, px, pxy, fj);  // (f - w) * CK_F_SCALE: the moments take the scale out
 
     // raw moments of the stored deviations f - w (lbm_core.cuh): dm0 = m0 - 1, m_a, dm_aa = m_aa - 1/3, m_ab
     // (a != b) -- the weights' own moments are 1, 0, 1/3, 0 -- by a forward chimera-style pass (66 additions): along x the line sums
@@ -172,14 +172,17 @@ LBM_INLINE void lbm_collide_cell(const long long c, ck_store_t* RESTRICT f, cons
     }
     LBM_YLINE(0) LBM_YLINE(1) LBM_YLINE(2)
 #undef LBM_YLINE
-    const float mzz = Y00[0] + Y00[2];  // dm_zz (deviation from 1/3), likewise myy, mxx below
-    const float dm0 = mzz + Y00[1], mz = Y00[2] - Y00[0];
+    // 1 / CK_F_SCALE: a power of two, exact (and 1, folded away, with fp32 storage)
+#define LBM_UNSCALE(v) ((v) * (1.f / CK_F_SCALE))
+    const float mzz = LBM_UNSCALE(Y00[0] + Y00[2]);  // dm_zz (deviation from 1/3), likewise myy, mxx below
+    const float dm0 = mzz + LBM_UNSCALE(Y00[1]), mz = LBM_UNSCALE(Y00[2] - Y00[0]);
     const float m0 = 1.f + dm0;  // only where it multiplies u u (the central moments below)
-    const float my = (Y01[0] + Y01[2]) + Y01[1], myz = Y01[2] - Y01[0];
-    const float myy = (Y02[0] + Y02[2]) + Y02[1];
-    const float mx = (Y10[0] + Y10[2]) + Y10[1], mxz = Y10[2] - Y10[0];
-    const float mxy = (Y11[0] + Y11[2]) + Y11[1];
-    const float mxx = (Y20[0] + Y20[2]) + Y20[1];
+    const float my = LBM_UNSCALE((Y01[0] + Y01[2]) + Y01[1]), myz = LBM_UNSCALE(Y01[2] - Y01[0]);
+    const float myy = LBM_UNSCALE((Y02[0] + Y02[2]) + Y02[1]);
+    const float mx = LBM_UNSCALE((Y10[0] + Y10[2]) + Y10[1]), mxz = LBM_UNSCALE(Y10[2] - Y10[0]);
+    const float mxy = LBM_UNSCALE((Y11[0] + Y11[2]) + Y11[1]);
+    const float mxx = LBM_UNSCALE((Y20[0] + Y20[2]) + Y20[1]);
+#undef LBM_UNSCALE
 
     // material properties, Eq. 4
 #if CK_TWO_PHASE

@@ -69,6 +69,19 @@ LBM_INLINE void lbm_load(const ck_store_t* RESTRICT f, const long long c, const 
 #undef LBM_LOAD
 }
 
+// the same, without taking the storage scale out: fj = stored values (f - w) * CK_F_SCALE (fp32: f - w); the
+// collision applies 1 / CK_F_SCALE to the 10 raw moments instead of to the 27 populations (fewer live values on
+// the GPU: with the scale taken out at each load the fp16 single-phase variants spilled 12 B on sm_90)
+template <int ODD>
+LBM_INLINE void lbm_load_scaled(const ck_store_t* RESTRICT f, const long long c, const long long N, const int px,
+                                const long long pxy, float* RESTRICT fj) {
+#define LBM_LOAD(q)                                                                  \
+    fj[q] = ODD ? CK_LOAD(f, opposite_dir(q) * N + c - LBM_OFFSET(q, px, pxy), 1.f) \
+                : CK_LOAD(f, (q) * N + c, 1.f);
+    LBM_FOR27(LBM_LOAD)
+#undef LBM_LOAD
+}
+
 // write post-collision populations of padded cell c under the write rule of the parity (ODD = parity & 1);
 // pushes into wall cells are turned into bounce-back by lbm_wall_bounce, into ghosts by lbm_fold /
 // lbm_outflow_fix
