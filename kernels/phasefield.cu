@@ -40,12 +40,15 @@
 #endif
 
 // Storage of h: ck_store_t (common.cuh).  float32 holds h itself; with CK_STORAGE_FP16 the binary16 slots hold
-// (h_q - CK_H_REST w_q) * CK_H_SCALE: h shifted by the weights of phi = 1 (docs/precision.md "fp16 storage":
-// in the water bulk the stored values are then the small flux parts, whose rounding is small; phi = 0 is h = 0,
-// stored -w_q exactly).  w_q is the same for a slot and its opposite, so the shift follows the slot.
-#if CK_STORAGE_FP16
-#define PF_LD(h, q, i) (CK_LOAD(h, i, CK_H_SCALE) + CK_H_REST * W7[q])
-#define PF_ST(h, q, i, v) CK_STORE(h, i, (v) - CK_H_REST * W7[q], CK_H_SCALE)
+// (h_q - CK_H_REST w_q) * CK_H_SCALE.  CK_H_REST = 0 (h unshifted) was measured against 1 (h - w_q: the water
+// bulk's flux parts stored finely, but the air's small phi tails rounded away against -w_q, always towards 0):
+// docs/precision.md "fp16 storage".  w_q is the same for a slot and its opposite, so a shift follows the slot.
+#if CK_STORAGE_FP16 && CK_H_REST
+#define PF_LD(h, q, i) (CK_LOAD(h, i, CK_H_SCALE) + W7[q])
+#define PF_ST(h, q, i, v) CK_STORE(h, i, (v) - W7[q], CK_H_SCALE)
+#elif CK_STORAGE_FP16
+#define PF_LD(h, q, i) CK_LOAD(h, i, CK_H_SCALE)
+#define PF_ST(h, q, i, v) CK_STORE(h, i, (v), CK_H_SCALE)
 #else
 #define PF_LD(h, q, i) ((h)[i])
 #define PF_ST(h, q, i, v) ((h)[i] = (v))
@@ -318,12 +321,12 @@ PF_INLINE float pf_relax(const int q, const float fq, const float p0, const floa
     float post = fq - omega * (fq - pf_feq(q, p0, ux, uy, uz)) + W7[q] * (pf_dot(q, hx, hy, hz) + s);
 #if CK_STORAGE_FP16
     // rounded to the storage here, so that the rest population (the exact balance) takes the six moving
-    // populations' rounding: sum phi then changes per cell by the rounding of h_0 - w_0 alone (which is small
-    // in the water bulk), not by seven binary16 roundings
+    // populations' rounding: sum phi then changes per cell by the rounding of h_0 alone, not by seven binary16
+    // roundings
     {
         ck_store_t r;
-        CK_STORE(&r, 0, post - CK_H_REST * W7[q], CK_H_SCALE);
-        post = CK_LOAD(&r, 0, CK_H_SCALE) + CK_H_REST * W7[q];
+        PF_ST(&r, q, 0, post);
+        post = PF_LD(&r, q, 0);
     }
 #endif
     pf_accumulate(rest, rest_comp, -post);

@@ -70,7 +70,7 @@ def test_constants_match_the_kernel_header():
     """couplekit.fluid.storage mirrors kernels/common.cuh's fp16 branch (the first definitions there)."""
     text = (ROOT / "kernels" / "common.cuh").read_text()
     for name, value in (("CK_F_SCALE", st.F_SCALE), ("CK_H_SCALE", st.H_SCALE), ("CK_H_REST", st.H_REST)):
-        m = re.search(rf"#define {name} ([0-9.]+)f", text)
+        m = re.search(rf"#define {name} ([0-9.]+)", text)
         assert m and float(m.group(1)) == value, name
 
 
@@ -92,8 +92,8 @@ def test_encoding_rounds_to_nearest_even_and_overflows_to_inf():
     assert np.isinf(st.encode_f(big, "fp16")).all()
     h = st.encode_h(np.full((7, 1), 3.0), "fp16")
     assert np.isinf(h).all()
-    # h: phi = 1 at rest is stored as 0, phi = 0 as -w exactly
-    assert np.all(st.encode_h(W7.reshape(7, 1), "fp16") == 0)
+    # h: resting water (h = w) and air (h = 0) are stored exactly
+    assert np.array_equal(st.decode_h(st.encode_h(W7.reshape(7, 1), "fp16")), W7.reshape(7, 1))
     assert np.all(st.decode_h(st.encode_h(np.zeros((7, 1)), "fp16")) == 0)
 
 
