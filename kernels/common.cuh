@@ -53,8 +53,8 @@
 //   CK_STORE(p, i, v, scale)  stores v * scale rounded to the storage type  (fp32: p[i] = v)
 // scale: CK_F_SCALE for f - w, CK_H_SCALE for h - CK_H_REST w_q (powers of two, so the scaling is exact;
 // CK_H_REST = 0: h is stored unshifted, chosen by measurement).
-// Rounding is round-to-nearest-even on both paths (host: _Float16 conversion, GCC >= 12 on x86-64 / F16C;
-// CUDA: cvt.rn.f16.f32), as NumPy's float16, so the reference rounds alike; a value beyond 65504 / scale
+// Rounding is round-to-nearest-even on both paths (host: integer bit operations, exact; CUDA: cvt.rn.f16.f32),
+// as NumPy's float16, so the reference rounds alike; a value beyond 65504 / scale
 // becomes +-inf (not a clamp), which the divergence checks see.  The Python twins of the constants:
 // couplekit.fluid.storage (a test reads them from here).
 #ifndef CK_STORAGE_FP16
@@ -171,10 +171,33 @@ DEVICE double ck_warp_sum(double v) {
 #define CK_NANF __builtin_nanf("")
 
 #if CK_STORAGE_FP16
-// _Float16: IEEE binary16 with round-to-nearest-even conversions (GCC 12 on x86-64; F16C vectorises them)
-typedef _Float16 ck_store_t;
-#define CK_LOAD(p, i, scale) ((float)(p)[i] * (1.f / (scale)))
-#define CK_STORE(p, i, v, scale) ((p)[i] = (_Float16)((v) * (scale)))
+// binary16 bits <-> float with integer operations and selects, bit-exact round-to-nearest-even (F. Giesen's
+// float_to_half_fast3_rtne; overflow -> inf, NaN -> quiet NaN; subnormals through one float addition, which
+// rounds to nearest even).  Not _Float16: GCC 12 converts it correctly but, without AVX512-FP16, does not
+// vectorise the conversions, and the collide-stream x loop then ran scalar (0.35x the fp32 throughput, measured
+// with benchmarks/fluid_throughput.py --storage fp16); these vectorise as 32-bit lane operations.
+typedef unsigned short ck_store_t;
+static inline __attribute__((always_inline)) float ck_half_to_float_(const unsigned short b) {
+    const uint32_t sign = (uint32_t)(b & 0x8000u) << 16, em = b & 0x7fffu;
+    uint32_t n = (em << 13) + 0x38000000u;              // rebias the exponent (normal numbers)
+    n = em >= 0x7c00u ? n + 0x38000000u : n;             // inf / NaN: exponent all ones
+    // subnormal: em * 2^-24, exact; blended by a mask (a select between it and n stops g++ if-converting)
+    const uint32_t sub = __builtin_bit_cast(uint32_t, (float)(int)em * 5.9604644775390625e-8f);
+    const uint32_t m = 0u - (uint32_t)(em < 0x0400u);
+    return __builtin_bit_cast(float, ((sub & m) | (n & ~m)) | sign);
+}
+static inline __attribute__((always_inline)) unsigned short ck_float_to_half_(const float f) {
+    const uint32_t x = __builtin_bit_cast(uint32_t, f), sign = x & 0x80000000u, a = x ^ sign;
+    // subnormal or zero: align the 10 mantissa bits at the bottom with a magic addition (0.5f)
+    const uint32_t sub = __builtin_bit_cast(uint32_t, __builtin_bit_cast(float, a) + 0.5f) - 0x3f000000u;
+    // normal: rebias, round to nearest even, take the bits (a carry into the exponent gives inf correctly)
+    const uint32_t nrm = (a + 0xc8000fffu + ((a >> 13) & 1u)) >> 13;  // 0xc8000fff = ((15 - 127) << 23) + 0xfff
+    const uint32_t big = a > 0x7f800000u ? 0x7e00u : 0x7c00u;        // NaN -> quiet NaN, else inf
+    const uint32_t o = a >= 0x47800000u ? big : (a < 0x38800000u ? sub : nrm);
+    return (unsigned short)(o | (sign >> 16));
+}
+#define CK_LOAD(p, i, scale) (ck_half_to_float_((p)[i]) * (1.f / (scale)))
+#define CK_STORE(p, i, v, scale) ((p)[i] = ck_float_to_half_((v) * (scale)))
 #else
 typedef float ck_store_t;
 #define CK_LOAD(p, i, scale) ((p)[i])

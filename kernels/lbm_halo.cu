@@ -25,6 +25,16 @@ KERNEL void lbm_halo_copy_pop(const long long n, ck_store_t* RESTRICT a, const l
     }
 }
 
+// out[i] = in[i] in the storage type (round to nearest even), back[i] = out[i] as float: the conversions of
+// CK_STORE / CK_LOAD at scale 1 (tests/fluid/test_fp16_storage.py checks them against NumPy on every binary16)
+KERNEL void lbm_store_convert(const long long n, const float* RESTRICT in /* size: n */,
+                              ck_store_t* RESTRICT out /* size: n */, float* RESTRICT back /* size: n */) {
+    FOR_EACH(i, n) {
+        CK_STORE(out, i, in[i], 1.f);
+        back[i] = CK_LOAD(out, i, 1.f);
+    }
+}
+
 // after an odd (push) step: F[j][image] = F[j][ghost] when ghost - c_j is an interior cell
 KERNEL void lbm_fold(const long long n, ck_store_t* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
                      const long long* RESTRICT ghost /* size: n */, const long long* RESTRICT image /* size: n */, const int nx, const int ny, const int nz) {

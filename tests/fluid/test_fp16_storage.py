@@ -97,6 +97,37 @@ def test_encoding_rounds_to_nearest_even_and_overflows_to_inf():
     assert np.all(st.decode_h(st.encode_h(np.zeros((7, 1)), "fp16")) == 0)
 
 
+def test_kernel_conversions_match_numpy_on_every_binary16(cpu):
+    """lbm_store_convert (CK_STORE / CK_LOAD at scale 1): every one of the 65536 binary16 values decodes as
+    NumPy's float16 does (NaNs: NaN), and float32 values on both sides of every rounding boundary (the exact
+    midpoints between neighbouring binary16 values and their float32 neighbours, subnormal, normal and beyond
+    65504) encode as NumPy's round to nearest even, overflow to inf included."""
+    fn = cpu.module("lbm_halo.cu", {"CK_STORAGE_FP16": 1}).function("lbm_store_convert")
+    bits = np.arange(65536, dtype=np.uint32).astype(np.uint16)
+    halves = bits.view(np.float16)
+    finite = np.isfinite(halves)
+    vals = halves[finite].astype(np.float32)
+    out, back = np.zeros(vals.size, np.float16), np.zeros(vals.size, np.float32)
+    fn(vals.size, vals, out, back)
+    assert np.array_equal(out.view(np.uint16), halves[finite].view(np.uint16))  # exact values round-trip
+    assert np.array_equal(back, vals)
+    # midpoints between consecutive positive binary16 values, and their float32 neighbours
+    pos = np.sort(np.unique(np.abs(halves[finite].astype(np.float64))))
+    mid = (pos[:-1] + pos[1:]) / 2
+    mid = np.concatenate([mid, [65520.0, 70000.0, 1e30]])  # 65520 rounds to inf (ties to even), beyond too
+    m32 = mid.astype(np.float32)
+    probe = np.concatenate([m32, np.nextafter(m32, 0), np.nextafter(m32, np.inf)]).astype(np.float32)
+    probe = np.concatenate([probe, -probe, np.array([np.inf, -np.inf, np.nan], np.float32)])
+    out, back = np.zeros(probe.size, np.float16), np.zeros(probe.size, np.float32)
+    fn(probe.size, probe, out, back)
+    with np.errstate(over="ignore"):
+        want = probe.astype(np.float16)
+    nan = np.isnan(probe)
+    assert np.array_equal(out[~nan].view(np.uint16), want[~nan].view(np.uint16))
+    assert np.isnan(out[nan]).all() and np.isnan(back[nan]).all()
+    assert np.array_equal(back[~nan], want[~nan].astype(np.float32))
+
+
 def test_storage_choices_are_checked():
     with pytest.raises(ValueError, match="'fp32', 'fp16'"):
         st.check_storage("bf16")
