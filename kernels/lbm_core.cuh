@@ -59,14 +59,15 @@ LBM_INLINE float lbm_clamp01(const float v) { return v < 0.f ? 0.f : (v > 1.f ? 
 // populations f_j(x, t) of padded cell c under the read rule of the parity (ODD = parity & 1).  The odd pull
 // reads every neighbour alike: wall links were prepared by lbm_wall_prefill, outflow / periodic ghosts by
 // lbm_halo_copy, so the host loop has contiguous loads only and vectorises.
-template <int ODD>
+// SCALAR = 1: for a loop the host does not vectorise (CK_LOAD_SCALAR, common.cuh); the same values
+template <int ODD, int SCALAR = 0>
 LBM_INLINE void lbm_load(const ck_store_t* RESTRICT f, const long long c, const long long N, const int px,
                          const long long pxy, float* RESTRICT fj) {
-#define LBM_LOAD(q)                                                                         \
-    fj[q] = ODD ? CK_LOAD(f, opposite_dir(q) * N + c - LBM_OFFSET(q, px, pxy), CK_F_SCALE)  \
-                : CK_LOAD(f, (q) * N + c, CK_F_SCALE);
+#define LBM_LD(p, i) (SCALAR ? CK_LOAD_SCALAR(p, i, CK_F_SCALE) : CK_LOAD(p, i, CK_F_SCALE))
+#define LBM_LOAD(q) fj[q] = ODD ? LBM_LD(f, opposite_dir(q) * N + c - LBM_OFFSET(q, px, pxy)) : LBM_LD(f, (q) * N + c);
     LBM_FOR27(LBM_LOAD)
 #undef LBM_LOAD
+#undef LBM_LD
 }
 
 // the same, without taking the storage scale out: fj = stored values (f - w) * CK_F_SCALE (fp32: f - w); the

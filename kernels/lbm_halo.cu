@@ -35,6 +35,15 @@ KERNEL void lbm_store_convert(const long long n, const float* RESTRICT in /* siz
     }
 }
 
+// the same through CK_STORE_SCALAR / CK_LOAD_SCALAR (the conversions of the loops the host runs scalar)
+KERNEL void lbm_store_convert_scalar(const long long n, const float* RESTRICT in /* size: n */,
+                                     ck_store_t* RESTRICT out /* size: n */, float* RESTRICT back /* size: n */) {
+    FOR_EACH(i, n) {
+        CK_STORE_SCALAR(out, i, in[i], 1.f);
+        back[i] = CK_LOAD_SCALAR(out, i, 1.f);
+    }
+}
+
 // after an odd (push) step: F[j][image] = F[j][ghost] when ghost - c_j is an interior cell
 KERNEL void lbm_fold(const long long n, ck_store_t* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
                      const long long* RESTRICT ghost /* size: n */, const long long* RESTRICT image /* size: n */, const int nx, const int ny, const int nz) {

@@ -38,9 +38,9 @@ KERNEL void lbm_macro_pressure(const long long n, const ck_store_t* RESTRICT f /
         if (flags[c] != FLAG_FLUID) continue;
         float fj[27];
         if (odd)
-            lbm_load<1>(f, c, N, px, pxy, fj);
+            lbm_load<1, 1>(f, c, N, px, pxy, fj);  // scalar on the host: CK_LOAD_SCALAR
         else
-            lbm_load<0>(f, c, N, px, pxy, fj);
+            lbm_load<0, 1>(f, c, N, px, pxy, fj);
         float s0 = 0.f;
 #define LBM_SUM(q) s0 += fj[q];
         LBM_FOR27(LBM_SUM)
@@ -136,9 +136,9 @@ KERNEL void lbm_momentum(const long long n, const ck_store_t* RESTRICT f /* size
         if (flags[c] != FLAG_FLUID) continue;
         float fj[27];
         if (odd)
-            lbm_load<1>(f, c, N, px, pxy, fj);
+            lbm_load<1, 1>(f, c, N, px, pxy, fj);  // scalar on the host: CK_LOAD_SCALAR
         else
-            lbm_load<0>(f, c, N, px, pxy, fj);
+            lbm_load<0, 1>(f, c, N, px, pxy, fj);
         float ux = 0.f, uy = 0.f, uz = 0.f;
 #define LBM_MOM(q) ux += CX27[q] * fj[q], uy += CY27[q] * fj[q], uz += CZ27[q] * fj[q];
         LBM_FOR26(LBM_MOM)

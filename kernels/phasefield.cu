@@ -43,15 +43,22 @@
 // (h_q - CK_H_REST w_q) * CK_H_SCALE.  CK_H_REST = 0 (h unshifted) was measured against 1 (h - w_q: the water
 // bulk's flux parts stored finely, but the air's small phi tails rounded away against -w_q, always towards 0):
 // docs/precision.md "fp16 storage".  w_q is the same for a slot and its opposite, so a shift follows the slot.
+// PF_LDS / PF_STS: the same, for loops the host runs scalar (CK_LOAD_SCALAR, common.cuh)
 #if CK_STORAGE_FP16 && CK_H_REST
 #define PF_LD(h, q, i) (CK_LOAD(h, i, CK_H_SCALE) + W7[q])
 #define PF_ST(h, q, i, v) CK_STORE(h, i, (v) - W7[q], CK_H_SCALE)
+#define PF_LDS(h, q, i) (CK_LOAD_SCALAR(h, i, CK_H_SCALE) + W7[q])
+#define PF_STS(h, q, i, v) CK_STORE_SCALAR(h, i, (v) - W7[q], CK_H_SCALE)
 #elif CK_STORAGE_FP16
 #define PF_LD(h, q, i) CK_LOAD(h, i, CK_H_SCALE)
 #define PF_ST(h, q, i, v) CK_STORE(h, i, (v), CK_H_SCALE)
+#define PF_LDS(h, q, i) CK_LOAD_SCALAR(h, i, CK_H_SCALE)
+#define PF_STS(h, q, i, v) CK_STORE_SCALAR(h, i, (v), CK_H_SCALE)
 #else
 #define PF_LD(h, q, i) ((h)[i])
 #define PF_ST(h, q, i, v) ((h)[i] = (v))
+#define PF_LDS(h, q, i) ((h)[i])
+#define PF_STS(h, q, i, v) ((h)[i] = (v))
 #endif
 
 #define PF_FLUID 0
@@ -107,17 +114,20 @@ PF_INLINE float pf_feq(const int q, const float phi, const float ux, const float
 }
 
 // Pre-collision populations of fluid cell nb[0] at step parity `odd` (AA read rule with boundary rules).
+// SCALAR = 1 in a loop the host does not vectorise (the odd step): PF_LDS.
+#define PF_LDX(h, q, i) (SCALAR ? PF_LDS(h, q, i) : PF_LD(h, q, i))
+template <int SCALAR>
 DEVICE void pf_load(const ck_store_t* RESTRICT h, const unsigned char* RESTRICT flags, const float* RESTRICT phi,
                     const float* RESTRICT u, const long long ncell, const long long nb[7], const int odd,
                     float f[7]) {
     const long long c = nb[0];
     if (!odd) {
         PF_UNROLL
-        for (int q = 0; q < 7; ++q) f[q] = PF_LD(h, q, q * ncell + c);
+        for (int q = 0; q < 7; ++q) f[q] = PF_LDX(h, q, q * ncell + c);
         return;
     }
     const float ux = u[c], uy = u[ncell + c], uz = u[2 * ncell + c];
-    f[0] = PF_LD(h, 0, c);
+    f[0] = PF_LDX(h, 0, c);
     float known = f[0], outflow_weight = 0.f;
     PF_UNROLL
     for (int q = 1; q < 7; ++q) {
@@ -125,13 +135,13 @@ DEVICE void pf_load(const ck_store_t* RESTRICT h, const unsigned char* RESTRICT 
         const int kind = flags[p];
         float v = 0.f;
         if (kind == PF_FLUID) {
-            v = PF_LD(h, q, pf_opp(q) * ncell + p);
+            v = PF_LDX(h, q, pf_opp(q) * ncell + p);
         } else if (kind == PF_INFLOW) {
             v = pf_feq(q, phi[p], u[p], u[ncell + p], u[2 * ncell + p]);
         } else if (kind == PF_OUTFLOW) {
             outflow_weight += pf_feq(q, 1.f, ux, uy, uz);
         } else {
-            v = PF_LD(h, q, q * ncell + c);
+            v = PF_LDX(h, q, q * ncell + c);
         }
         f[q] = v;
         known += v;
@@ -152,10 +162,10 @@ DEVICE void pf_store(ck_store_t* RESTRICT h, const unsigned char* RESTRICT flags
     const long long c = nb[0];
     if (!odd) {
         PF_UNROLL
-        for (int q = 0; q < 7; ++q) PF_ST(h, q, pf_opp(q) * ncell + c, f[q]);
+        for (int q = 0; q < 7; ++q) PF_STS(h, q, pf_opp(q) * ncell + c, f[q]);
         return;
     }
-    PF_ST(h, 0, c, f[0]);
+    PF_STS(h, 0, c, f[0]);
     const float phi_post = f[0] + f[1] + f[2] + f[3] + f[4] + f[5] + f[6];
     PF_UNROLL
     for (int q = 1; q < 7; ++q) {
@@ -163,13 +173,13 @@ DEVICE void pf_store(ck_store_t* RESTRICT h, const unsigned char* RESTRICT flags
         const int kind = flags[m];
         const int qo = pf_opp(q);
         if (kind == PF_FLUID) {
-            PF_ST(h, q, q * ncell + m, f[q]);
+            PF_STS(h, q, q * ncell + m, f[q]);
         } else if (kind == PF_INFLOW) {
-            PF_ST(h, qo, qo * ncell + c, pf_feq(qo, phi[m], u[m], u[ncell + m], u[2 * ncell + m]));
+            PF_STS(h, qo, qo * ncell + c, pf_feq(qo, phi[m], u[m], u[ncell + m], u[2 * ncell + m]));
         } else if (kind == PF_OUTFLOW) {
-            PF_ST(h, qo, qo * ncell + c, pf_feq(qo, phi_post, u[c], u[ncell + c], u[2 * ncell + c]));
+            PF_STS(h, qo, qo * ncell + c, pf_feq(qo, phi_post, u[c], u[ncell + c], u[2 * ncell + c]));
         } else {
-            PF_ST(h, qo, qo * ncell + c, f[q]);
+            PF_STS(h, qo, qo * ncell + c, f[q]);
         }
     }
 }
@@ -229,7 +239,7 @@ KERNEL void phase_macroscopic(const long long n,
         float s = 0.f;
         if (kind == PF_FLUID) {
             float f[7];
-            pf_load(h, flags, phi, u, ncell, nb, parity & 1, f);
+            pf_load<0>(h, flags, phi, u, ncell, nb, parity & 1, f);
             // summed in double as in phase_collide_stream: phi is the populations' sum up to one rounding
             s = (float)((double)f[0] + (double)f[1] + (double)f[2] + (double)f[3] + (double)f[4] + (double)f[5] +
                         (double)f[6]);
@@ -443,7 +453,7 @@ KERNEL void phase_collide_stream(const long long n, ck_store_t* RESTRICT h /* si
             const long long c = nb[0];
             if (flags[c] != PF_FLUID) continue;
             float f[7];
-            pf_load(h, flags, phi, u, ncell, nb, 1, f);
+            pf_load<1>(h, flags, phi, u, ncell, nb, 1, f);
             PfCell in;
             in.f0 = f[0];
             in.f1 = f[1];

@@ -97,12 +97,14 @@ def test_encoding_rounds_to_nearest_even_and_overflows_to_inf():
     assert np.all(st.decode_h(st.encode_h(np.zeros((7, 1)), "fp16")) == 0)
 
 
-def test_kernel_conversions_match_numpy_on_every_binary16(cpu):
-    """lbm_store_convert (CK_STORE / CK_LOAD at scale 1): every one of the 65536 binary16 values decodes as
+@pytest.mark.parametrize("kernel", ["lbm_store_convert", "lbm_store_convert_scalar"])
+def test_kernel_conversions_match_numpy_on_every_binary16(cpu, kernel):
+    """lbm_store_convert (CK_STORE / CK_LOAD at scale 1; ``_scalar``: CK_STORE_SCALAR / CK_LOAD_SCALAR, F16C on the
+    host): every one of the 65536 binary16 values decodes as
     NumPy's float16 does (NaNs: NaN), and float32 values on both sides of every rounding boundary (the exact
     midpoints between neighbouring binary16 values and their float32 neighbours, subnormal, normal and beyond
     65504) encode as NumPy's round to nearest even, overflow to inf included."""
-    fn = cpu.module("lbm_halo.cu", {"CK_STORAGE_FP16": 1}).function("lbm_store_convert")
+    fn = cpu.module("lbm_halo.cu", {"CK_STORAGE_FP16": 1}).function(kernel)
     bits = np.arange(65536, dtype=np.uint32).astype(np.uint16)
     halves = bits.view(np.float16)
     finite = np.isfinite(halves)
