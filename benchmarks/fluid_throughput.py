@@ -2,7 +2,11 @@
 bytes per cell-step, the machine's memory bandwidth, and lbmpy's generated D3Q27 central-moment kernel as a
 peer measured in the same run (issue 3).
 
-    python benchmarks/fluid_throughput.py [--sizes 64 128] [--threads 2] [--repeats 5]
+    python benchmarks/fluid_throughput.py [--sizes 64 128] [--threads 2] [--repeats 5] [--storage fp16]
+
+``--storage fp16`` also times the collide-stream kernel and the two-phase step with fp16 storage of f and h
+(``FluidSolver(storage="fp16")``), alternating with the fp32 ones in the same run, and records
+``fp16_vs_fp32`` (throughput ratios, > 1: fp16 faster).
 
 Writes ``benchmarks/results/fluid_throughput.json``. Timings on shared machines drift by up to 3x between
 runs (DESIGN), so every comparison is made within this run, alternating the contenders, best of
@@ -86,9 +90,9 @@ def bandwidth(backend, repeats: int) -> dict[str, float]:
     return {"in_place_update_GBs": 8 * n / t_upd / 1e9, "triad_GBs": 12 * n / t_tri / 1e9}
 
 
-def ours_collide(backend, n: int):
+def ours_collide(backend, n: int, storage: str = "fp32"):
     """A callable running one even + one odd collide-stream (single phase) on an n³ periodic box."""
-    s = FluidSolver(backend, (n, n, n), FluidParams(nu_h=0.01))
+    s = FluidSolver(backend, (n, n, n), FluidParams(nu_h=0.01), storage=storage)
     ops = s.ops
 
     def run():
@@ -100,7 +104,7 @@ def ours_collide(backend, n: int):
     return run
 
 
-def two_phase_solver(backend, n: int, **closures) -> FluidSolver:
+def two_phase_solver(backend, n: int, storage: str = "fp32", **closures) -> FluidSolver:
     """The benchmark's two-phase scene on n³: a flat 800:1 interface, σ > 0, walls in z, periodic in x and y;
     ``closures``: FluidParams' odd_lambda / smagorinsky (default: FluidParams' defaults)."""
     c = np.arange(n) + 0.5
@@ -117,12 +121,12 @@ def two_phase_solver(backend, n: int, **closures) -> FluidSolver:
         width=4.0,
         **closures,
     )
-    return FluidSolver(backend, (n, n, n), params, Boundaries.channel("z"), phi=phi)
+    return FluidSolver(backend, (n, n, n), params, Boundaries.channel("z"), phi=phi, storage=storage)
 
 
-def ours_two_phase_step(backend, n: int, **closures):
+def ours_two_phase_step(backend, n: int, storage: str = "fp32", **closures):
     """A callable running two full two-phase steps (flow + phase field, σ > 0, walls) on n³."""
-    s = two_phase_solver(backend, n, **closures)
+    s = two_phase_solver(backend, n, storage, **closures)
     return lambda: s.step(2)
 
 
@@ -204,6 +208,12 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--out", type=Path, default=RESULTS / "fluid_throughput.json")
+    parser.add_argument(
+        "--storage",
+        choices=("fp32", "fp16"),
+        default="fp32",
+        help="fp16: also time fp16 storage of f and h against fp32, alternating in the same run",
+    )
     args = parser.parse_args()
     backend = get_backend("cpu", threads=args.threads)
     bw = bandwidth(backend, args.repeats)
@@ -229,6 +239,9 @@ def main() -> None:
             # the cost of the scenes' closures (docs/fluid-stability.md), same run
             "two_phase_step_scene_closures": ours_two_phase_step(backend, n, odd_lambda=0.015, smagorinsky=0.1),
         }
+        if args.storage == "fp16":
+            contenders["collide_stream_fp16"] = ours_collide(backend, n, "fp16")
+            contenders["two_phase_step_fp16"] = ours_two_phase_step(backend, n, "fp16")
         if peer is not None:
             contenders["lbmpy_collide_stream"] = peer
         inner = max(1, int(2e6 // cells))
@@ -247,6 +260,8 @@ def main() -> None:
             "two_phase_fraction_of_roofline": mlups["two_phase_step"] / roofline,
             "collide_stream_roofline_mlups": bw["in_place_update_GBs"] * 1e9 / BYTES_COLLIDE_SINGLE / 1e6,
         }
+        if args.storage == "fp16":
+            entry["fp16_vs_fp32"] = {k: mlups[f"{k}_fp16"] / mlups[k] for k in ("collide_stream", "two_phase_step")}
         targets = {
             "two_phase_step >= 0.60 roofline": {
                 "ratio": entry["two_phase_fraction_of_roofline"] / 0.60,

@@ -35,6 +35,7 @@ from couplekit.backend.traffic import (
     BANDWIDTH_EFFICIENCY,
     GPU_BANDWIDTH,
     KERNEL_TRAFFIC,
+    bytes_per_item,
     occupancy,
     projected_items_per_s,
 )
@@ -55,14 +56,15 @@ def derived(kernel: str, defines: dict[str, str], registers: int | None, block_s
     out: dict = {}
     if registers:
         out["occupancy"] = occupancy(registers, block_size)
-    traffic = KERNEL_TRAFFIC.get(traffic_key(kernel, defines))
+    key = traffic_key(kernel, defines)
+    traffic = KERNEL_TRAFFIC.get(key)
     if traffic is not None:
-        out["bytes_per_item"] = traffic.bytes
+        fp16 = str(defines.get("CK_STORAGE_FP16", "0")) == "1"
+        nbytes = bytes_per_item(key, "fp16" if fp16 else "fp32")
+        out["bytes_per_item"] = nbytes
         out["item"] = traffic.item
-        out["traffic"] = traffic.what
-        out["projected_items_per_s"] = {
-            gpu: projected_items_per_s(traffic.bytes, bw) for gpu, bw in GPU_BANDWIDTH.items()
-        }
+        out["traffic"] = traffic.what + (" (f / h stored as fp16)" if fp16 and nbytes != traffic.bytes else "")
+        out["projected_items_per_s"] = {gpu: projected_items_per_s(nbytes, bw) for gpu, bw in GPU_BANDWIDTH.items()}
     return out
 
 

@@ -303,6 +303,7 @@ def build_fluid(scene: Scene, backend: Backend, units: Units, coupled: bool, log
             mixture=coupled,
             external_force=coupled or scene.stirring is not None,
             source_term=coupled and scene.effects.source_term,
+            storage=fl.storage,
         )
     if prm.odd_lambda > 0 and not fluid.odd_floor_active:
         log(
@@ -565,6 +566,10 @@ def memory_estimate(scene: Scene) -> dict[str, float]:
     if scene.fluid is not None:
         floats = _FLUID_FLOATS_PER_CELL + (_PHASE_FLOATS_PER_CELL if scene.fluid.phases == 2 else 0)
         out["fluid"] = padded * (4 * floats + 1)  # + 1 byte of flags
+        if scene.fluid.storage == "fp16":  # f and h in 2 B instead of 4 (couplekit.fluid.storage)
+            populations = 27 + (7 if scene.fluid.phases == 2 else 0)
+            out["fp16_saving"] = padded * 2.0 * populations
+            out["fluid"] -= out["fp16_saving"]
     if scene.has_sand:
         out["sand_grid"] = 4.0 * _SAND_FLOATS_PER_NODE * cells
         count = 0.0

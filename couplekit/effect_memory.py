@@ -11,7 +11,9 @@ the Fig. 14 ablation) the phase-field kernels take the ``CK_PF_SOURCE=0`` varian
 allocated.  Hardening (q) and cohesion
 (the saturation) cost 4 B per particle each; without them G2P takes the variant that never touches the field
 and the sand solver does not allocate it, except the saturation of a coupled scene, which is the coupling's
-moisture (Eq. 59) cohesion or not (and of particles seeded with a saturation, which carry it as data)."""
+moisture (Eq. 59) cohesion or not (and of particles seeded with a saturation, which carry it as data).
+``fp16_storage`` (``fluid.storage = 'fp16'``) is a saving, reported as negative bytes: the populations f and,
+two-phase, h take 2 B per value instead of 4 (54 + 14 B per padded cell)."""
 
 from __future__ import annotations
 
@@ -35,7 +37,13 @@ EFFECT_BYTES = {
     # diagnostic reads; + ρ_w a (3 float32) in the stirred cells' bounding box (:func:`_stirred_box_cells`)
     "stirring": (F32 * 3, 3 * 8 + 8 + 1, 0),
     "sand_emission": (0, 0, 0),  # the particles it emits (memory_estimate's emitted_particles)
+    # fluid.storage = 'fp16': f (27) and, two-phase, h (7) in 2 B instead of 4 -- a saving, so negative
+    # (the h part is added in effect_memory when the scene has a phase field)
+    "fp16_storage": (-(F32 - 2) * 27, 0, 0),
 }
+
+FP16_SAVING_H = (F32 - 2) * 7
+"""Bytes per padded cell fp16 storage saves on h (two-phase scenes), besides f's 54."""
 
 KEPT_WHEN_OFF: dict[str, str] = {}
 # kept only in some scenes: the effect's field is another effect's input there
@@ -89,6 +97,7 @@ def effect_memory(scene) -> dict[str, dict[str, float]]:
         "hardening": scene.has_sand and eff.hardening,
         "stirring": fl is not None and scene.stirring is not None,
         "sand_emission": scene.emits_sand,
+        "fp16_storage": fl is not None and getattr(fl, "storage", "fp32") == "fp16",
     }
     applies = {k: (scene.has_sand if k in ("cohesion", "hardening") else fl is not None) for k in on}
     applies["coupling"] = applies["drag_buoyancy"] = applies["retention"] = applies["source_term"] = coupled
@@ -103,6 +112,8 @@ def effect_memory(scene) -> dict[str, dict[str, float]]:
         elif name == "cohesion" and any(b.saturation for b in scene.bodies if b.kind == "sand"):
             kept, per_particle = "sand.saturation (4 B/particle): the bodies' seeded saturation", 0
         extra = 0.0
+        if name == "fp16_storage" and two:
+            per_cell -= FP16_SAVING_H
         if name == "stirring":
             if not scene.has_sand:
                 per_cell += F32 * 3  # the force input a coupled scene has anyway
@@ -128,7 +139,12 @@ def describe_effect_memory(scene, particles: float = 0.0) -> list[str]:
         cost = " + ".join(parts)
         total = e["bytes_total"] + (e["bytes_per_particle"] * particles if e["on"] else 0.0)
         state = "on " if e["on"] else "off"
-        if e["bytes_per_cell"] or e["bytes_per_particle"]:
+        if e["bytes_per_cell"] < 0:  # a saving (fp16 storage of the populations)
+            saved = f"{-e['bytes_per_cell']:.3g} bytes per cell"
+            line = f"  {name:18s} {state}  this saves {saved}" + (
+                f" ({-total / 2**20:.3g} MiB here)" if e["on"] else " (fluid.storage = 'fp16')"
+            )
+        elif e["bytes_per_cell"] or e["bytes_per_particle"]:
             line = f"  {name:18s} {state}  this costs {cost}" + (f" ({total / 2**20:.3g} MiB here)" if e["on"] else "")
         else:
             line = f"  {name:18s} {state}  no fields of its own"

@@ -539,6 +539,9 @@ class Simulation:
         from .io.checkpoint import save_checkpoint
 
         meta = {"step": self.step_count, "time": self.time, "backend": self.backend.name, "couplekit": __version__}
+        if self.fluid is not None:
+            # also in the stored scene (fluid.storage) and in the dtype of fluid/f and fluid/h
+            meta["fluid_storage"] = self.fluid.storage
         return save_checkpoint(path, self.scene.to_dict(), self._states(), meta)
 
     @classmethod

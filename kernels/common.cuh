@@ -45,6 +45,34 @@
 #define CK_MIN_BLOCKS_PER_SM 2
 #endif
 
+// Storage of the populations f (D3Q27) and h (D3Q7): CK_STORAGE_FP16 = 0 (float32, the default) or 1 (IEEE
+// binary16 bits, arithmetic stays float32; docs/precision.md "fp16 storage").  Kernels declare the arrays as
+// `ck_store_t*` (couplekit.backend.signature resolves it with the module's defines: float32, or a float16 /
+// uint16 array) and read / write them only through
+//   CK_LOAD(p, i, scale)      -> float value of element i  (stored / scale; fp32: p[i])
+//   CK_STORE(p, i, v, scale)  stores v * scale rounded to the storage type  (fp32: p[i] = v)
+//   CK_LOAD_SCALAR / CK_STORE_SCALAR: the same values, for loops the host does not vectorise (hardware F16C)
+// scale: CK_F_SCALE for f - w, CK_H_SCALE for h - CK_H_REST w_q (powers of two, so the scaling is exact;
+// CK_H_REST = 0: h is stored unshifted, chosen by measurement).
+// Rounding is round-to-nearest-even on both paths (host: integer bit operations, exact; CUDA: cvt.rn.f16.f32),
+// as NumPy's float16, so the reference rounds alike; a value beyond 65504 / scale
+// becomes +-inf (not a clamp), which the divergence checks see.  The Python twins of the constants:
+// couplekit.fluid.storage (a test reads them from here).
+#ifndef CK_STORAGE_FP16
+#define CK_STORAGE_FP16 0
+#endif
+#if CK_STORAGE_FP16
+#define CK_F_SCALE 32768.f
+#define CK_H_SCALE 32768.f
+#ifndef CK_H_REST  // 0 or 1; 0 measured better than 1 (h - w stored): docs/precision.md "fp16 storage"
+#define CK_H_REST 0
+#endif
+#else
+#define CK_F_SCALE 1.f
+#define CK_H_SCALE 1.f
+#define CK_H_REST 0
+#endif
+
 #if defined(__CUDACC__)
 // ---------------------------------------------------------------------------------------------- CUDA
 // NVRTC has no host headers: nothing may be included here (math functions are built in).
@@ -54,6 +82,32 @@
 #define RESTRICT __restrict__
 #define CK_ON_GPU 1
 #define CK_NANF __int_as_float(0x7fc00000)
+
+#if CK_STORAGE_FP16
+// binary16 bits <-> float by the PTX conversions (no header: NVRTC has none); .rn = round to nearest even,
+// out of range -> inf
+typedef unsigned short ck_store_t;
+DEVICE float ck_half_to_float_(const unsigned short b) {
+    float v;
+    asm("cvt.f32.f16 %0, %1;" : "=f"(v) : "h"(b));
+    return v;
+}
+DEVICE unsigned short ck_float_to_half_(const float v) {
+    unsigned short b;
+    asm("cvt.rn.f16.f32 %0, %1;" : "=h"(b) : "f"(v));
+    return b;
+}
+#define CK_LOAD(p, i, scale) (ck_half_to_float_((p)[i]) * (1.f / (scale)))
+#define CK_STORE(p, i, v, scale) ((p)[i] = ck_float_to_half_((v) * (scale)))
+#define CK_LOAD_SCALAR(p, i, scale) CK_LOAD(p, i, scale)
+#define CK_STORE_SCALAR(p, i, v, scale) CK_STORE(p, i, v, scale)
+#else
+typedef float ck_store_t;
+#define CK_LOAD(p, i, scale) ((p)[i])
+#define CK_STORE(p, i, v, scale) ((p)[i] = (v))
+#define CK_LOAD_SCALAR(p, i, scale) ((p)[i])
+#define CK_STORE_SCALAR(p, i, v, scale) ((p)[i] = (v))
+#endif
 
 #define CK_THREAD_INDEX ((long long)blockIdx.x * (long long)blockDim.x + (long long)threadIdx.x)
 #define CK_THREAD_STRIDE ((long long)blockDim.x * (long long)gridDim.x)
@@ -120,6 +174,47 @@ DEVICE double ck_warp_sum(double v) {
 #define CONSTANT static constexpr
 #define RESTRICT __restrict__
 #define CK_NANF __builtin_nanf("")
+
+#if CK_STORAGE_FP16
+// binary16 bits <-> float with integer operations and selects, bit-exact round-to-nearest-even (F. Giesen's
+// float_to_half_fast3_rtne; overflow -> inf, NaN -> quiet NaN; subnormals through one float addition, which
+// rounds to nearest even).  Not _Float16: GCC 12 converts it correctly but, without AVX512-FP16, does not
+// vectorise the conversions, and the collide-stream x loop then ran scalar (0.35x the fp32 throughput, measured
+// with benchmarks/fluid_throughput.py --storage fp16); these vectorise as 32-bit lane operations.
+typedef unsigned short ck_store_t;
+static inline __attribute__((always_inline)) float ck_half_to_float_(const unsigned short b) {
+    const uint32_t sign = (uint32_t)(b & 0x8000u) << 16, em = b & 0x7fffu;
+    uint32_t n = (em << 13) + 0x38000000u;              // rebias the exponent (normal numbers)
+    n = em >= 0x7c00u ? n + 0x38000000u : n;             // inf / NaN: exponent all ones
+    // subnormal: em * 2^-24, exact; blended by a mask (a select between it and n stops g++ if-converting)
+    const uint32_t sub = __builtin_bit_cast(uint32_t, (float)(int)em * 5.9604644775390625e-8f);
+    const uint32_t m = 0u - (uint32_t)(em < 0x0400u);
+    return __builtin_bit_cast(float, ((sub & m) | (n & ~m)) | sign);
+}
+static inline __attribute__((always_inline)) unsigned short ck_float_to_half_(const float f) {
+    const uint32_t x = __builtin_bit_cast(uint32_t, f), sign = x & 0x80000000u, a = x ^ sign;
+    // subnormal or zero: align the 10 mantissa bits at the bottom with a magic addition (0.5f)
+    const uint32_t sub = __builtin_bit_cast(uint32_t, __builtin_bit_cast(float, a) + 0.5f) - 0x3f000000u;
+    // normal: rebias, round to nearest even, take the bits (a carry into the exponent gives inf correctly)
+    const uint32_t nrm = (a + 0xc8000fffu + ((a >> 13) & 1u)) >> 13;  // 0xc8000fff = ((15 - 127) << 23) + 0xfff
+    const uint32_t big = a > 0x7f800000u ? 0x7e00u : 0x7c00u;        // NaN -> quiet NaN, else inf
+    const uint32_t o = a >= 0x47800000u ? big : (a < 0x38800000u ? sub : nrm);
+    return (unsigned short)(o | (sign >> 16));
+}
+#define CK_LOAD(p, i, scale) (ck_half_to_float_((p)[i]) * (1.f / (scale)))
+#define CK_STORE(p, i, v, scale) ((p)[i] = ck_float_to_half_((v) * (scale)))
+// the same conversions for loops the host runs scalar (the pressure update, the phase field's odd step): one
+// F16C instruction each (vcvtph2ps / vcvtps2ph, round to nearest even under the default MXCSR) instead of the
+// integer sequence, which only pays where it vectorises; both round alike (a test compares them with NumPy)
+#define CK_LOAD_SCALAR(p, i, scale) ((float)__builtin_bit_cast(_Float16, (p)[i]) * (1.f / (scale)))
+#define CK_STORE_SCALAR(p, i, v, scale) ((p)[i] = __builtin_bit_cast(unsigned short, (_Float16)((v) * (scale))))
+#else
+typedef float ck_store_t;
+#define CK_LOAD(p, i, scale) ((p)[i])
+#define CK_STORE(p, i, v, scale) ((p)[i] = (v))
+#define CK_LOAD_SCALAR(p, i, scale) ((p)[i])
+#define CK_STORE_SCALAR(p, i, v, scale) ((p)[i] = (v))
+#endif
 #define CK_MAX_THREADS 1024
 
 #define CK_PRAGMA(x) _Pragma(#x)

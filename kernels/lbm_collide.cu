@@ -14,7 +14,11 @@
 // variants: CK_TWO_PHASE=0,1 CK_SURFACE_TENSION=0,1 CK_MIXTURE=0,1 CK_EXT_FORCE=1
 // variants: CK_LES=1 CK_ODD_RATE=1
 // variants: CK_TWO_PHASE=1 CK_SURFACE_TENSION=1 CK_MIXTURE=1 CK_EXT_FORCE=1 CK_LES=1 CK_ODD_RATE=1
+// variants: CK_STORAGE_FP16=1 CK_TWO_PHASE=0,1 CK_SURFACE_TENSION=0,1 CK_MIXTURE=0,1 CK_EXT_FORCE=1
+// variants: CK_STORAGE_FP16=1 CK_TWO_PHASE=1 CK_SURFACE_TENSION=1 CK_MIXTURE=1 CK_EXT_FORCE=1 CK_LES=1 CK_ODD_RATE=1
 // (CK_EXT_FORCE=0 compiles a strict subset of the =1 code, so the GPU build checks only =1)
+// CK_STORAGE_FP16 (common.cuh): f held as binary16 (f - w) * CK_F_SCALE, float32 arithmetic; the lines with it
+// build the effect sets of the first line and the all-closures set
 #include "common.cuh"
 #include "lattice.cuh"
 #include "lbm_core.cuh"
@@ -132,7 +136,7 @@ LBM_INLINE void lbm_central_second(const float m0, const float mx, const float m
 // one fluid cell: load, forces, collision, store (ODD = parity & 1; MODE: how the stencils learn the kind of a
 // neighbour, see lbm_gradient; `mask` = lbm_link_mask of c for LBM_NB_MASK)
 template <int ODD, int MODE>
-LBM_INLINE void lbm_collide_cell(const long long c, float* RESTRICT f, const unsigned char* RESTRICT flags,
+LBM_INLINE void lbm_collide_cell(const long long c, ck_store_t* RESTRICT f, const unsigned char* RESTRICT flags,
                                  float* RESTRICT vel, const float* RESTRICT phi, const float* RESTRICT mu,
                                  const float* RESTRICT eps, const float* RESTRICT force,
                                  const float* RESTRICT pbar, const int px, const long long pxy, const long long N,
@@ -140,7 +144,7 @@ LBM_INLINE void lbm_collide_cell(const long long c, float* RESTRICT f, const uns
                                  const float gx, const float gy, const float gz, const float c_les,
                                  const float lambda_odd, const float odd_nu_max, const unsigned int mask) {
     float fj[27];
-    lbm_load<ODD>(f, c, N, px, pxy, fj);
+    lbm_load_scaled<ODD>(f, c, N, px, pxy, fj);  // (f - w) * CK_F_SCALE: the moments take the scale out
 
     // raw moments of the stored deviations f - w (lbm_core.cuh): dm0 = m0 - 1, m_a, dm_aa = m_aa - 1/3, m_ab
     // (a != b) -- the weights' own moments are 1, 0, 1/3, 0 -- by a forward chimera-style pass (66 additions): along x the line sums
@@ -168,14 +172,17 @@ LBM_INLINE void lbm_collide_cell(const long long c, float* RESTRICT f, const uns
     }
     LBM_YLINE(0) LBM_YLINE(1) LBM_YLINE(2)
 #undef LBM_YLINE
-    const float mzz = Y00[0] + Y00[2];  // dm_zz (deviation from 1/3), likewise myy, mxx below
-    const float dm0 = mzz + Y00[1], mz = Y00[2] - Y00[0];
+    // 1 / CK_F_SCALE: a power of two, exact (and 1, folded away, with fp32 storage)
+#define LBM_UNSCALE(v) ((v) * (1.f / CK_F_SCALE))
+    const float mzz = LBM_UNSCALE(Y00[0] + Y00[2]);  // dm_zz (deviation from 1/3), likewise myy, mxx below
+    const float dm0 = mzz + LBM_UNSCALE(Y00[1]), mz = LBM_UNSCALE(Y00[2] - Y00[0]);
     const float m0 = 1.f + dm0;  // only where it multiplies u u (the central moments below)
-    const float my = (Y01[0] + Y01[2]) + Y01[1], myz = Y01[2] - Y01[0];
-    const float myy = (Y02[0] + Y02[2]) + Y02[1];
-    const float mx = (Y10[0] + Y10[2]) + Y10[1], mxz = Y10[2] - Y10[0];
-    const float mxy = (Y11[0] + Y11[2]) + Y11[1];
-    const float mxx = (Y20[0] + Y20[2]) + Y20[1];
+    const float my = LBM_UNSCALE((Y01[0] + Y01[2]) + Y01[1]), myz = LBM_UNSCALE(Y01[2] - Y01[0]);
+    const float myy = LBM_UNSCALE((Y02[0] + Y02[2]) + Y02[1]);
+    const float mx = LBM_UNSCALE((Y10[0] + Y10[2]) + Y10[1]), mxz = LBM_UNSCALE(Y10[2] - Y10[0]);
+    const float mxy = LBM_UNSCALE((Y11[0] + Y11[2]) + Y11[1]);
+    const float mxx = LBM_UNSCALE((Y20[0] + Y20[2]) + Y20[1]);
+#undef LBM_UNSCALE
 
     // material properties, Eq. 4
 #if CK_TWO_PHASE
@@ -372,9 +379,9 @@ LBM_INLINE void lbm_collide_cell(const long long c, float* RESTRICT f, const uns
     const long long spxy = CK_PER_ITEM(pxy), sN = CK_PER_ITEM(N);
 #define LBM_PUT(i)                                                              \
     if (ODD)                                                                    \
-        f[QOF27[i] * sN + c + LBM_OFFSET(QOF27[i], spx, spxy)] = K[i];          \
+        CK_STORE(f, QOF27[i] * sN + c + LBM_OFFSET(QOF27[i], spx, spxy), K[i], CK_F_SCALE); \
     else                                                                        \
-        f[opposite_dir(QOF27[i]) * sN + c] = K[i];
+        CK_STORE(f, opposite_dir(QOF27[i]) * sN + c, K[i], CK_F_SCALE);
 #define LBM_BACK_Z(ij)                                                            \
     chimera_backward2_shift(K[(ij) * 3], K[(ij) * 3 + 1], K[(ij) * 3 + 2], uz, uz2, uzz, 0.f - LBM_REST_Z(ij)); \
     LBM_PUT((ij) * 3) LBM_PUT((ij) * 3 + 1) LBM_PUT((ij) * 3 + 2)
@@ -386,7 +393,7 @@ LBM_INLINE void lbm_collide_cell(const long long c, float* RESTRICT f, const uns
     vel[2 * N + c] = uz;
 }
 
-KERNEL void lbm_collide_stream(const long long n, float* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
+KERNEL void lbm_collide_stream(const long long n, ck_store_t* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
                                const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                                float* RESTRICT vel /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
                                const float* RESTRICT phi, const float* RESTRICT mu, const float* RESTRICT eps,

@@ -6,6 +6,8 @@
 // stress is ~1e-7 of w_j, below float32 round-off of f itself (docs/precision.md).  Streaming, bounce-back
 // (w_opp j = w_j), halo copies and sum f c are the same for f - w; the collision works on the deviations
 // (lbm_collide.cu) and the pressure update takes 1 - sum f = -sum (f - w).
+// Storage type: ck_store_t (common.cuh, CK_STORAGE_FP16): float32, or binary16 holding (f - w) * CK_F_SCALE;
+// every access goes through CK_LOAD / CK_STORE, the arithmetic is float32 either way.
 //
 // Grid: every field has one ghost layer: interior nx*ny*nz, padded Px = nx+2, Py = ny+2, Pz = nz+2, linear
 // padded index x + Px*(y + Py*z).  Distributions are SoA: slot j of cell c is f[j*N + c], N = Px*Py*Pz.
@@ -57,10 +59,26 @@ LBM_INLINE float lbm_clamp01(const float v) { return v < 0.f ? 0.f : (v > 1.f ? 
 // populations f_j(x, t) of padded cell c under the read rule of the parity (ODD = parity & 1).  The odd pull
 // reads every neighbour alike: wall links were prepared by lbm_wall_prefill, outflow / periodic ghosts by
 // lbm_halo_copy, so the host loop has contiguous loads only and vectorises.
-template <int ODD>
-LBM_INLINE void lbm_load(const float* RESTRICT f, const long long c, const long long N, const int px,
+// SCALAR = 1: for a loop the host does not vectorise (CK_LOAD_SCALAR, common.cuh); the same values
+template <int ODD, int SCALAR = 0>
+LBM_INLINE void lbm_load(const ck_store_t* RESTRICT f, const long long c, const long long N, const int px,
                          const long long pxy, float* RESTRICT fj) {
-#define LBM_LOAD(q) fj[q] = ODD ? f[opposite_dir(q) * N + c - LBM_OFFSET(q, px, pxy)] : f[(q) * N + c];
+#define LBM_LD(p, i) (SCALAR ? CK_LOAD_SCALAR(p, i, CK_F_SCALE) : CK_LOAD(p, i, CK_F_SCALE))
+#define LBM_LOAD(q) fj[q] = ODD ? LBM_LD(f, opposite_dir(q) * N + c - LBM_OFFSET(q, px, pxy)) : LBM_LD(f, (q) * N + c);
+    LBM_FOR27(LBM_LOAD)
+#undef LBM_LOAD
+#undef LBM_LD
+}
+
+// the same, without taking the storage scale out: fj = stored values (f - w) * CK_F_SCALE (fp32: f - w); the
+// collision applies 1 / CK_F_SCALE to the 10 raw moments instead of to the 27 populations (fewer live values on
+// the GPU: with the scale taken out at each load the fp16 single-phase variants spilled 12 B on sm_90)
+template <int ODD>
+LBM_INLINE void lbm_load_scaled(const ck_store_t* RESTRICT f, const long long c, const long long N, const int px,
+                                const long long pxy, float* RESTRICT fj) {
+#define LBM_LOAD(q)                                                                  \
+    fj[q] = ODD ? CK_LOAD(f, opposite_dir(q) * N + c - LBM_OFFSET(q, px, pxy), 1.f) \
+                : CK_LOAD(f, (q) * N + c, 1.f);
     LBM_FOR27(LBM_LOAD)
 #undef LBM_LOAD
 }
@@ -69,13 +87,13 @@ LBM_INLINE void lbm_load(const float* RESTRICT f, const long long c, const long 
 // pushes into wall cells are turned into bounce-back by lbm_wall_bounce, into ghosts by lbm_fold /
 // lbm_outflow_fix
 template <int ODD>
-LBM_INLINE void lbm_store(float* RESTRICT f, const long long c, const long long N, const int px, const long long pxy,
-                          const float* RESTRICT fs) {
-#define LBM_STORE(q)                                            \
-    if (ODD)                                                    \
-        f[(q) * N + c + LBM_OFFSET(q, px, pxy)] = fs[q];        \
-    else                                                        \
-        f[opposite_dir(q) * N + c] = fs[q];
+LBM_INLINE void lbm_store(ck_store_t* RESTRICT f, const long long c, const long long N, const int px,
+                          const long long pxy, const float* RESTRICT fs) {
+#define LBM_STORE(q)                                                      \
+    if (ODD)                                                              \
+        CK_STORE(f, (q) * N + c + LBM_OFFSET(q, px, pxy), fs[q], CK_F_SCALE); \
+    else                                                                  \
+        CK_STORE(f, opposite_dir(q) * N + c, fs[q], CK_F_SCALE);
     LBM_FOR27(LBM_STORE)
 #undef LBM_STORE
 }

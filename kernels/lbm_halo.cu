@@ -1,5 +1,8 @@
 // Periodic and outflow ghost layers of the padded LBM grid.
 // Spec: couplekit/fluid/reference.py halo_copy / fold / outflow_fix.
+// The populations are ck_store_t (common.cuh, CK_STORAGE_FP16): the copies move stored values unchanged; the
+// wall links convert (CK_LOAD / CK_STORE) to add the moving wall's term in float32.
+// variants: CK_STORAGE_FP16=0,1
 #include "common.cuh"
 #include "lattice.cuh"
 #include "lbm_core.cuh"
@@ -13,8 +16,36 @@ KERNEL void lbm_halo_copy(const long long n, float* RESTRICT a, const long long*
     }
 }
 
+// the same copy for a population array (f: ck_store_t, which is float unless CK_STORAGE_FP16)
+KERNEL void lbm_halo_copy_pop(const long long n, ck_store_t* RESTRICT a, const long long* RESTRICT ghost /* size: n */,
+                              const long long* RESTRICT image /* size: n */, const int ncomp, const long long N) {
+    FOR_EACH(i, n) {
+        const long long g = ghost[i], s = image[i];
+        for (int k = 0; k < ncomp; ++k) a[k * N + g] = a[k * N + s];
+    }
+}
+
+// out[i] = in[i] in the storage type (round to nearest even), back[i] = out[i] as float: the conversions of
+// CK_STORE / CK_LOAD at scale 1 (tests/fluid/test_fp16_storage.py checks them against NumPy on every binary16)
+KERNEL void lbm_store_convert(const long long n, const float* RESTRICT in /* size: n */,
+                              ck_store_t* RESTRICT out /* size: n */, float* RESTRICT back /* size: n */) {
+    FOR_EACH(i, n) {
+        CK_STORE(out, i, in[i], 1.f);
+        back[i] = CK_LOAD(out, i, 1.f);
+    }
+}
+
+// the same through CK_STORE_SCALAR / CK_LOAD_SCALAR (the conversions of the loops the host runs scalar)
+KERNEL void lbm_store_convert_scalar(const long long n, const float* RESTRICT in /* size: n */,
+                                     ck_store_t* RESTRICT out /* size: n */, float* RESTRICT back /* size: n */) {
+    FOR_EACH(i, n) {
+        CK_STORE_SCALAR(out, i, in[i], 1.f);
+        back[i] = CK_LOAD_SCALAR(out, i, 1.f);
+    }
+}
+
 // after an odd (push) step: F[j][image] = F[j][ghost] when ghost - c_j is an interior cell
-KERNEL void lbm_fold(const long long n, float* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
+KERNEL void lbm_fold(const long long n, ck_store_t* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
                      const long long* RESTRICT ghost /* size: n */, const long long* RESTRICT image /* size: n */, const int nx, const int ny, const int nz) {
     const int px = nx + 2;
     const long long pxy = (long long)px * (ny + 2);
@@ -31,7 +62,7 @@ KERNEL void lbm_fold(const long long n, float* RESTRICT f /* size: 27 * (nx + 2)
 
 // after an odd (push) step, outflow ghosts: F[j][ghost + c_j] = F[j][src + c_j] for every direction j with
 // ghost + c_j and src + c_j interior (the ghost "pushes" what its interior neighbour src pushed: zero gradient)
-KERNEL void lbm_outflow_fix(const long long n, float* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
+KERNEL void lbm_outflow_fix(const long long n, ck_store_t* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
                             const long long* RESTRICT ghost /* size: n */, const long long* RESTRICT src /* size: n */, const int nx, const int ny, const int nz) {
     const int px = nx + 2;
     const long long pxy = (long long)px * (ny + 2);
@@ -52,7 +83,7 @@ KERNEL void lbm_outflow_fix(const long long n, float* RESTRICT f /* size: 27 * (
 
 // before an odd step: for every wall link (fluid cell c, direction j, wall / inflow cell w = c - c_j) park the
 // bounced population where the pull of c reads it: F[opp j][w] = F[j][c] + 6 w_j c_j.u_w  (n = link count)
-KERNEL void lbm_wall_prefill(const long long n, float* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
+KERNEL void lbm_wall_prefill(const long long n, ck_store_t* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
                              const float* RESTRICT vel /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
                              const long long* RESTRICT cell /* size: n */, const int* RESTRICT dir /* size: n */,
                              const int nx, const int ny, const int nz) {
@@ -64,13 +95,13 @@ KERNEL void lbm_wall_prefill(const long long n, float* RESTRICT f /* size: 27 * 
         const int q = dir[i];
         const long long w = c - LBM_OFFSET(q, px, pxy);
         const float cu = CX27[q] * vel[w] + CY27[q] * vel[N + w] + CZ27[q] * vel[2 * N + w];
-        f[opposite_dir(q) * N + w] = f[q * N + c] + 6.f * W27[q] * cu;
+        CK_STORE(f, opposite_dir(q) * N + w, CK_LOAD(f, q * N + c, CK_F_SCALE) + 6.f * W27[q] * cu, CK_F_SCALE);
     }
 }
 
 // after an odd step: the population c pushed into the wall cell w = c - c_j (direction opp j) bounces back:
 // F[j][c] = F[opp j][w] + 6 w_j c_j.u_w
-KERNEL void lbm_wall_bounce(const long long n, float* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
+KERNEL void lbm_wall_bounce(const long long n, ck_store_t* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
                             const float* RESTRICT vel /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
                             const long long* RESTRICT cell /* size: n */, const int* RESTRICT dir /* size: n */,
                             const int nx, const int ny, const int nz) {
@@ -82,6 +113,6 @@ KERNEL void lbm_wall_bounce(const long long n, float* RESTRICT f /* size: 27 * (
         const int q = dir[i];
         const long long w = c - LBM_OFFSET(q, px, pxy);
         const float cu = CX27[q] * vel[w] + CY27[q] * vel[N + w] + CZ27[q] * vel[2 * N + w];
-        f[q * N + c] = f[opposite_dir(q) * N + w] + 6.f * W27[q] * cu;
+        CK_STORE(f, q * N + c, CK_LOAD(f, opposite_dir(q) * N + w, CK_F_SCALE) + 6.f * W27[q] * cu, CK_F_SCALE);
     }
 }

@@ -2,7 +2,8 @@
 // Spec: couplekit/fluid/reference.py ReferenceOps.macro_pressure / pressure_filter.
 // Defines: CK_TWO_PHASE (rho from phi, else rho = rho_h), CK_MIXTURE (fluid fraction eps and sand velocity
 // inputs; else eps = 1 and the sand terms vanish).
-// variants: CK_TWO_PHASE=0,1 CK_MIXTURE=0,1
+// variants: CK_TWO_PHASE=0,1 CK_MIXTURE=0,1 CK_STORAGE_FP16=0,1
+// f is ck_store_t (common.cuh, CK_STORAGE_FP16), read through lbm_load.
 #include "common.cuh"
 #include "lattice.cuh"
 #include "lbm_core.cuh"
@@ -18,7 +19,7 @@
 // u the velocity of Eq. 13 written by the last collision; the slip term (u - v).grad eps only in the cells
 // of slip_cells (couplekit.fluid.grid.slip_cells: not in the 1 or 3 layers next to a wall), and weighted by the water
 // fraction phi in two-phase flow)
-KERNEL void lbm_macro_pressure(const long long n, const float* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
+KERNEL void lbm_macro_pressure(const long long n, const ck_store_t* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
                                const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                                const float* RESTRICT vel /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
                                const float* RESTRICT phi, const float* RESTRICT eps, const float* RESTRICT sand_v,
@@ -37,9 +38,9 @@ KERNEL void lbm_macro_pressure(const long long n, const float* RESTRICT f /* siz
         if (flags[c] != FLAG_FLUID) continue;
         float fj[27];
         if (odd)
-            lbm_load<1>(f, c, N, px, pxy, fj);
+            lbm_load<1, 1>(f, c, N, px, pxy, fj);  // scalar on the host: CK_LOAD_SCALAR
         else
-            lbm_load<0>(f, c, N, px, pxy, fj);
+            lbm_load<0, 1>(f, c, N, px, pxy, fj);
         float s0 = 0.f;
 #define LBM_SUM(q) s0 += fj[q];
         LBM_FOR27(LBM_SUM)
@@ -121,7 +122,7 @@ KERNEL void lbm_pressure_filter(const long long n, const float* RESTRICT p /* si
 // out = sum_j f_j c_j of the current populations (read rule of the parity, no force shift) in interior fluid
 // cells: the fluid velocity "now", as the sand-fluid exchange needs it (odd parity: ghosts and wall links
 // must have been prepared as before an odd step)
-KERNEL void lbm_momentum(const long long n, const float* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
+KERNEL void lbm_momentum(const long long n, const ck_store_t* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
                          const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                          float* RESTRICT out /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */, const int parity,
                          const int nx, const int ny, const int nz) {
@@ -135,9 +136,9 @@ KERNEL void lbm_momentum(const long long n, const float* RESTRICT f /* size: 27 
         if (flags[c] != FLAG_FLUID) continue;
         float fj[27];
         if (odd)
-            lbm_load<1>(f, c, N, px, pxy, fj);
+            lbm_load<1, 1>(f, c, N, px, pxy, fj);  // scalar on the host: CK_LOAD_SCALAR
         else
-            lbm_load<0>(f, c, N, px, pxy, fj);
+            lbm_load<0, 1>(f, c, N, px, pxy, fj);
         float ux = 0.f, uy = 0.f, uz = 0.f;
 #define LBM_MOM(q) ux += CX27[q] * fj[q], uy += CY27[q] * fj[q], uz += CZ27[q] * fj[q];
         LBM_FOR26(LBM_MOM)

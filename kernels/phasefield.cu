@@ -31,7 +31,7 @@
 #include "lattice.cuh"
 
 // 0: surface tension sigma = 0, the chemical potential (double well + Laplacian) is compiled out.
-// variants: CK_PF_SURFACE_TENSION=0,1 CK_PF_SOURCE=0,1
+// variants: CK_PF_SURFACE_TENSION=0,1 CK_PF_SOURCE=0,1 CK_STORAGE_FP16=0,1
 #ifndef CK_PF_SURFACE_TENSION
 #define CK_PF_SURFACE_TENSION 1
 #endif
@@ -40,6 +40,28 @@
 // sums never read `source` (a placeholder may be passed) and sum S_phi = 0 (variants: the line above).
 #ifndef CK_PF_SOURCE
 #define CK_PF_SOURCE 1
+#endif
+
+// Storage of h: ck_store_t (common.cuh).  float32 holds h itself; with CK_STORAGE_FP16 the binary16 slots hold
+// (h_q - CK_H_REST w_q) * CK_H_SCALE.  CK_H_REST = 0 (h unshifted) was measured against 1 (h - w_q: the water
+// bulk's flux parts stored finely, but the air's small phi tails rounded away against -w_q, always towards 0):
+// docs/precision.md "fp16 storage".  w_q is the same for a slot and its opposite, so a shift follows the slot.
+// PF_LDS / PF_STS: the same, for loops the host runs scalar (CK_LOAD_SCALAR, common.cuh)
+#if CK_STORAGE_FP16 && CK_H_REST
+#define PF_LD(h, q, i) (CK_LOAD(h, i, CK_H_SCALE) + W7[q])
+#define PF_ST(h, q, i, v) CK_STORE(h, i, (v) - W7[q], CK_H_SCALE)
+#define PF_LDS(h, q, i) (CK_LOAD_SCALAR(h, i, CK_H_SCALE) + W7[q])
+#define PF_STS(h, q, i, v) CK_STORE_SCALAR(h, i, (v) - W7[q], CK_H_SCALE)
+#elif CK_STORAGE_FP16
+#define PF_LD(h, q, i) CK_LOAD(h, i, CK_H_SCALE)
+#define PF_ST(h, q, i, v) CK_STORE(h, i, (v), CK_H_SCALE)
+#define PF_LDS(h, q, i) CK_LOAD_SCALAR(h, i, CK_H_SCALE)
+#define PF_STS(h, q, i, v) CK_STORE_SCALAR(h, i, (v), CK_H_SCALE)
+#else
+#define PF_LD(h, q, i) ((h)[i])
+#define PF_ST(h, q, i, v) ((h)[i] = (v))
+#define PF_LDS(h, q, i) ((h)[i])
+#define PF_STS(h, q, i, v) ((h)[i] = (v))
 #endif
 
 #define PF_FLUID 0
@@ -104,17 +126,20 @@ PF_INLINE float pf_inflow(const int q, const float phi_b, const float ux, const 
 }
 
 // Pre-collision populations of fluid cell nb[0] at step parity `odd` (AA read rule with boundary rules).
-DEVICE void pf_load(const float* RESTRICT h, const unsigned char* RESTRICT flags, const float* RESTRICT phi,
+// SCALAR = 1 in a loop the host does not vectorise (the odd step): PF_LDS.
+#define PF_LDX(h, q, i) (SCALAR ? PF_LDS(h, q, i) : PF_LD(h, q, i))
+template <int SCALAR>
+DEVICE void pf_load(const ck_store_t* RESTRICT h, const unsigned char* RESTRICT flags, const float* RESTRICT phi,
                     const float* RESTRICT u, const long long ncell, const long long nb[7], const int odd,
                     float f[7]) {
     const long long c = nb[0];
     if (!odd) {
         PF_UNROLL
-        for (int q = 0; q < 7; ++q) f[q] = h[q * ncell + c];
+        for (int q = 0; q < 7; ++q) f[q] = PF_LDX(h, q, q * ncell + c);
         return;
     }
     const float ux = u[c], uy = u[ncell + c], uz = u[2 * ncell + c];
-    f[0] = h[c];
+    f[0] = PF_LDX(h, 0, c);
     float known = f[0], outflow_weight = 0.f;
     PF_UNROLL
     for (int q = 1; q < 7; ++q) {
@@ -122,13 +147,13 @@ DEVICE void pf_load(const float* RESTRICT h, const unsigned char* RESTRICT flags
         const int kind = flags[p];
         float v = 0.f;
         if (kind == PF_FLUID) {
-            v = h[pf_opp(q) * ncell + p];
+            v = PF_LDX(h, q, pf_opp(q) * ncell + p);
         } else if (kind == PF_INFLOW) {
-            v = h[q * ncell + c] + pf_inflow(q, phi[p], u[p], u[ncell + p], u[2 * ncell + p]);
+            v = PF_LDX(h, q, q * ncell + c) + pf_inflow(q, phi[p], u[p], u[ncell + p], u[2 * ncell + p]);
         } else if (kind == PF_OUTFLOW) {
             outflow_weight += pf_feq(q, 1.f, ux, uy, uz);
         } else {
-            v = h[q * ncell + c];
+            v = PF_LDX(h, q, q * ncell + c);
         }
         f[q] = v;
         known += v;
@@ -143,16 +168,16 @@ DEVICE void pf_load(const float* RESTRICT h, const unsigned char* RESTRICT flags
 }
 
 // AA write rule: post-collision populations of fluid cell nb[0] at step parity `odd`.
-DEVICE void pf_store(float* RESTRICT h, const unsigned char* RESTRICT flags, const float* RESTRICT phi,
+DEVICE void pf_store(ck_store_t* RESTRICT h, const unsigned char* RESTRICT flags, const float* RESTRICT phi,
                      const float* RESTRICT u, const long long ncell, const long long nb[7], const int odd,
                      const float f[7]) {
     const long long c = nb[0];
     if (!odd) {
         PF_UNROLL
-        for (int q = 0; q < 7; ++q) h[pf_opp(q) * ncell + c] = f[q];
+        for (int q = 0; q < 7; ++q) PF_STS(h, q, pf_opp(q) * ncell + c, f[q]);
         return;
     }
-    h[c] = f[0];
+    PF_STS(h, 0, c, f[0]);
     const float phi_post = f[0] + f[1] + f[2] + f[3] + f[4] + f[5] + f[6];
     PF_UNROLL
     for (int q = 1; q < 7; ++q) {
@@ -160,20 +185,20 @@ DEVICE void pf_store(float* RESTRICT h, const unsigned char* RESTRICT flags, con
         const int kind = flags[m];
         const int qo = pf_opp(q);
         if (kind == PF_FLUID) {
-            h[q * ncell + m] = f[q];
+            PF_STS(h, q, q * ncell + m, f[q]);
         } else if (kind == PF_INFLOW) {
-            h[qo * ncell + c] = f[q] + pf_inflow(qo, phi[m], u[m], u[ncell + m], u[2 * ncell + m]);
+            PF_STS(h, qo, qo * ncell + c, f[q] + pf_inflow(qo, phi[m], u[m], u[ncell + m], u[2 * ncell + m]));
         } else if (kind == PF_OUTFLOW) {
-            h[qo * ncell + c] = pf_feq(qo, phi_post, u[c], u[ncell + c], u[2 * ncell + c]);
+            PF_STS(h, qo, qo * ncell + c, pf_feq(qo, phi_post, u[c], u[ncell + c], u[2 * ncell + c]));
         } else {
-            h[qo * ncell + c] = f[q];
+            PF_STS(h, qo, qo * ncell + c, f[q]);
         }
     }
 }
 
 // h := a state that loads (at parity t) as h^eq(phi, u) in every interior fluid cell.  n = nx*ny*nz.
 KERNEL void phase_set_equilibrium(const long long n,
-                                  float* RESTRICT h /* size: 7 * (nx + 2) * (ny + 2) * (nz + 2) */,
+                                  ck_store_t* RESTRICT h /* size: 7 * (nx + 2) * (ny + 2) * (nz + 2) */,
                                   const float* RESTRICT phi /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                                   const float* RESTRICT u /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
                                   const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
@@ -190,14 +215,14 @@ KERNEL void phase_set_equilibrium(const long long n,
         for (int q = 0; q < 7; ++q) {
             const float feq = pf_feq(q, p0, ux, uy, uz);
             if (!(parity & 1) || q == 0) {
-                h[q * ncell + c] = feq;
+                PF_ST(h, q, q * ncell + c, feq);
             } else {
                 const long long p = nb[pf_opp(q)];
                 const int kind = flags[p];
-                if (kind == PF_FLUID) h[pf_opp(q) * ncell + p] = feq;
-                else if (kind == PF_WALL) h[q * ncell + c] = feq;
+                if (kind == PF_FLUID) PF_ST(h, q, pf_opp(q) * ncell + p, feq);
+                else if (kind == PF_WALL) PF_ST(h, q, q * ncell + c, feq);
                 else if (kind == PF_INFLOW)
-                    h[q * ncell + c] = feq - pf_inflow(q, phi[p], u[p], u[ncell + p], u[2 * ncell + p]);
+                    PF_ST(h, q, q * ncell + c, feq - pf_inflow(q, phi[p], u[p], u[ncell + p], u[2 * ncell + p]));
                 // OUTFLOW links: the load rule computes the value
             }
         }
@@ -209,7 +234,7 @@ KERNEL void phase_set_equilibrium(const long long n,
 // image is one) gets 0; INFLOW cells, ghost or interior, keep the phase value they carry (set by the
 // caller).  n = (nx+2)*(ny+2)*(nz+2).
 KERNEL void phase_macroscopic(const long long n,
-                              const float* RESTRICT h /* size: 7 * (nx + 2) * (ny + 2) * (nz + 2) */,
+                              const ck_store_t* RESTRICT h /* size: 7 * (nx + 2) * (ny + 2) * (nz + 2) */,
                               float* RESTRICT phi /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                               const float* RESTRICT u /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
                               const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
@@ -228,7 +253,7 @@ KERNEL void phase_macroscopic(const long long n,
         float s = 0.f;
         if (kind == PF_FLUID) {
             float f[7];
-            pf_load(h, flags, phi, u, ncell, nb, parity & 1, f);
+            pf_load<0>(h, flags, phi, u, ncell, nb, parity & 1, f);
             // summed in double as in phase_collide_stream: phi is the populations' sum up to one rounding
             s = (float)((double)f[0] + (double)f[1] + (double)f[2] + (double)f[3] + (double)f[4] + (double)f[5] +
                         (double)f[6]);
@@ -317,7 +342,17 @@ struct PfCell {
 // into the compensated rest balance.
 PF_INLINE float pf_relax(const int q, const float fq, const float feq, const float sym, const float hx, const float hy,
                          const float hz, const float s, const float omega, float& rest, float& rest_comp) {
-    const float post = fq - omega * (fq - feq) - sym + W7[q] * (pf_dot(q, hx, hy, hz) + s);
+    float post = fq - omega * (fq - feq) - sym + W7[q] * (pf_dot(q, hx, hy, hz) + s);
+#if CK_STORAGE_FP16
+    // rounded to the storage here, so that the rest population (the exact balance) takes the six moving
+    // populations' rounding: sum phi then changes per cell by the rounding of h_0 alone, not by seven binary16
+    // roundings
+    {
+        ck_store_t r;
+        PF_ST(&r, q, 0, post);
+        post = PF_LD(&r, q, 0);
+    }
+#endif
     pf_accumulate(rest, rest_comp, -post);
     return post;
 }
@@ -386,7 +421,7 @@ PF_INLINE PfCell pf_collide(const PfCell in, const long long c, const long long 
 //         (1/omega - 1/2)(1/omega_plus - 1/2) = trt_lambda (Ginzburg's "magic" product; 0 = Eq. 48's single rate)
 // grad: grad phi of the same step (phase_gradients); u: fluid velocity (and the velocity of INFLOW cells);
 // phi: read only at INFLOW cells (their phase value); source: S_phi.  n = nx*ny*nz.
-KERNEL void phase_collide_stream(const long long n, float* RESTRICT h /* size: 7 * (nx + 2) * (ny + 2) * (nz + 2) */,
+KERNEL void phase_collide_stream(const long long n, ck_store_t* RESTRICT h /* size: 7 * (nx + 2) * (ny + 2) * (nz + 2) */,
                                  const float* RESTRICT phi /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                                  const float* RESTRICT grad /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
                                  const float* RESTRICT u /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
@@ -404,23 +439,38 @@ KERNEL void phase_collide_stream(const long long n, float* RESTRICT h /* size: 7
         const long long sy = (long long)(nx + 2), sz = sy * (ny + 2);
         FOR_EACH_CELL(x, y, z, nx, ny, nz) {
             const long long c = (x + 1) + sy * (y + 1) + sz * (z + 1);
+#if CK_STORAGE_FP16 && !defined(__CUDACC__)
+            // host, fp16: g++ does not if-convert the skip of non-fluid cells into masked 16-bit stores, and the
+            // loop ran scalar; every cell is computed and a non-fluid cell stores its slots' own bits back
+            const bool keep = flags[c] != PF_FLUID;
+#define PF_ST_EVEN(q, i, v)                  \
+    {                                        \
+        const ck_store_t old_ = h[i];        \
+        ck_store_t new_;                     \
+        PF_ST(&new_, q, 0, v);               \
+        h[i] = keep ? old_ : new_;           \
+    }
+#else
             if (flags[c] != PF_FLUID) continue;
+#define PF_ST_EVEN(q, i, v) PF_ST(h, q, i, v)
+#endif
             PfCell in;
-            in.f0 = h[c];
-            in.f1 = h[ncell + c];
-            in.f2 = h[2 * ncell + c];
-            in.f3 = h[3 * ncell + c];
-            in.f4 = h[4 * ncell + c];
-            in.f5 = h[5 * ncell + c];
-            in.f6 = h[6 * ncell + c];
+            in.f0 = PF_LD(h, 0, c);
+            in.f1 = PF_LD(h, 1, ncell + c);
+            in.f2 = PF_LD(h, 2, 2 * ncell + c);
+            in.f3 = PF_LD(h, 3, 3 * ncell + c);
+            in.f4 = PF_LD(h, 4, 4 * ncell + c);
+            in.f5 = PF_LD(h, 5, 5 * ncell + c);
+            in.f6 = PF_LD(h, 6, 6 * ncell + c);
             const PfCell out = pf_collide(in, c, ncell, grad, u, source, omega, interface_factor, source_scale, omega_plus);
-            h[c] = out.f0;  // store in the opposite slots (AA even step)
-            h[2 * ncell + c] = out.f1;
-            h[ncell + c] = out.f2;
-            h[4 * ncell + c] = out.f3;
-            h[3 * ncell + c] = out.f4;
-            h[6 * ncell + c] = out.f5;
-            h[5 * ncell + c] = out.f6;
+            PF_ST_EVEN(0, c, out.f0);  // store in the opposite slots (AA even step)
+            PF_ST_EVEN(2, 2 * ncell + c, out.f1);
+            PF_ST_EVEN(1, ncell + c, out.f2);
+            PF_ST_EVEN(4, 4 * ncell + c, out.f3);
+            PF_ST_EVEN(3, 3 * ncell + c, out.f4);
+            PF_ST_EVEN(6, 6 * ncell + c, out.f5);
+            PF_ST_EVEN(5, 5 * ncell + c, out.f6);
+#undef PF_ST_EVEN
         }
     } else {
         FOR_EACH_CELL(x, y, z, nx, ny, nz) {
@@ -429,7 +479,7 @@ KERNEL void phase_collide_stream(const long long n, float* RESTRICT h /* size: 7
             const long long c = nb[0];
             if (flags[c] != PF_FLUID) continue;
             float f[7];
-            pf_load(h, flags, phi, u, ncell, nb, 1, f);
+            pf_load<1>(h, flags, phi, u, ncell, nb, 1, f);
             PfCell in;
             in.f0 = f[0];
             in.f1 = f[1];

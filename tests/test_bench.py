@@ -76,6 +76,8 @@ def test_validate_prints_the_memory_of_each_effect():
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     assert "surface_tension" in proc.stdout and "this costs 4" in proc.stdout
+    # what fp16 storage of f and h would save (27 + 7 populations, 2 B each, per padded cell)
+    assert "fp16_storage       off  this saves" in proc.stdout and "fluid.storage = 'fp16'" in proc.stdout
 
 
 def test_bench_into_a_file_is_refused_with_exit_2(tmp_path, capsys):
@@ -104,3 +106,23 @@ def test_interleaved_pair_reports_a_ratio_per_pair_and_the_stage_cost():
     # the volume controller's own stage does not run when it is off: its cost is positive in every pair
     assert sc["fraction_ci95"][0] > 0.0 and sc["resolved"]
     assert pair["on"]["allocated_bytes"] == pair["off"]["allocated_bytes"]
+
+
+@pytest.mark.parametrize("which", ["coupled", "fluid only"])
+def test_fp16_storage_saving_reported_matches_the_allocated_arrays(which):
+    """fluid.storage = 'fp16': f (27) and, two-phase, h (7) in 2 B instead of 4. What effect_memory reports
+    (a negative cost) and what memory_estimate subtracts are both the bytes the arrays actually lose."""
+    from couplekit.assembly import memory_estimate
+    from couplekit.scene import Scene
+
+    data = eff.base_scene(10) if which == "coupled" else eff.fluid_only(eff.base_scene(10))
+    on = eff._set(data, "fluid.storage", "fp16")
+    m_on, m_off = eff.measure(on, "numpy", 1), eff.measure(data, "numpy", 1)
+    table = m_on["effect_memory"]["fp16_storage"]
+    assert table["on"] and not m_off["effect_memory"]["fp16_storage"]["on"]
+    saved = m_off["allocated_bytes"] - m_on["allocated_bytes"]
+    padded = 12**3
+    assert saved == 2 * (27 + 7) * padded  # both scenes are two-phase
+    assert -table["bytes_total"] == pytest.approx(saved)
+    est_on, est_off = (memory_estimate(Scene.from_dict(d, source_name="x")) for d in (on, data))
+    assert est_off["total"] - est_on["total"] == pytest.approx(saved) == est_on["fp16_saving"]

@@ -83,7 +83,7 @@ class CudaModule:
         self.source = kernel_path(name)
         self.defines = dict(defines or {})
         code = nvrtc_source(name)
-        self.signatures = parse_kernels(self.source.read_text(), self.source.name)
+        self.signatures = parse_kernels(self.source.read_text(), self.source.name, self.defines)
         self._module = cupy.RawModule(code=code, options=nvrtc_options(self.defines))
         self._functions: dict[str, CudaFunction] = {}
 

@@ -35,6 +35,7 @@ _CTYPES = {
     np.dtype(np.int64): ctypes.c_int64,
     np.dtype(np.uint8): ctypes.c_uint8,
     np.dtype(np.int8): ctypes.c_int8,
+    np.dtype(np.uint16): ctypes.c_uint16,
 }
 
 
@@ -179,7 +180,7 @@ class HostModule:
         self.device_path = bool(device_path)
         self.build = build_library(self.source, self.defines, device_path=self.device_path)
         self._lib = ctypes.CDLL(str(self.build.library))
-        self.signatures = parse_kernels(self.source.read_text(), self.source.name)
+        self.signatures = parse_kernels(self.source.read_text(), self.source.name, self.defines)
         self.threads = int(threads) if threads else None
         if self.threads:
             self._lib.couplekit_set_num_threads(ctypes.c_int(self.threads))

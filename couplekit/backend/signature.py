@@ -24,7 +24,20 @@ C_TYPES: dict[str, np.dtype] = {
     "long long": np.dtype(np.int64),
     "unsigned char": np.dtype(np.uint8),
     "signed char": np.dtype(np.int8),
+    "unsigned short": np.dtype(np.uint16),
 }
+
+STORE_TYPE = "ck_store_t"
+"""The populations' storage type (kernels/common.cuh): float, or IEEE binary16 when the module is built with
+``CK_STORAGE_FP16=1`` (``unsigned short`` bits on CUDA, ``_Float16`` on the host). Pointer parameters of this
+type take a float32 array, or a float16 one (numpy's float16 is binary16) in an fp16 module."""
+
+
+def store_dtype(defines: dict | None) -> np.dtype:
+    """NumPy dtype of ``ck_store_t`` under ``defines``."""
+    fp16 = int((defines or {}).get("CK_STORAGE_FP16", 0) or 0)
+    return np.dtype(np.float16 if fp16 else np.float32)
+
 
 _KERNEL = re.compile(r"\bKERNEL\s+void\s+(\w+)\s*\(")
 _SIZE = re.compile(r"/\*\s*size\s*(:|>=)\s*(.+?)\s*\*/", re.DOTALL)
@@ -41,9 +54,12 @@ class Param:
     const: bool
     size: str | None = None  # `/* size: EXPR */` (exact element count) or `/* size >= EXPR */` annotation
     size_at_least: bool = False
+    ctype: str | None = None  # the C type as written, when it is not the C_TYPES name of dtype (ck_store_t)
 
     def describe(self) -> str:
-        ctype = next(k for k, v in C_TYPES.items() if v == self.dtype)
+        ctype = self.ctype or next(k for k, v in C_TYPES.items() if v == self.dtype)
+        if self.ctype:
+            ctype = f"{ctype} [{self.dtype}]"
         return f"{'const ' if self.const else ''}{ctype}{'*' if self.pointer else ''} {self.name}"
 
 
@@ -107,7 +123,7 @@ def _split_params(body: str) -> list[str]:
     return [p for p in parts if _strip_comments(p).strip()]
 
 
-def _parse_param(text: str, kernel: str, source: str) -> Param:
+def _parse_param(text: str, kernel: str, source: str, defines: dict | None = None) -> Param:
     size = _SIZE.search(text)
     text = _strip_comments(text)
     const = bool(re.search(r"\bconst\b", text.split("*")[0]))
@@ -116,25 +132,35 @@ def _parse_param(text: str, kernel: str, source: str) -> Param:
     if len(words) < 2:
         raise ValueError(f"{source}: kernel {kernel}: cannot read parameter {text.strip()!r}")
     name, ctype = words[-1], " ".join(words[:-1])
-    if ctype not in C_TYPES:
+    if ctype == STORE_TYPE:
+        if not pointer:
+            raise ValueError(f"{source}: kernel {kernel}: {STORE_TYPE} parameter {name!r} must be a pointer")
+        dtype = store_dtype(defines)
+    elif ctype in C_TYPES:
+        dtype = C_TYPES[ctype]
+    else:
         raise ValueError(
             f"{source}: kernel {kernel}: parameter {name!r} has type {ctype!r}; kernels may take "
-            f"{', '.join(C_TYPES)} (as scalars or pointers)"
+            f"{', '.join(C_TYPES)} (as scalars or pointers) and {STORE_TYPE} pointers"
         )
     if size and not pointer:
         raise ValueError(f"{source}: kernel {kernel}: size annotation on scalar parameter {name!r}")
     return Param(
         name,
-        C_TYPES[ctype],
+        dtype,
         pointer,
         const,
         size=size.group(2) if size else None,
         size_at_least=bool(size and size.group(1) == ">="),
+        ctype=STORE_TYPE if ctype == STORE_TYPE else None,
     )
 
 
-def parse_kernels(text: str, source: str = "<source>") -> dict[str, Signature]:
+def parse_kernels(text: str, source: str = "<source>", defines: dict | None = None) -> dict[str, Signature]:
     """Every ``KERNEL void name(...)`` in ``text`` (headers pasted in or not), by name.
+
+    ``defines``: the module's preprocessor flags; they decide the dtype of ``ck_store_t`` pointers
+    (:func:`store_dtype`: float16 with ``CK_STORAGE_FP16=1``, else float32).
 
     A pointer parameter may carry a size annotation, checked at every call:
     ``const float* x /* size: 27 * n */`` (exactly that many elements) or ``/* size >= nx * ny */`` (at
@@ -146,7 +172,7 @@ def parse_kernels(text: str, source: str = "<source>") -> dict[str, Signature]:
     blanked = re.sub(r"/\*.*?\*/|//[^\n]*", lambda c: re.sub(r"[^\n]", " ", c.group(0)), text, flags=re.DOTALL)
     for m in _KERNEL.finditer(blanked):
         name = m.group(1)
-        params = tuple(_parse_param(p, name, source) for p in _split_params(_parameter_list(text, m.end())))
+        params = tuple(_parse_param(p, name, source, defines) for p in _split_params(_parameter_list(text, m.end())))
         if not params or params[0].pointer or params[0].dtype != np.int64:
             raise ValueError(f"{source}: kernel {name} must take `const long long n` as its first parameter")
         for p in params:

@@ -88,15 +88,30 @@ BANDWIDTH_EFFICIENCY = 0.8
 PARTICLE_BANDWIDTH_EFFICIENCY = 0.4
 
 
-def bytes_per_item(kernel: str) -> int | None:
-    """Compulsory bytes per work item of ``kernel`` (KERNEL_TRAFFIC), or None for a kernel without an entry."""
+# populations (f or h values) each kernel above moves per item: with fp16 storage (CK_STORAGE_FP16=1) each is
+# 2 B instead of F4
+POPULATION_VALUES = {
+    "lbm_collide_stream": 27 * 2,
+    "lbm_collide_stream (two-phase)": 27 * 2,
+    "lbm_macro_pressure": 27,
+    "lbm_momentum": 27,
+    "phase_macroscopic": 7,
+    "phase_collide_stream": 7 * 2,
+}
+
+
+def bytes_per_item(kernel: str, storage: str = "fp32") -> int | None:
+    """Compulsory bytes per work item of ``kernel`` (KERNEL_TRAFFIC), or None for a kernel without an entry;
+    ``storage="fp16"``: its populations in 2 B (POPULATION_VALUES)."""
     entry = KERNEL_TRAFFIC.get(kernel)
-    return entry.bytes if entry else None
+    if entry is None:
+        return None
+    return entry.bytes - (F4 - 2) * POPULATION_VALUES.get(kernel, 0) * (storage == "fp16")
 
 
-def two_phase_step_bytes() -> dict[str, int]:
-    """Bytes per interior cell of each kernel of one two-phase step."""
-    return {k: KERNEL_TRAFFIC[k].bytes for k in TWO_PHASE_STEP}
+def two_phase_step_bytes(storage: str = "fp32") -> dict[str, int]:
+    """Bytes per interior cell of each kernel of one two-phase step (``storage`` of the populations)."""
+    return {k: bytes_per_item(k, storage) for k in TWO_PHASE_STEP}
 
 
 def projected_items_per_s(nbytes: int, bandwidth: float, efficiency: float = BANDWIDTH_EFFICIENCY) -> float:

@@ -3,7 +3,8 @@
 Effects are compile-time defines (DESIGN "Effects"): ``CK_TWO_PHASE``, ``CK_SURFACE_TENSION``,
 ``CK_MIXTURE``, ``CK_EXT_FORCE``, and the fluid closures ``CK_LES`` (Smagorinsky) and ``CK_ODD_RATE``
 (odd-moment rate floor); one cached module per flag set. Inputs of switched-off effects are not read
-by the kernels and may be ``None``.
+by the kernels and may be ``None``. ``storage="fp16"`` builds every module that touches f with
+``CK_STORAGE_FP16=1`` (f a float16 array; :mod:`couplekit.fluid.storage`).
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ import numpy as np
 
 from ..backend import Backend
 from .reference import check_closures
+from .storage import check_storage
 
 
 class KernelOps:
@@ -26,6 +28,7 @@ class KernelOps:
         external_force: bool = False,
         les: bool = False,
         odd_rate: bool = False,
+        storage: str = "fp32",
     ):
         self.backend = backend
         self.name = backend.name
@@ -35,17 +38,22 @@ class KernelOps:
         self.external_force = bool(external_force)
         self.les = bool(les)
         self.odd_rate = bool(odd_rate)
+        self.storage = check_storage(storage)
         defines = self.defines()
+        # fp16 storage: CK_STORAGE_FP16=1 in every module that reads or writes f (absent for fp32, so the fp32
+        # modules are the ones built before the option existed)
+        store = {"CK_STORAGE_FP16": 1} if self.storage == "fp16" else {}
         collide = backend.module("lbm_collide.cu", defines)
         pressure = backend.module(
-            "lbm_pressure.cu", {"CK_TWO_PHASE": defines["CK_TWO_PHASE"], "CK_MIXTURE": defines["CK_MIXTURE"]}
+            "lbm_pressure.cu", {"CK_TWO_PHASE": defines["CK_TWO_PHASE"], "CK_MIXTURE": defines["CK_MIXTURE"], **store}
         )
-        halo = backend.module("lbm_halo.cu")
+        halo = backend.module("lbm_halo.cu", store)
         self._collide = collide.function("lbm_collide_stream")
         self._macro = pressure.function("lbm_macro_pressure")
         self._filter = pressure.function("lbm_pressure_filter")
         self._momentum = pressure.function("lbm_momentum")
         self._halo = halo.function("lbm_halo_copy")
+        self._halo_pop = halo.function("lbm_halo_copy_pop")
         self._fold = halo.function("lbm_fold")
         self._outflow_fix = halo.function("lbm_outflow_fix")
         self._prefill = halo.function("lbm_wall_prefill")
@@ -64,6 +72,7 @@ class KernelOps:
             "CK_EXT_FORCE": int(self.external_force),
             "CK_LES": int(self.les),
             "CK_ODD_RATE": int(self.odd_rate),
+            **({"CK_STORAGE_FP16": 1} if self.storage == "fp16" else {}),
         }
 
     def _wall_links(self, flags):
@@ -185,7 +194,9 @@ class KernelOps:
             return
         ncomp = 1 if a.ndim == 3 else int(np.prod(a.shape[:-3]))
         ncell = int(np.prod(a.shape[-3:]))
-        self._halo(int(ghost.size), a, ghost, image, np.int32(ncomp), np.int64(ncell))
+        # the populations' storage type may differ from the other fields' float32
+        fn = self._halo_pop if a.dtype == np.float16 else self._halo
+        fn(int(ghost.size), a, ghost, image, np.int32(ncomp), np.int64(ncell))
 
     def fold(self, f, ghost, image) -> None:
         """After an odd step, move populations pushed into periodic ghosts to their images."""

@@ -89,6 +89,7 @@ from .phasefield_layout import (
     volume_controller_gamma,
 )
 from .phasefield_reference import PhaseFieldReferenceOps
+from .storage import check_storage, dtype_of
 
 __all__ = [
     "FLUID",
@@ -119,7 +120,8 @@ class PhaseFieldKernelOps:
     ``periodic``: (x, y, z) periodicity; ``surface_tension``: False compiles the chemical potential out
     (``CK_PF_SURFACE_TENSION=0``) and :meth:`gradients` then takes ``mu=None``; ``source``: False compiles
     the source term S_φ out (``CK_PF_SOURCE=0``): :meth:`collide_stream` and :meth:`volume_sums` then take
-    ``source=None`` and the volume sums report Σ S_φ = 0.
+    ``source=None`` and the volume sums report Σ S_φ = 0. ``storage``: ``"fp32"`` or ``"fp16"`` (h stored as
+    binary16, ``CK_STORAGE_FP16=1``; h is then a float16 array, :mod:`couplekit.fluid.storage`).
     """
 
     def __init__(
@@ -128,16 +130,18 @@ class PhaseFieldKernelOps:
         periodic: bool | Sequence[bool] = True,
         surface_tension: bool = True,
         source: bool = True,
+        storage: str = "fp32",
     ):
         self.backend = backend
         self.xp = backend.xp
         self.periodic = as_periodic(periodic)
         self.surface_tension = bool(surface_tension)
         self.source = bool(source)
-        self.module = backend.module(
-            KERNEL_SOURCE,
-            defines={"CK_PF_SURFACE_TENSION": int(self.surface_tension), "CK_PF_SOURCE": int(self.source)},
-        )
+        self.storage = check_storage(storage)
+        defines = {"CK_PF_SURFACE_TENSION": int(self.surface_tension), "CK_PF_SOURCE": int(self.source)}
+        if self.storage == "fp16":
+            defines["CK_STORAGE_FP16"] = 1
+        self.module = backend.module(KERNEL_SOURCE, defines=defines)
         self._flags = tuple(int(p) for p in self.periodic)
         self._no_mu = None if self.surface_tension else self.xp.zeros(1, dtype=np.float32)
         self._no_source = None if self.source else self.xp.zeros(1, dtype=np.float32)  # never read
@@ -209,12 +213,16 @@ class PhaseFieldKernelOps:
 
 
 def make_phase_field_ops(
-    backend: Backend, periodic: bool | Sequence[bool] = True, surface_tension: bool = True, source: bool = True
+    backend: Backend,
+    periodic: bool | Sequence[bool] = True,
+    surface_tension: bool = True,
+    source: bool = True,
+    storage: str = "fp32",
 ) -> PhaseFieldKernelOps | PhaseFieldReferenceOps:
     """Kernel ops on the cuda/cpu backends, the NumPy reference on the numpy backend."""
     if backend.has_kernels:
-        return PhaseFieldKernelOps(backend, periodic, surface_tension, source)
-    return PhaseFieldReferenceOps(periodic, surface_tension, source)
+        return PhaseFieldKernelOps(backend, periodic, surface_tension, source, storage)
+    return PhaseFieldReferenceOps(periodic, surface_tension, source, storage)
 
 
 class PhaseFieldRunner:
@@ -255,7 +263,7 @@ class PhaseFieldRunner:
         self.phi[1:-1, 1:-1, 1:-1] = xp.asarray(np.asarray(phi0, dtype=np.float32))
         self.grad = xp.zeros((3, *shape), dtype=np.float32)
         self.mu = xp.zeros(shape, dtype=np.float32) if ops.surface_tension else None
-        self.h = xp.zeros((7, *shape), dtype=np.float32)
+        self.h = xp.zeros((7, *shape), dtype=dtype_of(getattr(ops, "storage", "fp32")))
         self.step_count = 0
         self.gamma = 1.0
         ops.set_equilibrium(self.h, self.phi, self.u, self.flags, 0)

@@ -3,7 +3,9 @@
 Written for clarity from the paper (000, §4.1 and §4.4, Eqs. 21–23 and 44–52) and
 ``shared/notes/lbm-method.md`` §1c/§1d, independently of ``kernels/phasefield.cu``; the kernel ops are
 tested against it.  Computes in float64 and stores into the caller's float32 arrays.  Storage and
-streaming convention: see :mod:`couplekit.fluid.phasefield`.
+streaming convention: see :mod:`couplekit.fluid.phasefield`.  An fp16-stored h (float16 array,
+:mod:`couplekit.fluid.storage`) is decoded exactly to float64 for reading and written through a float64 copy
+encoded once (round to nearest even), as the kernels' ``CK_STORAGE_FP16`` does.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import numpy as np
 
 from ..lattice import C7, C27, CS2, CS2_7, W7, W27
 from .phasefield_layout import FLUID, INFLOW, OUTFLOW, WALL, as_periodic, interior_shape, padded_shape
+from .storage import check_storage, decode_h, encode_h, round_h
 
 OPP7 = np.array([0, 2, 1, 4, 3, 6, 5])
 """Opposite direction of each D3Q7 direction."""
@@ -60,12 +63,20 @@ def trt_omega_plus(omega: float, trt_lambda: float) -> float:
 class PhaseFieldReferenceOps:
     """NumPy phase-field stages; same methods and signatures as :class:`PhaseFieldKernelOps`.
 
-    ``periodic``: (x, y, z) periodicity (the other faces are given by the ghost cells' flags);
+    ``periodic``: (x, y, z) periodicity (the other faces are given by the ghost cells' flags); ``storage``:
+    the storage the owner allocates h in (the stages follow the dtype of the h they are given);
     ``surface_tension``: whether :meth:`gradients` computes the chemical potential; ``source``: whether
     there is a source term S_φ (False: ``source`` is ``None`` and counts as 0).
     """
 
-    def __init__(self, periodic: bool | Sequence[bool] = True, surface_tension: bool = True, source: bool = True):
+    def __init__(
+        self,
+        periodic: bool | Sequence[bool] = True,
+        surface_tension: bool = True,
+        source: bool = True,
+        storage: str = "fp32",
+    ):
+        self.storage = check_storage(storage)  # what h arrays to allocate; the stages follow h's dtype
         self.periodic = as_periodic(periodic)
         self.surface_tension = bool(surface_tension)
         self.source = bool(source)
@@ -84,7 +95,7 @@ class PhaseFieldReferenceOps:
 
     def _load(self, h, phi, u, grid: _Grid, parity: int) -> np.ndarray:
         """Pre-collision populations f_q (7, ncells) of every interior cell under the AA read rule."""
-        H = h.reshape(7, -1).astype(np.float64)
+        H = decode_h(h).reshape(7, -1)
         P = phi.reshape(-1).astype(np.float64)
         U = u.reshape(3, -1).astype(np.float64)
         c = grid.cell
@@ -110,6 +121,11 @@ class PhaseFieldReferenceOps:
 
     def _store(self, h, phi, u, fstar: np.ndarray, grid: _Grid, parity: int) -> None:
         """Write post-collision f* (7, ncells) of the interior fluid cells under the AA write rule."""
+        if h.dtype == np.float16:
+            work = decode_h(h)
+            self._store(work, phi, u, fstar, grid, parity)
+            h[...] = encode_h(work, "fp16")
+            return
         H = h.reshape(7, -1)
         P = phi.reshape(-1).astype(np.float64)
         U = u.reshape(3, -1).astype(np.float64)
@@ -137,6 +153,11 @@ class PhaseFieldReferenceOps:
     def _unload(self, h, feq: np.ndarray, grid: _Grid, parity: int, phi=None, u=None) -> None:
         """Write f (7, ncells) so that loading at ``parity`` returns it in every interior fluid cell (``phi``,
         ``u``: the inflow cells' values, needed at odd parity for the inflow links)."""
+        if h.dtype == np.float16:
+            work = decode_h(h)
+            self._unload(work, feq, grid, parity, phi, u)
+            h[...] = encode_h(work, "fp16")
+            return
         H = h.reshape(7, -1)
         fluid = grid.fluid
         c = grid.cell[fluid]
@@ -264,7 +285,13 @@ class PhaseFieldReferenceOps:
             sym = 0.5 * (n + n[OPP7])
             sym[0] = n[0]  # the rest population is its own pair
             post -= (trt_omega_plus(omega, trt_lambda) - omega) * sym
-        self._store(h, phi, u, post.astype(np.float32).astype(np.float64), grid, parity)
+        post = post.astype(np.float32).astype(np.float64)
+        if h.dtype == np.float16:
+            # as the kernel: the moving populations rounded to the storage first and the rest population from
+            # the exact balance sum_k h*_k = sum_k h_k + S_phi, so that it takes their rounding
+            post[1:] = round_h(post, "fp16")[1:]
+            post[0] = f.sum(axis=0) + S_k.sum(axis=0) - post[1:].sum(axis=0)
+        self._store(h, phi, u, post, grid, parity)
 
     def volume_sums(self, phi, source, flags, eps=None) -> tuple[float, float]:
         """(V, sum S_phi) over interior FLUID cells in float64: V = sum phi, or sum eps phi with ``eps``."""

@@ -41,6 +41,7 @@ import numpy as np
 from ..lattice import C27, CS2, OPP27, W27
 from . import moments
 from .grid import FLUID, INTERIOR, OUTFLOW
+from .storage import check_storage, decode_f, encode_f
 
 
 def shifted(a: np.ndarray, c) -> np.ndarray:
@@ -156,17 +157,19 @@ def _weights(ndim: int) -> np.ndarray:
     return W27.reshape((27,) + (1,) * (ndim - 1))
 
 
-def to_stored(f: np.ndarray) -> np.ndarray:
-    """Stored form ``f − w`` (float32) of full populations f (27, ...): what the fluid arrays hold (shifted
-    storage, module docstring); the difference is taken in float64."""
+def to_stored(f: np.ndarray, storage: str = "fp32") -> np.ndarray:
+    """Stored form of full populations f (27, ...): what the fluid arrays hold (shifted storage, module
+    docstring): ``f − w`` as float32 (``storage="fp32"``) or ``(f − w) · F_SCALE`` as float16 (``"fp16"``,
+    :mod:`couplekit.fluid.storage`); the difference is taken in float64 and rounded once."""
     f = np.asarray(f, np.float64)
-    return (f - _weights(f.ndim)).astype(np.float32)
+    return encode_f(f - _weights(f.ndim), check_storage(storage))
 
 
 def from_stored(stored: np.ndarray) -> np.ndarray:
-    """Full populations f = stored + w (float64, 27, ...) of a stored array (``FluidSolver.f``)."""
-    stored = np.asarray(stored, np.float64)
-    return stored + _weights(stored.ndim)
+    """Full populations f = stored + w (float64, 27, ...) of a stored array (``FluidSolver.f``; float32, or
+    float16 of fp16 storage, whose scale is taken out)."""
+    shifted = decode_f(stored)
+    return shifted + _weights(shifted.ndim)
 
 
 class ReferenceOps:
@@ -190,7 +193,9 @@ class ReferenceOps:
         external_force: bool = False,
         les: bool = False,
         odd_rate: bool = False,
+        storage: str = "fp32",
     ):
+        self.storage = check_storage(storage)  # what f arrays to allocate; the stages follow f's dtype
         self.two_phase = bool(two_phase)
         self.surface_tension = bool(surface_tension) and self.two_phase
         self.mixture = bool(mixture)
@@ -202,7 +207,9 @@ class ReferenceOps:
     @staticmethod
     def load(f: np.ndarray, flags: np.ndarray, velocity: np.ndarray, parity: int) -> np.ndarray:
         """The full populations f_j(x, t) (27, nz, ny, nx, float64) of every interior cell under the AA read rule of
-        ``parity``, from the stored f − w (the read rules act on the stored values; w is added at the end)."""
+        ``parity``, from the stored f − w (the read rules act on the stored values; w is added at the end).
+        An fp16 array (float16) is decoded first (:func:`~couplekit.fluid.storage.decode_f`, exact in float64)."""
+        f = decode_f(f)
         if parity % 2 == 0:
             return interior(f).astype(np.float64) + _weights(4)
         out = np.empty((27,) + interior(flags).shape)
@@ -219,7 +226,14 @@ class ReferenceOps:
     @staticmethod
     def store(f: np.ndarray, flags: np.ndarray, velocity: np.ndarray, parity: int, fstar: np.ndarray) -> None:
         """Write post-collision populations ``fstar`` (full f*, float64) of the interior fluid cells under the AA
-        write rule of ``parity``, as f* − w (shifted storage, formed in float64)."""
+        write rule of ``parity``, as f* − w (shifted storage, formed in float64). An fp16 array is written
+        through a float64 copy (decoded exactly, so the values not written come back unchanged) that is encoded
+        once at the end: each written value is rounded once, from float64, to nearest even."""
+        if f.dtype == np.float16:
+            work = decode_f(f)
+            ReferenceOps.store(work, flags, velocity, parity, fstar)
+            f[...] = encode_f(work, "fp16")
+            return
         fstar = np.asarray(fstar, np.float64) - _weights(4)
         fluid = interior(flags) == FLUID
         if parity % 2 == 0:

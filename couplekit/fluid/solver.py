@@ -46,6 +46,7 @@ from .grid import (
 )
 from .kernel_ops import KernelOps
 from .reference import ReferenceOps, equilibrium, to_stored
+from .storage import check_storage, dtype_of
 
 
 def _ghost_faces(idx: np.ndarray, pshape: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray]:
@@ -237,6 +238,11 @@ class FluidSolver:
     source_term: allocate the phase field's source ``source_term`` (S_φ, zeros; two-phase only); default
         ``None`` = with ``mixture`` (the coupling writes it). Without it the phase-field kernels are built with
         ``CK_PF_SOURCE=0`` (S_φ compiled out) and ``source_term`` is ``None``.
+    storage: ``"fp32"`` (default) or ``"fp16"``: the precision the populations f and h are stored in (the
+        arithmetic stays float32 in the kernels, float64 in the reference). fp16 halves their memory (and the
+        traffic of the streaming) at a cost in accuracy (docs/precision.md, "fp16 storage");
+        :attr:`f` and :attr:`h` are then float16 arrays of scaled values (:mod:`couplekit.fluid.storage`;
+        :func:`couplekit.fluid.from_stored` decodes f).
 
     Inputs the coupling fills (padded backend arrays, present only when enabled): ``fluid_fraction``,
     ``sand_velocity``, ``force``, and ``source_term`` (S_φ of the phase field, two-phase only).
@@ -255,8 +261,10 @@ class FluidSolver:
         mixture: bool = False,
         external_force: bool = False,
         source_term: bool | None = None,
+        storage: str = "fp32",
     ):
         self.backend = backend
+        self.storage = check_storage(storage, "FluidSolver storage")
         self.shape = tuple(int(s) for s in shape)
         if len(self.shape) != 3 or min(self.shape) < 2:
             raise ValueError(f"shape must be (nz, ny, nx) with every extent >= 2, got {shape!r}")
@@ -290,6 +298,7 @@ class FluidSolver:
             external_force=self.external_force,
             les=params.smagorinsky > 0,
             odd_rate=self._odd_lambda > 0,
+            storage=self.storage,
         )
         self.ops = KernelOps(backend, **effects) if backend.has_kernels else ReferenceOps(**effects)
         pshape = padded_shape(self.shape)
@@ -311,8 +320,8 @@ class FluidSolver:
         vel[(slice(None), *INTERIOR)] = np.where(self._fluid_host[None], u0, vel[(slice(None), *INTERIOR)])
         # stored as f - w (shifted storage, reference.py); 0 in the ghost / wall cells, which are written before
         # they are read
-        f = np.zeros((27,) + pshape, np.float32)
-        f[(slice(None), *INTERIOR)] = to_stored(equilibrium(u0))  # parity 0: natural order
+        f = np.zeros((27,) + pshape, dtype_of(self.storage))
+        f[(slice(None), *INTERIOR)] = to_stored(equilibrium(u0), self.storage)  # parity 0: natural order
         self.f = backend.asarray(f)
         self.velocity = backend.asarray(vel)
         p0 = np.zeros(pshape, np.float32)
@@ -344,7 +353,7 @@ class FluidSolver:
             self._pf = pf
             periodic = tuple(self.boundaries.face(a + "-").kind == "periodic" for a in "xyz")
             has_source = bool(mixture if source_term is None else source_term)
-            self.pf_ops = pf.make_phase_field_ops(backend, periodic, self.surface_tension, has_source)
+            self.pf_ops = pf.make_phase_field_ops(backend, periodic, self.surface_tension, has_source, self.storage)
             self.beta, self.kappa = pf.chemical_potential_coefficients(params.sigma, params.width)
             phi0 = np.asarray(phi, np.float32)
             if phi0.shape != self.shape:
@@ -354,7 +363,7 @@ class FluidSolver:
             self.phi = backend.asarray(phi_p)
             self.grad = xp.zeros((3,) + pshape, dtype=np.float32)
             self.mu = xp.zeros(pshape, dtype=np.float32) if self.surface_tension else None
-            self.h = xp.zeros((7,) + pshape, dtype=np.float32)
+            self.h = xp.zeros((7,) + pshape, dtype=dtype_of(self.storage))
             self.source_term = xp.zeros(pshape, dtype=np.float32) if has_source else None
             self._setup_inflow_front(flags, wall_u, wall_phi, phi_p)
             self.pf_ops.set_equilibrium(self.h, self.phi, self.velocity, self.flags, 0)
@@ -637,7 +646,8 @@ class FluidSolver:
         """Everything a bitwise-exact restart needs (host NumPy copies of padded arrays, plus counters).
 
         ``f`` is the stored form f − w of the populations (shifted storage; :func:`couplekit.fluid.from_stored`
-        gives the full f), as :attr:`f` itself is."""
+        gives the full f), as :attr:`f` itself is; ``f`` and ``h`` keep their storage dtype (float16 with
+        fp16 storage, which is how a checkpoint records the storage)."""
         out = {k: self.backend.to_host(getattr(self, k)) for k in self._STATE_ARRAYS if getattr(self, k) is not None}
         out["step_count"] = np.array(self.step_count, np.int64)
         out["gamma"] = np.array(self.gamma, np.float64)
@@ -658,6 +668,19 @@ class FluidSolver:
             arr = np.asarray(state[k])
             if arr.shape != tuple(mine.shape):
                 raise ValueError(f"state[{k!r}] has shape {arr.shape}, this solver needs {tuple(mine.shape)}")
+            if k in ("f", "h"):
+                # the populations restart only into the storage that wrote them: a conversion would not be the
+                # exact restart a checkpoint promises (fp32 -> fp16 rounds; fp16 -> fp32 continues a run with
+                # other rounding), so it is refused, naming the scene key
+                theirs = "fp16" if arr.dtype == np.float16 else "fp32"
+                if theirs != self.storage:
+                    raise ValueError(
+                        f"state[{k!r}] holds {theirs} populations but this fluid stores them as {self.storage}: "
+                        f"set fluid.storage = {theirs!r} in the scene to restart it (a checkpoint restarts only "
+                        "with the storage that wrote it)"
+                    )
+                setattr(self, k, self.backend.asarray(arr.astype(dtype_of(self.storage))))
+                continue
             setattr(self, k, self.backend.asarray(arr.astype(np.float32)))
         self.step_count = int(state["step_count"])
         self.gamma = float(state["gamma"])

@@ -18,6 +18,13 @@ Version 3 stores the fluid populations as the solver holds them since the shifte
 f − w, :mod:`couplekit.fluid.reference`); versions 1 and 2 stored the full f, and :func:`load_checkpoint`
 converts them (f − w formed in float64, rounded to float32), so such a run restarts, though not bitwise
 identically to the run that wrote it: the populations are rounded once more, ~1e-8 (docs/precision.md).
+
+The fluid's storage precision (``fluid.storage``, fp32 or fp16) is recorded three times: in the stored scene,
+in ``meta["fluid_storage"]`` and as the dtype of ``fluid/f`` and ``fluid/h`` (float32, or float16 holding the
+scaled values of :mod:`couplekit.fluid.storage`). A state restarts only into the storage that wrote it:
+:meth:`couplekit.fluid.FluidSolver.load_state` refuses fp16 populations in an fp32 fluid and the reverse,
+naming ``fluid.storage`` (a conversion would not be an exact restart). Files from before the option hold
+float32 populations and a scene without the key, so they load as fp32, as before.
 """
 
 from __future__ import annotations

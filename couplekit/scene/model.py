@@ -145,6 +145,8 @@ class Fluid:
     gravity: tuple[float, float, float] | None = None
     """The fluid's acceleration (None: domain.gravity)."""
     initial_pressure: str = "resting"
+    storage: str = "fp32"
+    """Storage precision of the populations f and h: 'fp32' or 'fp16' (couplekit.fluid.storage)."""
 
 
 @dataclass(frozen=True)
@@ -906,6 +908,7 @@ def _fluid(flu: dict, raw: dict, domain: Domain | None, tim: dict, problems: lis
             "odd_lambda",
             "smagorinsky",
             "initial_pressure",
+            "storage",
         )
     ):
         return None
@@ -923,6 +926,7 @@ def _fluid(flu: dict, raw: dict, domain: Domain | None, tim: dict, problems: lis
         flu["smagorinsky"],
         None if flu["gravity"] is None else tuple(flu["gravity"]),
         flu["initial_pressure"],
+        flu["storage"],
     )
 
 

@@ -358,6 +358,15 @@ SECTIONS: dict[str, list[Key]] = {
             lo=0.0,
             hi=0.5,
         ),
+        Key(
+            "storage",
+            "choice",
+            "fp32",
+            "storage precision of the populations f and h: 'fp32', or 'fp16' (IEEE half, scaled; float32 "
+            "arithmetic), which halves their memory at a cost in accuracy measured in docs/precision.md "
+            "('fp16 storage')",
+            choices=("fp32", "fp16"),
+        ),
     ],
     "sand": [
         Key(

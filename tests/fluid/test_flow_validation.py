@@ -56,7 +56,9 @@ def test_poiseuille_profile_l2_below_one_percent(cpu, flow, walls):
     assert np.abs(solver.fields()["velocity"][AXES[walls]]).max() < 1e-6
 
 
-def _taylor_green_rate_error(cpu, n: int, store_filtered: bool, nu: float = 0.02, u0: float = 0.02) -> float:
+def _taylor_green_rate_error(
+    cpu, n: int, store_filtered: bool, nu: float = 0.02, u0: float = 0.02, storage: str = "fp32"
+) -> float:
     k = 2 * np.pi / n
     c = np.arange(n) + 0.5
     x, y = np.meshgrid(c, c, indexing="xy")  # x varies along the last (contiguous) axis
@@ -65,7 +67,7 @@ def _taylor_green_rate_error(cpu, n: int, store_filtered: bool, nu: float = 0.02
     vel[1] = -u0 * np.cos(k * x) * np.sin(k * y)
     p = np.broadcast_to(u0**2 / 4 * (np.cos(2 * k * x) + np.cos(2 * k * y)), (2, n, n))
     params = FluidParams(nu_h=nu, store_filtered_pressure=store_filtered)
-    solver = FluidSolver(cpu, (2, n, n), params, velocity=vel, pressure=p)
+    solver = FluidSolver(cpu, (2, n, n), params, velocity=vel, pressure=p, storage=storage)
     steps = int(round(0.5 / (2 * nu * k * k)))
     a0 = np.sqrt(solver.diagnostics()["kinetic_energy"])
     solver.step(steps)

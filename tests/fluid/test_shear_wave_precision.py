@@ -38,9 +38,16 @@ from couplekit.fluid import FluidParams, FluidSolver
 
 
 def decay_ratio(
-    backend: str, n: int, nu: float, steps: int, scene: bool = False, amp: float = 1e-3, overrides=None
+    backend: str,
+    n: int,
+    nu: float,
+    steps: int,
+    scene: bool = False,
+    amp: float = 1e-3,
+    overrides=None,
+    storage: str = "fp32",
 ) -> float:
-    """Fitted decay rate of the wave's amplitude over ν k² (1 = Navier–Stokes)."""
+    """Fitted decay rate of the wave's amplitude over ν k² (1 = Navier–Stokes); ``storage`` of f (fp32 / fp16)."""
     be = get_backend(backend, threads=1) if backend == "cpu" else get_backend(backend)
     k = 2 * np.pi / n
     shape = (2, 2, n)
@@ -53,7 +60,7 @@ def decay_ratio(
         prm = FluidParams(nu_h=nu, nu_l=nu)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the odd floor does nothing at nu = 1e-3 (OddFloorInactiveWarning)
-        s = FluidSolver(be, shape, prm, velocity=u)
+        s = FluidSolver(be, shape, prm, velocity=u, storage=storage)
     every = steps // 40
     ts, amps = [], []
     for i in range(41):
