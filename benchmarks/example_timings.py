@@ -43,7 +43,9 @@ def time_scene(scene: Path, out_dir: Path, threads: int) -> dict:
     """Run one scene file to the end in a subprocess and summarise what it did."""
     out = out_dir / scene.stem
     cmd = [sys.executable, "-m", "couplekit", "run", str(scene), "--out", str(out), "--backend", "cpu",
-           "--threads", str(threads), "--no-progress"]  # fmt: skip
+           "--threads", str(threads), "--no-progress", "--overwrite"]  # fmt: skip
+    # --overwrite: the folder is this benchmark's own; without it a second run was refused scene by scene
+    # (exit 2) and its table showed the first run's diagnostics under a 0 s wall time
     load_before = os.getloadavg()[0]
     t0 = time.perf_counter()
     proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
