@@ -71,6 +71,12 @@
 #define CK_F_SCALE 1.f
 #define CK_H_SCALE 1.f
 #define CK_H_REST 0
+// float32 storage, the same on CUDA and on the host (the fp16 conversions are per compiler: below)
+typedef float ck_store_t;
+#define CK_LOAD(p, i, scale) ((p)[i])
+#define CK_STORE(p, i, v, scale) ((p)[i] = (v))
+#define CK_LOAD_SCALAR(p, i, scale) ((p)[i])
+#define CK_STORE_SCALAR(p, i, v, scale) ((p)[i] = (v))
 #endif
 
 #if defined(__CUDACC__)
@@ -101,13 +107,7 @@ DEVICE unsigned short ck_float_to_half_(const float v) {
 #define CK_STORE(p, i, v, scale) ((p)[i] = ck_float_to_half_((v) * (scale)))
 #define CK_LOAD_SCALAR(p, i, scale) CK_LOAD(p, i, scale)
 #define CK_STORE_SCALAR(p, i, v, scale) CK_STORE(p, i, v, scale)
-#else
-typedef float ck_store_t;
-#define CK_LOAD(p, i, scale) ((p)[i])
-#define CK_STORE(p, i, v, scale) ((p)[i] = (v))
-#define CK_LOAD_SCALAR(p, i, scale) ((p)[i])
-#define CK_STORE_SCALAR(p, i, v, scale) ((p)[i] = (v))
-#endif
+#endif  // fp32 storage: the shared definitions above the CUDA / host sections
 
 #define CK_THREAD_INDEX ((long long)blockIdx.x * (long long)blockDim.x + (long long)threadIdx.x)
 #define CK_THREAD_STRIDE ((long long)blockDim.x * (long long)gridDim.x)
@@ -208,13 +208,7 @@ static inline __attribute__((always_inline)) unsigned short ck_float_to_half_(co
 // integer sequence, which only pays where it vectorises; both round alike (a test compares them with NumPy)
 #define CK_LOAD_SCALAR(p, i, scale) ((float)__builtin_bit_cast(_Float16, (p)[i]) * (1.f / (scale)))
 #define CK_STORE_SCALAR(p, i, v, scale) ((p)[i] = __builtin_bit_cast(unsigned short, (_Float16)((v) * (scale))))
-#else
-typedef float ck_store_t;
-#define CK_LOAD(p, i, scale) ((p)[i])
-#define CK_STORE(p, i, v, scale) ((p)[i] = (v))
-#define CK_LOAD_SCALAR(p, i, scale) ((p)[i])
-#define CK_STORE_SCALAR(p, i, v, scale) ((p)[i] = (v))
-#endif
+#endif  // fp32 storage: the shared definitions above the CUDA / host sections
 #define CK_MAX_THREADS 1024
 
 #define CK_PRAGMA(x) _Pragma(#x)
