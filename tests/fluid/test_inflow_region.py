@@ -168,6 +168,29 @@ def test_jet_volume_flux_through_the_outlet_is_u_in_times_its_area(cpu):
     assert uz0[mask].mean() > 0.7 * u_in and abs(uz0[6, 1]) < 0.1 * u_in, (uz0[mask].mean(), uz0[6, 1])
 
 
+def _outlet_jet(cpu, shape, centre, across: float, u_in: float, width: float, mobility: float = 0.02):
+    """Air at rest at 800:1 (ν = 0.01, σ = 1e-4) in a walled box with an outflow at z+, water entering through a
+    square ``across``-cell outlet at ``centre`` of the z- wall at ``u_in``: (solver, outlet mask)."""
+    mask = region_mask(shape, 1.0, "z-", "rect", centre, size=(float(across), float(across)))
+    b = Boundaries(_walls(**{"z+": Face("outflow")}), (InflowRegion("z-", mask, (0.0, 0.0, u_in), phi=1.0),))
+    params = FluidParams(rho_h=1.0, rho_l=1 / 800, nu_h=0.01, nu_l=0.01, sigma=1e-4, mobility=mobility, width=width)
+    return FluidSolver(cpu, shape, params, b, phi=np.zeros(shape)), mask
+
+
+def _run_in_blocks(solver, blocks: int, block: int = 50) -> tuple[dict[int, float], float]:
+    """``blocks`` × ``block`` steps, finite after each block: (water volume by step, peak lattice speed)."""
+    volumes, peak = {}, 0.0
+    for _ in range(blocks):
+        solver.step(block)
+        d = solver.diagnostics()
+        assert np.isfinite(d["max_lattice_speed"]) and np.isfinite(d["fluid_volume"]), (
+            f"non-finite at step {solver.step_count}"
+        )
+        peak = max(peak, d["max_lattice_speed"])
+        volumes[solver.step_count] = d["fluid_volume"]
+    return volumes, peak
+
+
 def test_water_jet_into_air_800_to_1_from_an_outlet_stays_finite(cpu):
     """Two phases at 800:1, air at rest in a 12 × 12 × 24 box with an outflow at z+; water enters through a
     6 × 6-cell outlet in the z- wall at u_in = 0.04 (ν = 0.01, σ = 1e-4, ξ = 4, M = 0.02: the whole-face jet
@@ -177,19 +200,9 @@ def test_water_jet_into_air_800_to_1_from_an_outlet_stays_finite(cpu):
     (kernels/phasefield.cu, pf_inflow); with the former equilibrium inflow 0.96, as its diffusive exchange
     across the face depended on the cells' φ. The water stands over the outlet: φ ≈ 1 on the jet axis near the
     outlet, less beside it."""
-    shape = (24, 12, 12)
     u_in = 0.04
-    mask = region_mask(shape, 1.0, "z-", "rect", (6.0, 6.0), size=(6.0, 6.0))
-    b = Boundaries(_walls(**{"z+": Face("outflow")}), (InflowRegion("z-", mask, (0.0, 0.0, u_in), phi=1.0),))
-    params = FluidParams(rho_h=1.0, rho_l=1 / 800, nu_h=0.01, nu_l=0.01, sigma=1e-4, mobility=0.02, width=4.0)
-    solver = FluidSolver(cpu, shape, params, b, phi=np.zeros(shape))
-    volumes, peak = {}, 0.0
-    for k in range(8):
-        solver.step(50)
-        d = solver.diagnostics()
-        assert np.isfinite(d["max_lattice_speed"]) and np.isfinite(d["fluid_volume"]), f"non-finite at {50 * k}"
-        peak = max(peak, d["max_lattice_speed"])
-        volumes[solver.step_count] = d["fluid_volume"]
+    solver, mask = _outlet_jet(cpu, (24, 12, 12), (6.0, 6.0), 6, u_in, width=4.0)
+    volumes, peak = _run_in_blocks(solver, 8)
     assert peak < 0.3, f"max lattice speed {peak:.3f}"
     rate = (volumes[400] - volumes[250]) / (u_in * mask.sum() * 150)
     assert abs(rate - 1.0) < 0.01, f"water inflow {rate:.4f} u_in A"
@@ -281,20 +294,10 @@ def test_narrow_outlet_jet_runs(cpu, width, across, u_in, steps):
     jet at ξ = 4 gave NaN at 0.08 by step 50 (and, with the equilibrium inflow, at 0.04 by step 140). At the
     scenes' ν_h = 1e-4, ν_l = 0.01: ξ = 4, 4 and 6 cells ✓ to 0.08. Outlets under 3 cells across (every cell a
     rim cell) and the more viscous air are not fixed: scenes limit them (0.02; 0.04 / 0.06)."""
-    shape = (24, 12, 12)
-    mask = region_mask(shape, 1.0, "z-", "rect", (6.0, 6.0), size=(float(across), float(across)))
+    solver, mask = _outlet_jet(cpu, (24, 12, 12), (6.0, 6.0), across, u_in, width=width)
     assert mask.sum() == across * across
-    b = Boundaries(_walls(**{"z+": Face("outflow")}), (InflowRegion("z-", mask, (0.0, 0.0, u_in), phi=1.0),))
-    params = FluidParams(rho_h=1.0, rho_l=1 / 800, nu_h=0.01, nu_l=0.01, sigma=1e-4, mobility=0.02, width=width)
-    solver = FluidSolver(cpu, shape, params, b, phi=np.zeros(shape))
     assert solver.phase_trt_lambda == pytest.approx(0.1)  # the default with an inflow
-    volumes, peak = {}, 0.0
-    for _ in range(steps // 50):
-        solver.step(50)
-        d = solver.diagnostics()
-        assert np.isfinite(d["max_lattice_speed"]), f"non-finite at step {solver.step_count}"
-        peak = max(peak, d["max_lattice_speed"])
-        volumes[solver.step_count] = d["fluid_volume"]
+    volumes, peak = _run_in_blocks(solver, steps // 50)
     assert peak < 2.0 * u_in, f"max lattice speed {peak / u_in:.2f} u_in"
     assert solver.fields()["phi"].min() > -0.005
     if steps >= 400:
@@ -308,20 +311,10 @@ def test_outlet_jet_at_twice_the_resolution(cpu):
     2 u_in), and the water volume grows by u_in × 64 cells per step once the front's ramp (2ξ/u_in = 200 steps)
     is done (measured over steps 200-300 and 300-400: 1.0000). At ξ = 8 the paper's single-rate phase field
     runs it too (peak 1.06 u_in, measured): the interface is resolved there."""
-    shape = (48, 24, 24)
     u_in = 0.08
-    mask = region_mask(shape, 1.0, "z-", "rect", (12.0, 12.0), size=(8.0, 8.0))
+    solver, mask = _outlet_jet(cpu, (48, 24, 24), (12.0, 12.0), 8, u_in, width=8.0, mobility=0.04)
     assert mask.sum() == 64
-    b = Boundaries(_walls(**{"z+": Face("outflow")}), (InflowRegion("z-", mask, (0.0, 0.0, u_in), phi=1.0),))
-    params = FluidParams(rho_h=1.0, rho_l=1 / 800, nu_h=0.01, nu_l=0.01, sigma=1e-4, mobility=0.04, width=8.0)
-    solver = FluidSolver(cpu, shape, params, b, phi=np.zeros(shape))
-    volumes, peak = {}, 0.0
-    for _ in range(6):
-        solver.step(50)
-        d = solver.diagnostics()
-        assert np.isfinite(d["max_lattice_speed"]), f"non-finite at step {solver.step_count}"
-        peak = max(peak, d["max_lattice_speed"])
-        volumes[solver.step_count] = d["fluid_volume"]
+    volumes, peak = _run_in_blocks(solver, 6)
     assert peak < 2.0 * u_in, f"max lattice speed {peak / u_in:.2f} u_in"
     rate = (volumes[300] - volumes[200]) / (u_in * mask.sum() * 100)
     assert abs(rate - 1.0) < 0.01, f"water inflow {rate:.4f} u_in A"
