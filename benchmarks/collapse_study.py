@@ -82,9 +82,9 @@ def run(args) -> dict:
     backend = get_backend("numpy" if args.float64 else "cpu")
     sol = SandSolver(backend, (nz, ny, nx), dx, dt, params, body.x, body.volume, walls=walls)
     if args.float64:
-        for k in ("x", "v", "C", "F", "tau", "vc", "volume", "mass", "grid_m", "grid_mv", "grid_vol", "grid_v"):
+        for k in ("x", "v", "C", "F", "tau", "vc", "volume", "mass", "grid_m", "grid_mv", "grid_vol"):
             setattr(sol, k, getattr(sol, k).astype(np.float64))
-        sol.f_ext = sol.f_ext.astype(np.float64)
+        sol.grid_v = sol.grid_mv  # one node array for momentum and velocity, as SandSolver allocates it
     if args.transfer == "pic":
         _pic(sol)
     elif args.transfer.startswith("flip:"):
