@@ -41,7 +41,7 @@ import numpy as np
 from ..lattice import C27, CS2, OPP27, W27
 from . import moments
 from .grid import FLUID, INTERIOR, OUTFLOW
-from .storage import check_storage, decode_f, encode_f
+from .storage import check_storage, decode_f, encode_f, weights27
 
 
 def shifted(a: np.ndarray, c) -> np.ndarray:
@@ -153,23 +153,19 @@ def equilibrium(u: np.ndarray) -> np.ndarray:
     return np.stack([psi(C27[j, 0], u[0]) * psi(C27[j, 1], u[1]) * psi(C27[j, 2], u[2]) for j in range(27)])
 
 
-def _weights(ndim: int) -> np.ndarray:
-    return W27.reshape((27,) + (1,) * (ndim - 1))
-
-
 def to_stored(f: np.ndarray, storage: str = "fp32") -> np.ndarray:
     """Stored form of full populations f (27, ...): what the fluid arrays hold (shifted storage, module
     docstring): ``f − w`` as float32 (``storage="fp32"``) or ``(f − w) · F_SCALE`` as float16 (``"fp16"``,
     :mod:`couplekit.fluid.storage`); the difference is taken in float64 and rounded once."""
     f = np.asarray(f, np.float64)
-    return encode_f(f - _weights(f.ndim), check_storage(storage))
+    return encode_f(f - weights27(f.ndim), check_storage(storage))
 
 
 def from_stored(stored: np.ndarray) -> np.ndarray:
     """Full populations f = stored + w (float64, 27, ...) of a stored array (``FluidSolver.f``; float32, or
     float16 of fp16 storage, whose scale is taken out)."""
     shifted = decode_f(stored)
-    return shifted + _weights(shifted.ndim)
+    return shifted + weights27(shifted.ndim)
 
 
 class ReferenceOps:
@@ -211,7 +207,7 @@ class ReferenceOps:
         An fp16 array (float16) is decoded first (:func:`~couplekit.fluid.storage.decode_f`, exact in float64)."""
         f = decode_f(f)
         if parity % 2 == 0:
-            return interior(f).astype(np.float64) + _weights(4)
+            return interior(f).astype(np.float64) + weights27(4)
         out = np.empty((27,) + interior(flags).shape)
         out[0] = interior(f[0])
         for j in range(1, 27):
@@ -221,7 +217,7 @@ class ReferenceOps:
             wall_u = shifted(velocity, -c).astype(np.float64)
             bounced = interior(f[j]) + 6.0 * W27[j] * (c[0] * wall_u[0] + c[1] * wall_u[1] + c[2] * wall_u[2])
             out[j] = np.where((nb_flag == FLUID) | (nb_flag == OUTFLOW), pulled, bounced)
-        return out + _weights(4)
+        return out + weights27(4)
 
     @staticmethod
     def store(f: np.ndarray, flags: np.ndarray, velocity: np.ndarray, parity: int, fstar: np.ndarray) -> None:
@@ -234,7 +230,7 @@ class ReferenceOps:
             ReferenceOps.store(work, flags, velocity, parity, fstar)
             f[...] = encode_f(work, "fp16")
             return
-        fstar = np.asarray(fstar, np.float64) - _weights(4)
+        fstar = np.asarray(fstar, np.float64) - weights27(4)
         fluid = interior(flags) == FLUID
         if parity % 2 == 0:
             for j in range(27):
