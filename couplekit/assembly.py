@@ -544,9 +544,9 @@ def build_scheduler(scene: Scene, fluid, sand, coupler, *, timing: bool = True, 
 
 
 # ---------------------------------------------------------------------------------------------- memory
-_FLUID_FLOATS_PER_CELL = 27 + 3 + 3 + 1 + 1  # f, velocity, wall velocity, p, pbar
-_PHASE_FLOATS_PER_CELL = 7 + 1 + 3 + 1 + 1  # h, phi, grad phi, mu, source term (an upper bound: mu only
-# with surface tension, the source term only in coupled scenes with it on; effect_memory counts them exactly)
+_FLUID_FLOATS_PER_CELL = 27 + 3 + 1 + 1  # f, velocity (the walls' velocities in the wall cells), p, pbar
+_PHASE_FLOATS_PER_CELL = 7 + 1 + 3  # h, phi, grad phi; + mu with surface tension, + the source term in coupled
+# scenes with it on (FluidSolver; effect_memory counts each effect's fields)
 _SAND_FLOATS_PER_NODE = 1 + 3 + 1 + 1  # mass, momentum (overwritten by the velocity: SandSolver.grid_v), volume, sdf
 _SAND_FLOATS_PER_PARTICLE = 3 + 3 + 9 + 9 + 6 + 1 + 1 + 1 + 1 + 1  # x v C F tau q vc saturation mass volume
 
@@ -564,7 +564,11 @@ def memory_estimate(scene: Scene) -> dict[str, float]:
     padded = (nx + 2) * (ny + 2) * (nz + 2)
     out = {"fluid": 0.0, "sand_grid": 0.0, "particles": 0.0, "particle_count": 0.0}
     if scene.fluid is not None:
-        floats = _FLUID_FLOATS_PER_CELL + (_PHASE_FLOATS_PER_CELL if scene.fluid.phases == 2 else 0)
+        floats = _FLUID_FLOATS_PER_CELL
+        if scene.fluid.phases == 2:
+            sigma = scene.fluid.surface_tension > 0 and scene.effects.surface_tension
+            source = scene.has_sand and scene.effects.source_term
+            floats += _PHASE_FLOATS_PER_CELL + int(sigma) + int(source)
         out["fluid"] = padded * (4 * floats + 1)  # + 1 byte of flags
         if scene.fluid.storage == "fp16":  # f and h in 2 B instead of 4 (couplekit.fluid.storage)
             populations = 27 + (7 if scene.fluid.phases == 2 else 0)
@@ -596,14 +600,19 @@ def memory_estimate(scene: Scene) -> dict[str, float]:
         # fluid mixture inputs (fluid_fraction, sand_velocity, force) and the coupler's fields
         flags = set(retention_flags(scene))
         retention, mixed = True in flags, len(flags) > 1  # mixed: + retentive fraction grid and flags
-        out["coupling"] = padded * 4.0 * (7 + 1 + 3 + 1) + cells * 4.0 * (1 + (3 + mixed if retention else 0))
+        # padded: the fluid's ε, sand velocity and force (7), the coupler's ε_s, exchange velocity and last ε (5),
+        # the cells of Eq. 39's slip term (1 byte); interior: the water per cell (+ bound water with retention)
+        out["coupling"] = padded * (4.0 * (7 + 1 + 3 + 1) + 1) + cells * 4.0 * (1 + (3 + mixed if retention else 0))
         out["particles"] += 4.0 * count * ((1 + mixed) if retention else 0)
         if scene.scheduler.kind == "subcycle":
             linear = scene.scheduler.interpolation == "linear"
             out["scheduler"] = 4.0 * (padded * (3 + 3 + 1 + (3 if linear else 0)) + cells * (3 + retention))
     if scene.fluid is not None and getattr(scene, "stirring", None) is not None:
-        # the stirring force's buffer, plus the force input a fluid-only scene would not have
-        out["stirring"] = padded * 4.0 * (3 if scene.has_sand else 6)
+        # the stirring's fields (its acceleration, radius and mask grids, the summed force, the stirred box's
+        # density; the force input a fluid-only scene would not have): one table, couplekit.effect_memory
+        from .effect_memory import effect_memory
+
+        out["stirring"] = effect_memory(scene)["stirring"]["bytes_total"]
     out["total"] = (
         out["fluid"]
         + out["sand_grid"]
