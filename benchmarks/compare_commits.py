@@ -1,0 +1,130 @@
+"""The coupled step of a scene on two commits, measured in one run: per-stage milliseconds per step
+(``Simulation.cost_report``) and the ratio old / new.
+
+    python benchmarks/compare_commits.py OLD [NEW] [--scene examples/fig13_sand_drop_beaker_small.toml]
+        [--steps 30] [--warm-up 5] [--repeats 3] [--threads 2]
+
+``OLD`` and ``NEW`` are git revisions (``NEW`` defaults to the working tree); each is checked out into a
+temporary ``git worktree`` (the working tree is used as it is) and timed in its own subprocess with that
+checkout first on ``PYTHONPATH``. The contenders alternate, ``--repeats`` times each, and each stage keeps its
+best time: timings on a shared machine drift by up to 3x (DESIGN), a ratio within one run does not.
+
+Writes ``benchmarks/results/compare_commits.json``. Kernel libraries are cached by source hash, so the first
+repeat of a commit may build them: the ``--warm-up`` steps (not timed) absorb that.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "benchmarks" / "results"
+
+# run inside each checkout's subprocess: build the scene, warm up, time, print the stage costs as JSON
+_CHILD = r"""
+import json, sys
+from couplekit.scene import Scene
+from couplekit.simulation import Simulation
+scene, steps, warm = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
+sim = Simulation(Scene.load(scene), backend="cpu", log=None)
+sim.step(warm)
+sim.reset_timing()
+sim.step(steps)
+rep = sim.cost_report()
+print(json.dumps({k: 1e3 * v["mean"] for k, v in rep.items()}))
+"""
+
+
+def _checkout(rev: str | None, tmp: Path) -> Path:
+    """A checkout of ``rev`` (None: the working tree itself), with the package's two top-level folders
+    reachable as couplekit.kernels and couplekit.schedulers (as the editable install maps them)."""
+    if rev is None:
+        path = ROOT
+    else:
+        path = tmp / rev.replace("/", "_")
+        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "-q", "--detach", str(path), rev], check=True)
+    for name in ("kernels", "schedulers"):
+        link = path / "couplekit" / name
+        if not link.exists():
+            link.symlink_to(Path("..") / name)
+    return path
+
+
+def _time(path: Path, scene: Path, steps: int, warm: int, threads: int) -> dict[str, float]:
+    env = dict(os.environ, PYTHONPATH=str(path), OMP_NUM_THREADS=str(threads))
+    out = subprocess.run(
+        [sys.executable, "-c", _CHILD, str(scene), str(steps), str(warm)],
+        cwd=path, env=env, capture_output=True, text=True,
+    )  # fmt: skip
+    if out.returncode != 0:
+        raise RuntimeError(f"timing at {path} failed:\n{out.stderr[-3000:]}")
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("old", help="git revision timed as 'old'")
+    parser.add_argument("new", nargs="?", default=None, help="git revision timed as 'new' (default: working tree)")
+    parser.add_argument("--scene", type=Path, default=ROOT / "examples" / "fig13_sand_drop_beaker_small.toml")
+    parser.add_argument("--steps", type=int, default=30)
+    parser.add_argument("--warm-up", type=int, default=5)
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--out", type=Path, default=RESULTS / "compare_commits.json")
+    args = parser.parse_args()
+    if args.steps < 1 or args.repeats < 1 or args.warm_up < 1:
+        parser.error("--steps, --repeats and --warm-up must be >= 1")
+    scene = args.scene.resolve()
+    if not scene.is_file():
+        parser.error(f"no scene file {scene}")
+
+    with tempfile.TemporaryDirectory(prefix="couplekit-compare-") as tmp:
+        made = []
+        try:
+            paths = {}
+            for label, rev in (("old", args.old), ("new", args.new)):
+                paths[label] = _checkout(rev, Path(tmp))
+                if rev is not None:
+                    made.append(paths[label])
+            best: dict[str, dict[str, float]] = {"old": {}, "new": {}}
+            for r in range(args.repeats):
+                for label in ("old", "new"):
+                    ms = _time(paths[label], scene, args.steps, args.warm_up, args.threads)
+                    ms["total"] = sum(ms.values())
+                    for k, v in ms.items():
+                        best[label][k] = min(best[label].get(k, float("inf")), v)
+                    print(f"repeat {r + 1}/{args.repeats} {label}: {ms['total']:.1f} ms/step", flush=True)
+        finally:
+            for p in made:
+                subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(p)], check=False)
+
+    stages = sorted(set(best["old"]) | set(best["new"]), key=lambda k: -best["old"].get(k, 0.0))
+    ratio = {k: best["old"][k] / best["new"][k] for k in stages if k in best["old"] and best["new"].get(k)}
+    result = {
+        "command": "python " + " ".join([Path(sys.argv[0]).as_posix(), *sys.argv[1:]]),
+        "old": args.old,
+        "new": args.new or "working tree",
+        "scene": scene.relative_to(ROOT).as_posix() if scene.is_relative_to(ROOT) else str(scene),
+        "steps": args.steps,
+        "repeats": args.repeats,
+        "threads": args.threads,
+        "ms_per_step": best,
+        "speedup_old_over_new": ratio,
+    }
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(result, indent=1) + "\n")
+    print(f"{'stage':28s} {'old ms':>9s} {'new ms':>9s} {'old/new':>8s}")
+    for k in stages:
+        o, n = best["old"].get(k), best["new"].get(k)
+        print(f"{k:28s} {o or 0:9.2f} {n or 0:9.2f} {ratio.get(k, float('nan')):8.2f}")
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
