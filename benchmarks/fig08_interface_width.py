@@ -1,6 +1,7 @@
 """Fig. 8 at the default interface width: the smallest ball (radius in cells) that floats at Archimedes' depth.
 
     python benchmarks/fig08_interface_width.py [--radii 1.74 2.0 2.4 3.0] [--widths 4] [--also 1.74:8] [--time 3.0]
+        [--set KEY=VALUE ...] [--small-variant]
 
 Paper 000 Fig. 8's 600 kg/m³ sand ball floats. Our small variant (examples/fig08_sand_densities_small.toml,
 10× coarser than Table 1: balls of 1.74 cells radius) needs interface width ξ = 8: at ξ = 4 the light ball
@@ -14,7 +15,16 @@ of grain density 600 kg/m³ floats with a cap of height t·r submerged, t²(3 �
 centre is at surface + (1 − t)·r. The domain is 8 r wide (at least 0.6 m) so the walls stay away from the
 ball; the pool 0.8 m deep as in the small variant.
 
-Results: benchmarks/results/fig08_interface_width.json (one record per (r, ξ)), and a table printed.
+One factor at a time (issue 16): ``--set KEY=VALUE ...`` changes the keys of DEFAULTS for every case, e.g.
+``--set drop=0 odd_lambda=0`` (released at rest touching the surface, the odd moments at the paper's rate 1);
+each record keeps what it changed, the ball's water fraction φ against the far field's at its height, and the
+pore fluid's and the sand's vertical speed per frame. ``pressure_buoyancy`` is an experiment of this script
+only (a wrapper around the coupler's exchange, NumPy gradient), not a solver option. ``--small-variant`` runs
+the example scene itself at each ``--widths`` (odd_lambda, smagorinsky from ``--set``): each ball's centre,
+the max lattice speed and where it is. What was found: docs/examples.md, the fig08_sand_densities_small bullet.
+
+Results: benchmarks/results/fig08_interface_width.json (one record per case; a case run again replaces its
+record, ``--replace`` starts the file afresh), and a table printed.
 """
 
 from __future__ import annotations
@@ -252,7 +262,7 @@ def run_small_variant(xi: float, backend: str, f: dict | None = None, frames: in
     which = np.argmin(np.abs(x0[:, None] - centres_x[None, :]), axis=1)
     steps = int(round(d["time"]["frame_duration"] / d["time"]["dt"]))
     hist = {b["name"]: [] for b in balls}
-    speed, drift = [], []
+    speed, drift, where = [], [], []
     t0 = time.perf_counter()
     for _ in range(frames):
         sim.step(steps)
@@ -261,6 +271,12 @@ def run_small_variant(xi: float, backend: str, f: dict | None = None, frames: in
             hist[b["name"]].append(float(z[which == k].mean()))
         diag = sim.diagnostics()
         speed.append(float(diag["max_lattice_speed"]))
+        fl = sim.fields(lattice=True)
+        mag = np.sqrt((fl["velocity"] ** 2).sum(axis=0))
+        k, j, i = (int(v) for v in np.unravel_index(int(np.argmax(mag)), mag.shape))
+        n = mag.shape
+        where.append({"cell": [i, j, k], "to_wall": min(i, j, k, n[2] - 1 - i, n[1] - 1 - j, n[0] - 1 - k),
+                      "phi": float(fl["phi"][k, j, i]), "sand_fraction": float(fl["sand_fraction"][k, j, i])})  # fmt: skip
         drift.append(float(diag.get("fluid_volume_drift", float("nan"))))
     surface = balls and d["bodies"][0]["geometry"]["max"][2]
     return {
@@ -272,6 +288,7 @@ def run_small_variant(xi: float, backend: str, f: dict | None = None, frames: in
         "centre_history_m": hist,
         "max_lattice_speed_history": speed,
         "fluid_volume_drift_history": drift,
+        "max_speed_at_history": where,  # the largest speed's cell (x, y, z index), cells to the nearest wall
         "wall_s": time.perf_counter() - t0,
     }
 
@@ -332,6 +349,8 @@ def main() -> None:
             results.append(res)
             print(f"small variant xi {xi:g} {res['changed']}: max lattice speed {max(res['max_lattice_speed_history']):.3f}, "
                   f"volume drift {res['fluid_volume_drift_history'][-1]:+.2e}, {res['wall_s']:.0f} s", flush=True)  # fmt: skip
+            print("    largest speed every 0.25 s at (cell, cells to a wall, phi):", " ".join(
+                f"{w['cell']}/{w['to_wall']}/{w['phi']:.2f}" for w in res["max_speed_at_history"][4::5]), flush=True)  # fmt: skip
             for name, h in res["centre_history_m"].items():
                 print(f"    {name}: centre every 0.25 s (m) " + " ".join(f"{z:.3f}" for z in h[4::5]), flush=True)
         a.radii, a.also = [], []
