@@ -24,14 +24,20 @@
 // fraction phi in two-phase flow).  One fluid cell c: ODD = parity & 1, MODE: how the four stencils learn the
 // kind of a neighbour (lbm_gradient; `mask` = lbm_link_mask of c for LBM_NB_MASK), SCALAR: lbm_load's,
 // `slip_on`: slip_cells[c] != 0 (on the host taken from a widened copy: no byte read in the x loop).
-template <int ODD, int MODE, int SCALAR>
+// GPU = 1 (the GPU loop): ODD is the runtime `odd` (a branch around the loads only), and the link mask and the
+// slip flag are read here, where the stencils need them, not passed in: computed before the loads, they stayed
+// live through them and the fp16 mixture variants spilled 4-8 B on sm_80 / sm_90 (measured).
+template <int ODD, int MODE, int SCALAR, int GPU = 0>
 LBM_INLINE void lbm_pressure_cell(const long long c, const ck_store_t* RESTRICT f, const unsigned char* RESTRICT flags,
                                   const float* RESTRICT vel, const float* RESTRICT phi, const float* RESTRICT eps,
                                   const float* RESTRICT sand_v, float* RESTRICT p, const int px, const long long pxy,
-                                  const long long N, const float rho_h, const float rho_l, const unsigned int mask,
-                                  const bool slip_on) {
+                                  const long long N, const float rho_h, const float rho_l, unsigned int mask,
+                                  bool slip_on, const int odd = 0, const unsigned char* RESTRICT slip_cells = nullptr) {
     float fj[27];
-    lbm_load<ODD, SCALAR>(f, c, N, px, pxy, fj);
+    if (GPU ? odd != 0 : ODD != 0)
+        lbm_load<1, SCALAR>(f, c, N, px, pxy, fj);
+    else
+        lbm_load<0, SCALAR>(f, c, N, px, pxy, fj);
     float s0 = 0.f;
 #define LBM_SUM(q) s0 += fj[q];
     LBM_FOR27(LBM_SUM)
@@ -46,6 +52,7 @@ LBM_INLINE void lbm_pressure_cell(const long long c, const ck_store_t* RESTRICT 
     // update, which grows a grid-scale mode where eps changes next to a wall (reference docstring)
     const float ux = vel[c], uy = vel[N + c], uz = vel[2 * N + c];
     float ge[3], gvx[3], gvy[3], gvz[3];
+    if (GPU) mask = lbm_link_mask(flags, c, px, pxy);  // the neighbours' kinds once, for the four stencils
     lbm_gradient<0, MODE>(eps, flags, c, px, pxy, ge, mask);
     lbm_gradient<0, MODE>(sand_v, flags, c, px, pxy, gvx, mask);
     lbm_gradient<0, MODE>(sand_v + N, flags, c, px, pxy, gvy, mask);
@@ -54,6 +61,7 @@ LBM_INLINE void lbm_pressure_cell(const long long c, const ck_store_t* RESTRICT 
     const float div_v = gvx[0] + gvy[1] + gvz[2];
     // the slip term only in the cells of slip_cells, not in the layers next to a wall (1, or 3 with the odd-rate
     // floor): there a porosity step grows a grid-scale mode (reference docstring)
+    if (GPU) slip_on = slip_cells[c] != 0;
     const float slip = slip_on ? (ux - sand_v[c]) * ge[0] + (uy - sand_v[N + c]) * ge[1] +
                                      (uz - sand_v[2 * N + c]) * ge[2]
                                : 0.f;
@@ -65,7 +73,7 @@ LBM_INLINE void lbm_pressure_cell(const long long c, const ck_store_t* RESTRICT 
     divergence += ((1.f - e) * div_v + slip) / e;
 #endif
 #else
-    (void)vel, (void)eps, (void)sand_v, (void)mask, (void)slip_on;
+    (void)vel, (void)eps, (void)sand_v, (void)mask, (void)slip_on, (void)slip_cells;
 #endif
 #if CK_TWO_PHASE
     const float ph = lbm_clamp01(phi[c]);
@@ -96,18 +104,7 @@ KERNEL void lbm_macro_pressure(const long long n, const ck_store_t* RESTRICT f /
         const long long N = pxy * (nz + 2);
         const long long c = (x + 1) + px * (long long)(y + 1) + pxy * (z + 1);
         if (flags[c] != FLAG_FLUID) continue;
-#if CK_MIXTURE
-        // the neighbours' kinds read once into a link mask (one register) for the four stencils
-        const unsigned int m = lbm_link_mask(flags, c, px, pxy);
-        const bool slip_on = slip_cells[c] != 0;
-#else
-        const unsigned int m = 0u;
-        const bool slip_on = false;
-#endif
-        if (odd)
-            lbm_pressure_cell<1, LBM_NB_MASK, 1>(c, LBM_P_ARGS(px, pxy, N), m, slip_on);
-        else
-            lbm_pressure_cell<0, LBM_NB_MASK, 1>(c, LBM_P_ARGS(px, pxy, N), m, slip_on);
+        lbm_pressure_cell<0, LBM_NB_MASK, 1, 1>(c, LBM_P_ARGS(px, pxy, N), 0u, false, odd, slip_cells);
     }
 #else
     // host: the row scheme of lbm_collide_stream.  A row whose cells are all fluid (with the mixture's stencils:
