@@ -230,6 +230,15 @@ LBM_INLINE bool lbm_rows_all_fluid(const unsigned char* RESTRICT flags, const lo
     return any == 0;  // FLAG_FLUID == 0
 }
 
+// Host: true when the cells xa..xb of padded row `row` (index of x = 0) are all FLUID (xb - xa + 1 byte reads)
+LBM_INLINE bool lbm_row_fluid(const unsigned char* RESTRICT flags, const long long row, const int xa, const int xb) {
+    unsigned int any = 0;
+    const unsigned char* r = flags + row;
+    CK_PRAGMA(omp simd reduction(| : any))
+    for (int x = xa; x <= xb; ++x) any |= r[x];
+    return any == 0;  // FLAG_FLUID == 0
+}
+
 // Host: link masks of the `len` cells starting at padded index c0.  The flags of the 9 rows around them are
 // first widened to one 32-bit word per cell in `scratch` (size >= 10 (len + 2)), so the mask loop itself
 // reads no byte data and vectorises with 16 lanes (built straight from the flags g++ left it scalar: 26

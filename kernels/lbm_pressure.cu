@@ -15,10 +15,76 @@
 #define CK_MIXTURE 0
 #endif
 
+// host rows are processed in chunks of this many cells (their link masks live on the stack)
+#define LBM_P_CHUNK 512
+
 // p <- p - cs2 rho [(1 - sum f) + (eps_s div v + (u - v).grad eps) / eps]   (Eq. 39, 1 - sum f ~ div u, Eq. 38;
 // u the velocity of Eq. 13 written by the last collision; the slip term (u - v).grad eps only in the cells
 // of slip_cells (couplekit.fluid.grid.slip_cells: not in the 1 or 3 layers next to a wall), and weighted by the water
-// fraction phi in two-phase flow)
+// fraction phi in two-phase flow).  One fluid cell c: ODD = parity & 1, MODE: how the four stencils learn the
+// kind of a neighbour (lbm_gradient; `mask` = lbm_link_mask of c for LBM_NB_MASK), SCALAR: lbm_load's,
+// `slip_on`: slip_cells[c] != 0 (on the host taken from a widened copy: no byte read in the x loop).
+// GPU = 1 (the GPU loop): ODD is the runtime `odd` (a branch around the loads only), and the link mask and the
+// slip flag are read here, where the stencils need them, not passed in: computed before the loads, they stayed
+// live through them and the fp16 mixture variants spilled 4-8 B on sm_80 / sm_90 (measured).
+template <int ODD, int MODE, int SCALAR, int GPU = 0>
+LBM_INLINE void lbm_pressure_cell(const long long c, const ck_store_t* RESTRICT f, const unsigned char* RESTRICT flags,
+                                  const float* RESTRICT vel, const float* RESTRICT phi, const float* RESTRICT eps,
+                                  const float* RESTRICT sand_v, float* RESTRICT p, const int px, const long long pxy,
+                                  const long long N, const float rho_h, const float rho_l, unsigned int mask,
+                                  bool slip_on, const int odd = 0, const unsigned char* RESTRICT slip_cells = nullptr) {
+    float fj[27];
+    if (GPU ? odd != 0 : ODD != 0)
+        lbm_load<1, SCALAR>(f, c, N, px, pxy, fj);
+    else
+        lbm_load<0, SCALAR>(f, c, N, px, pxy, fj);
+    float s0 = 0.f;
+#define LBM_SUM(q) s0 += fj[q];
+    LBM_FOR27(LBM_SUM)
+#undef LBM_SUM
+    // 1 - sum f = -sum (f - w): the stored populations are f - w (lbm_core.cuh), sum w = 1.  Written
+    // `0.f - s0`: with `-s0` (or a negative accumulation) ptxas spilled 8 B on sm_80 in the two-phase
+    // mixture variant; this form builds with the registers of the former `1.f - s0` (124 / 128)
+    float divergence = 0.f - s0;
+#if CK_MIXTURE
+    // u: the fluid velocity of Eq. 13 (with its half-force shift) from the last collision, not sum f c:
+    // sum f c = u - a/2 puts -(a/2).grad eps / eps = (grad p - rho g).grad eps / (2 rho eps) into the
+    // update, which grows a grid-scale mode where eps changes next to a wall (reference docstring)
+    const float ux = vel[c], uy = vel[N + c], uz = vel[2 * N + c];
+    float ge[3], gvx[3], gvy[3], gvz[3];
+    if (GPU) mask = lbm_link_mask(flags, c, px, pxy);  // the neighbours' kinds once, for the four stencils
+    lbm_gradient<0, MODE>(eps, flags, c, px, pxy, ge, mask);
+    lbm_gradient<0, MODE>(sand_v, flags, c, px, pxy, gvx, mask);
+    lbm_gradient<0, MODE>(sand_v + N, flags, c, px, pxy, gvy, mask);
+    lbm_gradient<0, MODE>(sand_v + 2 * N, flags, c, px, pxy, gvz, mask);
+    const float e = eps[c];
+    const float div_v = gvx[0] + gvy[1] + gvz[2];
+    // the slip term only in the cells of slip_cells, not in the layers next to a wall (1, or 3 with the odd-rate
+    // floor): there a porosity step grows a grid-scale mode (reference docstring)
+    if (GPU) slip_on = slip_cells[c] != 0;
+    const float slip = slip_on ? (ux - sand_v[c]) * ge[0] + (uy - sand_v[N + c]) * ge[1] +
+                                     (uz - sand_v[2 * N + c]) * ge[2]
+                               : 0.f;
+#if CK_TWO_PHASE
+    // weighted by the water fraction: in the light phase the slip's pressure, accelerated by 1/rho, pumped
+    // the air through a sand ball at the interface upward (reference docstring)
+    divergence += ((1.f - e) * div_v + lbm_clamp01(phi[c]) * slip) / e;
+#else
+    divergence += ((1.f - e) * div_v + slip) / e;
+#endif
+#else
+    (void)vel, (void)eps, (void)sand_v, (void)mask, (void)slip_on, (void)slip_cells;
+#endif
+#if CK_TWO_PHASE
+    const float ph = lbm_clamp01(phi[c]);
+    const float rho = rho_l + (rho_h - rho_l) * ph;
+#else
+    (void)phi, (void)rho_l;
+    const float rho = rho_h;
+#endif
+    p[c] = p[c] - CS2 * rho * divergence;
+}
+
 KERNEL void lbm_macro_pressure(const long long n, const ck_store_t* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
                                const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                                const float* RESTRICT vel /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
@@ -26,6 +92,8 @@ KERNEL void lbm_macro_pressure(const long long n, const ck_store_t* RESTRICT f /
                                const unsigned char* RESTRICT slip_cells,
                                float* RESTRICT p /* size: (nx + 2) * (ny + 2) * (nz + 2) */, const int parity, const int nx,
                                const int ny, const int nz, const float rho_h, const float rho_l) {
+#define LBM_P_ARGS(px, pxy, N) f, flags, vel, phi, eps, sand_v, p, px, pxy, N, rho_h, rho_l
+#if CK_ON_GPU
     const int odd = parity & 1;
     FOR_EACH_CELL(x, y, z, nx, ny, nz) {
         // the grid sizes through CK_PER_ITEM (common.cuh): on the GPU the 27 load offsets and the 4 gradients'
@@ -36,87 +104,131 @@ KERNEL void lbm_macro_pressure(const long long n, const ck_store_t* RESTRICT f /
         const long long N = pxy * (nz + 2);
         const long long c = (x + 1) + px * (long long)(y + 1) + pxy * (z + 1);
         if (flags[c] != FLAG_FLUID) continue;
-        float fj[27];
-        if (odd)
-            lbm_load<1, 1>(f, c, N, px, pxy, fj);  // scalar on the host: CK_LOAD_SCALAR
-        else
-            lbm_load<0, 1>(f, c, N, px, pxy, fj);
-        float s0 = 0.f;
-#define LBM_SUM(q) s0 += fj[q];
-        LBM_FOR27(LBM_SUM)
-#undef LBM_SUM
-        // 1 - sum f = -sum (f - w): the stored populations are f - w (lbm_core.cuh), sum w = 1.  Written
-        // `0.f - s0`: with `-s0` (or a negative accumulation) ptxas spilled 8 B on sm_80 in the two-phase
-        // mixture variant; this form builds with the registers of the former `1.f - s0` (124 / 128)
-        float divergence = 0.f - s0;
-#if CK_MIXTURE
-        // u: the fluid velocity of Eq. 13 (with its half-force shift) from the last collision, not sum f c:
-        // sum f c = u - a/2 puts -(a/2).grad eps / eps = (grad p - rho g).grad eps / (2 rho eps) into the
-        // update, which grows a grid-scale mode where eps changes next to a wall (reference docstring)
-        const float ux = vel[c], uy = vel[N + c], uz = vel[2 * N + c];
-        float ge[3], gvx[3], gvy[3], gvz[3];
-#if CK_ON_GPU
-        // the neighbours' kinds read once into a link mask (one register) for the four stencils
-        const unsigned int m = lbm_link_mask(flags, c, px, pxy);
-        lbm_gradient<0, LBM_NB_MASK>(eps, flags, c, px, pxy, ge, m);
-        lbm_gradient<0, LBM_NB_MASK>(sand_v, flags, c, px, pxy, gvx, m);
-        lbm_gradient<0, LBM_NB_MASK>(sand_v + N, flags, c, px, pxy, gvy, m);
-        lbm_gradient<0, LBM_NB_MASK>(sand_v + 2 * N, flags, c, px, pxy, gvz, m);
-#else
-        lbm_gradient<0>(eps, flags, c, px, pxy, ge);
-        lbm_gradient<0>(sand_v, flags, c, px, pxy, gvx);
-        lbm_gradient<0>(sand_v + N, flags, c, px, pxy, gvy);
-        lbm_gradient<0>(sand_v + 2 * N, flags, c, px, pxy, gvz);
-#endif
-        const float e = eps[c];
-        const float div_v = gvx[0] + gvy[1] + gvz[2];
-        // the slip term only in the cells of slip_cells, not in the layers next to a wall (1, or 3 with the odd-rate
-        // floor): there a porosity step grows a grid-scale mode (reference docstring)
-        const float slip = slip_cells[c] ? (ux - sand_v[c]) * ge[0] + (uy - sand_v[N + c]) * ge[1] +
-                                               (uz - sand_v[2 * N + c]) * ge[2]
-                                         : 0.f;
-#if CK_TWO_PHASE
-        // weighted by the water fraction: in the light phase the slip's pressure, accelerated by 1/rho, pumped
-        // the air through a sand ball at the interface upward (reference docstring)
-        divergence += ((1.f - e) * div_v + lbm_clamp01(phi[c]) * slip) / e;
-#else
-        divergence += ((1.f - e) * div_v + slip) / e;
-#endif
-#endif
-#if CK_TWO_PHASE
-        const float ph = lbm_clamp01(phi[c]);
-        const float rho = rho_l + (rho_h - rho_l) * ph;
-#else
-        const float rho = rho_h;
-#endif
-        p[c] = p[c] - CS2 * rho * divergence;
+        lbm_pressure_cell<0, LBM_NB_MASK, 1, 1>(c, LBM_P_ARGS(px, pxy, N), 0u, false, odd, slip_cells);
     }
+#else
+    // host: the row scheme of lbm_collide_stream.  A row whose cells are all fluid (with the mixture's stencils:
+    // whose 9-row neighbourhood is) takes a flag-free `omp simd` x loop (LBM_NB_BULK), other rows a loop over
+    // 32-bit link masks (lbm_link_masks, LBM_NB_MASK); the slip cells are widened to 32 bits first.  A byte
+    // read inside the x loop makes g++ choose byte-wide vectors (4 registers per float value) and the loop
+    // ran scalar before (the odd loads through CK_LOAD_SCALAR).  The parity is a template argument of each
+    // loop.  Same arithmetic per cell in every path as on the GPU, except the bulk stencils' round-off.
+    const int px = nx + 2;
+    const long long pxy = (long long)px * (ny + 2);
+    const long long N = pxy * (nz + 2);
+#if CK_MIXTURE
+#define LBM_P_ROWS(row) lbm_rows_all_fluid(flags, row, 0, nx + 1, px, pxy)
+#define LBM_P_SLIP(i) (slipw[i] != 0u)
+#else
+#define LBM_P_ROWS(row) lbm_row_fluid(flags, row, 1, nx)
+#define LBM_P_SLIP(i) false
+#endif
+#define LBM_P_LOOP(ODD)                                                                                   \
+    CK_PRAGMA(omp parallel for collapse(2) schedule(static))                                              \
+    for (int z = 0; z < nz; ++z)                                                                          \
+        for (int y = 0; y < ny; ++y) {                                                                    \
+            const long long row = px * (long long)(y + 1) + pxy * (z + 1);                                \
+            const bool bulk = LBM_P_ROWS(row);                                                            \
+            unsigned int masks[LBM_P_CHUNK], scratch[10 * (LBM_P_CHUNK + 2)], slipw[LBM_P_CHUNK];         \
+            (void)slipw;                                                                                  \
+            for (int x0 = 1; x0 <= nx; x0 += LBM_P_CHUNK) {                                               \
+                const int len = nx + 1 - x0 < LBM_P_CHUNK ? nx + 1 - x0 : LBM_P_CHUNK;                    \
+                const long long c0 = row + x0;                                                            \
+                if (CK_MIXTURE) {                                                                         \
+                    CK_PRAGMA(omp simd)                                                                   \
+                    for (int i = 0; i < len; ++i) slipw[i] = slip_cells[c0 + i];                          \
+                }                                                                                         \
+                if (bulk) {                                                                               \
+                    CK_PRAGMA(omp simd)                                                                   \
+                    for (int i = 0; i < len; ++i)                                                         \
+                        lbm_pressure_cell<ODD, LBM_NB_BULK, 0>(c0 + i, LBM_P_ARGS(px, pxy, N), LBM_FULL_MASK, \
+                                                               LBM_P_SLIP(i));                            \
+                    continue;                                                                             \
+                }                                                                                         \
+                lbm_link_masks(flags, c0, len, px, pxy, masks, scratch);                                  \
+                CK_PRAGMA(omp simd)                                                                       \
+                for (int i = 0; i < len; ++i) {                                                           \
+                    const unsigned int m = masks[i];                                                      \
+                    if (!(m & 1u)) continue;                                                              \
+                    lbm_pressure_cell<ODD, LBM_NB_MASK, 0>(c0 + i, LBM_P_ARGS(px, pxy, N), m, LBM_P_SLIP(i)); \
+                }                                                                                         \
+            }                                                                                             \
+        }
+    if (parity & 1) {
+        LBM_P_LOOP(1)
+    } else {
+        LBM_P_LOOP(0)
+    }
+#undef LBM_P_LOOP
+#undef LBM_P_ROWS
+#undef LBM_P_SLIP
+#endif
+#undef LBM_P_ARGS
 }
 
 // pbar = sum_j w_j p(x + c_j)   (Eq. 40); a wall / inflow / solid neighbour contributes the linear
-// extrapolation 2 p(x) - p(x - c_j) (the centre value if x - c_j is not a stencil cell either)
+// extrapolation 2 p(x) - p(x - c_j) (the centre value if x - c_j is not a stencil cell either).  MODE as in
+// lbm_gradient: LBM_NB_FLAGS reads the neighbours' flags, LBM_NB_MASK takes them from `mask`, LBM_NB_BULK (all
+// stencil cells) skips the tests; the same terms in the same order in all three (bitwise equal results).
+template <int MODE>
+LBM_INLINE void lbm_filter_cell(const long long c, const float* RESTRICT p, const unsigned char* RESTRICT flags,
+                                float* RESTRICT pbar, const int px, const long long pxy, const unsigned int mask) {
+#define LBM_F_STENCIL(q, cell) \
+    (MODE == LBM_NB_BULK ? true : (MODE == LBM_NB_MASK ? ((mask >> (q)) & 1u) != 0u : LBM_STENCIL_CELL(flags[cell])))
+    const float pc = p[c];
+    float acc = 0.f;
+#define LBM_AVG(q)                                                                               \
+    {                                                                                           \
+        const long long nb = c + LBM_OFFSET(q, px, pxy), mb = c - LBM_OFFSET(q, px, pxy);       \
+        const bool snb = LBM_F_STENCIL(q, nb);                                                  \
+        float d = snb ? p[nb] - pc : 0.f;                                                       \
+        if (MODE != LBM_NB_BULK) d = (!snb && LBM_F_STENCIL(opposite_dir(q), mb)) ? pc - p[mb] : d; \
+        acc += W27[q] * d;                                                                      \
+    }
+    LBM_FOR26(LBM_AVG)
+#undef LBM_AVG
+#undef LBM_F_STENCIL
+    pbar[c] = pc + acc;
+}
+
 KERNEL void lbm_pressure_filter(const long long n, const float* RESTRICT p /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                                 const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                                 float* RESTRICT pbar /* size: (nx + 2) * (ny + 2) * (nz + 2) */, const int nx,
                                 const int ny, const int nz) {
     const int px = nx + 2;
     const long long pxy = (long long)px * (ny + 2);
+#if CK_ON_GPU
     FOR_EACH_CELL(x, y, z, nx, ny, nz) {
         const long long c = (x + 1) + px * (long long)(y + 1) + pxy * (z + 1);
         if (flags[c] != FLAG_FLUID) continue;
-        const float pc = p[c];
-        float acc = 0.f;
-#define LBM_AVG(q)                                                                               \
-    {                                                                                           \
-        const long long nb = c + LBM_OFFSET(q, px, pxy), mb = c - LBM_OFFSET(q, px, pxy);       \
-        float d = LBM_STENCIL_CELL(flags[nb]) ? p[nb] - pc : 0.f;                               \
-        d = (!LBM_STENCIL_CELL(flags[nb]) && LBM_STENCIL_CELL(flags[mb])) ? pc - p[mb] : d;     \
-        acc += W27[q] * d;                                                                      \
+        lbm_filter_cell<LBM_NB_FLAGS>(c, p, flags, pbar, px, pxy, 0u);
     }
-        LBM_FOR26(LBM_AVG)
-#undef LBM_AVG
-        pbar[c] = pc + acc;
-    }
+#else
+    // host: the row scheme of lbm_collide_stream (flag-free bulk rows, link masks elsewhere); with the 52 flag
+    // reads per cell in the x loop this 9 B/cell stage took half the flow collide's time
+    CK_PRAGMA(omp parallel for collapse(2) schedule(static))
+    for (int z = 0; z < nz; ++z)
+        for (int y = 0; y < ny; ++y) {
+            const long long row = px * (long long)(y + 1) + pxy * (z + 1);
+            if (lbm_rows_all_fluid(flags, row, 0, nx + 1, px, pxy)) {
+                CK_PRAGMA(omp simd)
+                for (int x = 1; x <= nx; ++x) lbm_filter_cell<LBM_NB_BULK>(row + x, p, flags, pbar, px, pxy, LBM_FULL_MASK);
+                continue;
+            }
+            unsigned int masks[LBM_P_CHUNK], scratch[10 * (LBM_P_CHUNK + 2)];
+            for (int x0 = 1; x0 <= nx; x0 += LBM_P_CHUNK) {
+                const int len = nx + 1 - x0 < LBM_P_CHUNK ? nx + 1 - x0 : LBM_P_CHUNK;
+                const long long c0 = row + x0;
+                lbm_link_masks(flags, c0, len, px, pxy, masks, scratch);
+                CK_PRAGMA(omp simd)
+                for (int i = 0; i < len; ++i) {
+                    const unsigned int m = masks[i];
+                    if (!(m & 1u)) continue;
+                    lbm_filter_cell<LBM_NB_MASK>(c0 + i, p, flags, pbar, px, pxy, m);
+                }
+            }
+        }
+#endif
 }
 
 // out = sum_j f_j c_j of the current populations (read rule of the parity, no force shift) in interior fluid

@@ -83,6 +83,49 @@
 #define PF_INLINE static inline __attribute__((always_inline))
 #endif
 
+#if !CK_ON_GPU
+// Host row scheme (as the flow's lbm_collide_stream, kernels/lbm_core.cuh): a padded row of cells whose
+// neighbourhood is all FLUID takes a flag-free `omp simd` x loop; other rows a per-cell path with the flags, or
+// a loop over 32-bit neighbour masks built from widened flags.  A byte (flag) read inside an x loop makes g++
+// choose byte-wide vectors (four registers per float value) or leave the loop scalar.
+#define PF_ROW_CHUNK 512
+
+// true when the cells xa..xb of the padded row starting at index `row` (X = 0) are all FLUID
+static inline __attribute__((always_inline)) bool pf_row_fluid(const unsigned char* RESTRICT flags,
+                                                               const long long row, const int xa, const int xb) {
+    unsigned int any = 0;
+    const unsigned char* r = flags + row;
+    CK_PRAGMA(omp simd reduction(| : any))
+    for (int x = xa; x <= xb; ++x) any |= r[x];
+    return any == 0;  // PF_FLUID == 0
+}
+
+// FLUID masks of the `len` cells from padded index c0 for the 27-point stencils: bit k (cube order
+// k = (dz + 1) * 9 + (dy + 1) * 3 + (dx + 1), as PF_W27_CUBE; bit 13 = the cell itself) is set when cell
+// c + dx + sy dy + sz dz is FLUID.  The 9 rows' flags are widened to 32 bits in `scratch` (>= 9 (len + 2)) first,
+// so the mask loop reads no byte data.
+static inline __attribute__((always_inline)) void pf_fluid_masks(const unsigned char* RESTRICT flags,
+                                                                 const long long c0, const int len,
+                                                                 const long long sy, const long long sz,
+                                                                 unsigned int* RESTRICT masks,
+                                                                 unsigned int* RESTRICT scratch) {
+    const int w = len + 2;
+    for (int r = 0; r < 9; ++r) {  // r = (dz + 1) * 3 + (dy + 1)
+        const unsigned char* fr = flags + c0 - 1 + (long long)(r % 3 - 1) * sy + (long long)(r / 3 - 1) * sz;
+        unsigned int* sr = scratch + r * w;
+        CK_PRAGMA(omp simd)
+        for (int i = 0; i < w; ++i) sr[i] = fr[i] == PF_FLUID ? 1u : 0u;
+    }
+    CK_PRAGMA(omp simd)
+    for (int i = 0; i < len; ++i) {
+        unsigned int m = 0u;
+        PF_UNROLL
+        for (int k = 0; k < 27; ++k) m |= scratch[(k / 3) * w + i + k % 3] << k;
+        masks[i] = m;
+    }
+}
+#endif
+
 // D3Q27 weights in 3x3x3 cube order, index (dz+1)*9 + (dy+1)*3 + (dx+1) (the isotropic stencils, Eqs. 21, 23)
 CONSTANT float PF_W27_CUBE[27] = {
     1.f / 216, 1.f / 54, 1.f / 216, 1.f / 54, 2.f / 27, 1.f / 54, 1.f / 216, 1.f / 54, 1.f / 216,
@@ -229,6 +272,53 @@ KERNEL void phase_set_equilibrium(const long long n,
     }
 }
 
+// phase_macroscopic for padded cell (X, Y, Z), as the GPU runs it (and the host outside its bulk loops)
+DEVICE void pf_macro_cell(const int X, const int Y, const int Z, const ck_store_t* RESTRICT h, float* RESTRICT phi,
+                          const float* RESTRICT u, const unsigned char* RESTRICT flags, const int nx, const int ny,
+                          const int nz, const int px, const int py, const int pz, const int parity,
+                          const long long ncell) {
+    const long long c = X + (long long)(nx + 2) * (Y + (long long)(ny + 2) * Z);
+    if (flags[c] == PF_INFLOW) return;
+    const int xi = X == 0 ? (px ? nx : 1) : (X == nx + 1 ? (px ? 1 : nx) : X);
+    const int yi = Y == 0 ? (py ? ny : 1) : (Y == ny + 1 ? (py ? 1 : ny) : Y);
+    const int zi = Z == 0 ? (pz ? nz : 1) : (Z == nz + 1 ? (pz ? 1 : nz) : Z);
+    long long nb[7];
+    pf_neighbours(xi, yi, zi, nx, ny, nz, px, py, pz, nb);
+    const int kind = flags[nb[0]];
+    float s = 0.f;
+    if (kind == PF_FLUID) {
+        float f[7];
+        pf_load<1>(h, flags, phi, u, ncell, nb, parity & 1, f);
+        // summed in double as in phase_collide_stream: phi is the populations' sum up to one rounding
+        s = (float)((double)f[0] + (double)f[1] + (double)f[2] + (double)f[3] + (double)f[4] + (double)f[5] +
+                    (double)f[6]);
+    } else if (kind == PF_INFLOW) {
+        s = phi[nb[0]];
+    }
+    phi[c] = s;
+}
+
+#if !CK_ON_GPU
+// Host: the offsets nb[q] - c (q = 1..6) of the D3Q7 neighbours of the cells X = 2..nx - 1 of interior row
+// (Y, Z) (constant along the row: only x = 1 and x = nx can wrap in x), and whether those cells are a bulk
+// run: the row's cells 1..nx and, with NEIGH, the 4 neighbour rows' cells 2..nx - 1 all FLUID
+template <int NEIGH>
+static inline __attribute__((always_inline)) bool pf_bulk_row(const unsigned char* RESTRICT flags, const int Y,
+                                                              const int Z, const int nx, const int ny, const int nz,
+                                                              const int px, const int py, const int pz,
+                                                              long long off[7]) {
+    long long nb[7];
+    pf_neighbours(2, Y, Z, nx, ny, nz, px, py, pz, nb);
+    for (int q = 0; q < 7; ++q) off[q] = nb[q] - nb[0];
+    if (nx < 3) return false;
+    const long long row = nb[0] - 2;
+    bool bulk = pf_row_fluid(flags, row, 1, nx);
+    if (NEIGH)
+        for (int q = 3; q < 7; ++q) bulk = bulk && pf_row_fluid(flags, row + off[q], 2, nx - 1);
+    return bulk;
+}
+#endif
+
 // phi = sum_k h_k (Eq. 47) at parity t, on every padded cell.  A ghost cell takes the value of its image
 // (wrap on periodic axes, nearest interior cell otherwise); an interior WALL / OUTFLOW cell (or a ghost whose
 // image is one) gets 0; INFLOW cells, ghost or interior, keep the phase value they carry (set by the
@@ -241,27 +331,61 @@ KERNEL void phase_macroscopic(const long long n,
                               const int nx, const int ny, const int nz, const int px, const int py,
                               const int pz, const int parity) {
     const long long ncell = (long long)(nx + 2) * (ny + 2) * (nz + 2);
+#if CK_ON_GPU
     FOR_EACH_CELL(X, Y, Z, nx + 2, ny + 2, nz + 2) {
-        const long long c = X + (long long)(nx + 2) * (Y + (long long)(ny + 2) * Z);
-        if (flags[c] == PF_INFLOW) continue;
-        const int xi = X == 0 ? (px ? nx : 1) : (X == nx + 1 ? (px ? 1 : nx) : X);
-        const int yi = Y == 0 ? (py ? ny : 1) : (Y == ny + 1 ? (py ? 1 : ny) : Y);
-        const int zi = Z == 0 ? (pz ? nz : 1) : (Z == nz + 1 ? (pz ? 1 : nz) : Z);
-        long long nb[7];
-        pf_neighbours(xi, yi, zi, nx, ny, nz, px, py, pz, nb);
-        const int kind = flags[nb[0]];
-        float s = 0.f;
-        if (kind == PF_FLUID) {
-            float f[7];
-            pf_load<0>(h, flags, phi, u, ncell, nb, parity & 1, f);
-            // summed in double as in phase_collide_stream: phi is the populations' sum up to one rounding
-            s = (float)((double)f[0] + (double)f[1] + (double)f[2] + (double)f[3] + (double)f[4] + (double)f[5] +
-                        (double)f[6]);
-        } else if (kind == PF_INFLOW) {
-            s = phi[nb[0]];
-        }
-        phi[c] = s;
+        pf_macro_cell(X, Y, Z, h, phi, u, flags, nx, ny, nz, px, py, pz, parity, ncell);
     }
+#else
+    // host: interior rows first, a bulk run (pf_bulk_row) by a flag-free `omp simd` loop with the row's constant
+    // neighbour offsets, everything else by pf_macro_cell; then the ghosts, each the value its image (an interior
+    // cell) has now, which is what pf_macro_cell computes for a ghost (the sum of the image's populations, its
+    // inflow value, or 0).  Same values as the GPU path (the same sums in the same order).
+    const long long sy = nx + 2, sz = sy * (ny + 2);
+#define PF_MACRO_ROWS(ODD)                                                                                   \
+    CK_PRAGMA(omp parallel for collapse(2) schedule(static))                                                 \
+    for (int Z = 1; Z <= nz; ++Z)                                                                            \
+        for (int Y = 1; Y <= ny; ++Y) {                                                                      \
+            long long off[7];                                                                                \
+            const bool bulk = pf_bulk_row<ODD>(flags, Y, Z, nx, ny, nz, px, py, pz, off);                    \
+            const long long row = sy * Y + sz * Z;                                                           \
+            const int xa = bulk ? (ODD ? 2 : 1) : nx + 1, xb = bulk ? (ODD ? nx - 1 : nx) : nx;               \
+            const long long o1 = off[1], o2 = off[2], o3 = off[3], o4 = off[4], o5 = off[5], o6 = off[6];     \
+            CK_PRAGMA(omp simd)                                                                              \
+            for (int X = xa; X <= xb; ++X) {                                                                 \
+                const long long c = row + X;                                                                 \
+                const float f0 = PF_LD(h, 0, c);                                                             \
+                const float f1 = ODD ? PF_LD(h, 1, 2 * ncell + c + o2) : PF_LD(h, 1, ncell + c);             \
+                const float f2 = ODD ? PF_LD(h, 2, ncell + c + o1) : PF_LD(h, 2, 2 * ncell + c);             \
+                const float f3 = ODD ? PF_LD(h, 3, 4 * ncell + c + o4) : PF_LD(h, 3, 3 * ncell + c);         \
+                const float f4 = ODD ? PF_LD(h, 4, 3 * ncell + c + o3) : PF_LD(h, 4, 4 * ncell + c);         \
+                const float f5 = ODD ? PF_LD(h, 5, 6 * ncell + c + o6) : PF_LD(h, 5, 5 * ncell + c);         \
+                const float f6 = ODD ? PF_LD(h, 6, 5 * ncell + c + o5) : PF_LD(h, 6, 6 * ncell + c);         \
+                phi[c] = (float)((double)f0 + (double)f1 + (double)f2 + (double)f3 + (double)f4 + (double)f5 + \
+                                 (double)f6);                                                                \
+            }                                                                                                \
+            for (int X = 0; X <= nx + 1; ++X)                                                                \
+                if (X < xa || X > xb) pf_macro_cell(X, Y, Z, h, phi, u, flags, nx, ny, nz, px, py, pz, parity, ncell); \
+        }
+    // (the row's own x ghosts are done above: their images lie in the same row)
+    if (parity & 1) {
+        PF_MACRO_ROWS(1)
+    } else {
+        PF_MACRO_ROWS(0)
+    }
+#undef PF_MACRO_ROWS
+    CK_PRAGMA(omp parallel for collapse(2) schedule(static))
+    for (int Z = 0; Z <= nz + 1; ++Z)
+        for (int Y = 0; Y <= ny + 1; ++Y) {
+            if (Z >= 1 && Z <= nz && Y >= 1 && Y <= ny) continue;
+            const int yi = Y == 0 ? (py ? ny : 1) : (Y == ny + 1 ? (py ? 1 : ny) : Y);
+            const int zi = Z == 0 ? (pz ? nz : 1) : (Z == nz + 1 ? (pz ? 1 : nz) : Z);
+            const long long row = sy * Y + sz * Z, img = sy * yi + sz * zi;
+            for (int X = 0; X <= nx + 1; ++X) {
+                const int xi = X == 0 ? (px ? nx : 1) : (X == nx + 1 ? (px ? 1 : nx) : X);
+                if (flags[row + X] != PF_INFLOW) phi[row + X] = phi[img + xi];
+            }
+        }
+#endif
 }
 
 // grad phi by the isotropic D3Q27 stencil (Eq. 21) and, with CK_PF_SURFACE_TENSION, the chemical potential
@@ -270,12 +394,59 @@ KERNEL void phase_macroscopic(const long long n,
 // link, as the flow's stencils).  phi must have its ghost layer filled (phase_macroscopic does).  Interior
 // cells only; non-fluid cells get 0.  n = nx*ny*nz.  Without CK_PF_SURFACE_TENSION, mu, beta and kappa
 // are not used (pass a 1-element dummy for mu).
+// One cell c of phase_gradients.  MODE: how the kind of a neighbour is known: PF_NB_FLAGS reads its flag,
+// PF_NB_MASK takes bit k of `mask` (pf_fluid_masks; bit 13: c itself is FLUID, else c gets zeros), PF_NB_BULK:
+// the caller guarantees that c and all its neighbours are FLUID.  The same terms in the same order in all three
+// (bitwise equal results).
+#define PF_NB_FLAGS 0
+#define PF_NB_BULK 1
+#define PF_NB_MASK 2
+template <int MODE>
+PF_INLINE void pf_gradient_cell(const long long c, const float* RESTRICT phi, const unsigned char* RESTRICT flags,
+                                float* RESTRICT grad, float* RESTRICT mu, const long long sy, const long long sz,
+                                const long long ncell, const float beta, const float kappa,
+                                const unsigned int mask) {
+    const float p0 = phi[c];
+    float gx = 0.f, gy = 0.f, gz = 0.f;
+#if CK_PF_SURFACE_TENSION
+    float lap = 0.f;
+#else
+    (void)mu, (void)beta, (void)kappa;
+#endif
+    PF_UNROLL
+    for (int k = 0; k < 27; ++k) {
+        const int dx = k % 3 - 1, dy = (k / 3) % 3 - 1, dz = k / 9 - 1;
+        const long long o = c + dx + sy * dy + sz * dz;
+        const bool fluid = MODE == PF_NB_BULK ? true
+                                              : (MODE == PF_NB_MASK ? ((mask >> k) & 1u) != 0u : flags[o] == PF_FLUID);
+        const float v = fluid ? phi[o] : p0;
+        const float w = PF_W27_CUBE[k];
+        gx += (w * dx) * v;
+        gy += (w * dy) * v;
+        gz += (w * dz) * v;
+#if CK_PF_SURFACE_TENSION
+        lap += w * (v - p0);
+#endif
+    }
+    // MODE == PF_NB_MASK: a non-fluid cell gets zeros (a select, so the host mask loop has no branch)
+    const bool self = MODE == PF_NB_MASK ? ((mask >> 13) & 1u) != 0u : true;
+    // Eq. 21: 3 sum_j w_j c_j phi(x + c_j)  (3 = 1/cs^2 of D3Q27)
+    grad[c] = self ? 3.f * gx : 0.f;
+    grad[ncell + c] = self ? 3.f * gy : 0.f;
+    grad[2 * ncell + c] = self ? 3.f * gz : 0.f;
+#if CK_PF_SURFACE_TENSION
+    // Eqs. 22-23
+    mu[c] = self ? 4.f * beta * p0 * (p0 - 1.f) * (p0 - 0.5f) - kappa * (6.f * lap) : 0.f;
+#endif
+}
+
 KERNEL void phase_gradients(const long long n, const float* RESTRICT phi /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                             const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                             float* RESTRICT grad /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */, float* RESTRICT mu /* size >= 1 */,
                             const int nx, const int ny, const int nz, const float beta, const float kappa) {
     const long long sy = (long long)(nx + 2), sz = (long long)(nx + 2) * (ny + 2);
     const long long ncell = sz * (nz + 2);
+#if CK_ON_GPU
     FOR_EACH_CELL(x, y, z, nx, ny, nz) {
         const long long c = (x + 1) + sy * (y + 1) + sz * (z + 1);
         if (flags[c] != PF_FLUID) {
@@ -287,33 +458,35 @@ KERNEL void phase_gradients(const long long n, const float* RESTRICT phi /* size
 #endif
             continue;
         }
-        const float p0 = phi[c];
-        float gx = 0.f, gy = 0.f, gz = 0.f;
-#if CK_PF_SURFACE_TENSION
-        float lap = 0.f;
-#endif
-        PF_UNROLL
-        for (int k = 0; k < 27; ++k) {
-            const int dx = k % 3 - 1, dy = (k / 3) % 3 - 1, dz = k / 9 - 1;
-            const long long o = c + dx + sy * dy + sz * dz;
-            const float v = flags[o] == PF_FLUID ? phi[o] : p0;
-            const float w = PF_W27_CUBE[k];
-            gx += (w * dx) * v;
-            gy += (w * dy) * v;
-            gz += (w * dz) * v;
-#if CK_PF_SURFACE_TENSION
-            lap += w * (v - p0);
-#endif
-        }
-        // Eq. 21: 3 sum_j w_j c_j phi(x + c_j)  (3 = 1/cs^2 of D3Q27)
-        grad[c] = 3.f * gx;
-        grad[ncell + c] = 3.f * gy;
-        grad[2 * ncell + c] = 3.f * gz;
-#if CK_PF_SURFACE_TENSION
-        // Eqs. 22-23
-        mu[c] = 4.f * beta * p0 * (p0 - 1.f) * (p0 - 0.5f) - kappa * (6.f * lap);
-#endif
+        pf_gradient_cell<PF_NB_FLAGS>(c, phi, flags, grad, mu, sy, sz, ncell, beta, kappa, 0u);
     }
+#else
+    // host row scheme (pf_row_fluid): the 27 flag reads per cell in the x loop made this 21 B/cell stage cost a
+    // quarter of the flow collide
+    CK_PRAGMA(omp parallel for collapse(2) schedule(static))
+    for (int z = 0; z < nz; ++z)
+        for (int y = 0; y < ny; ++y) {
+            const long long row = sy * (y + 1) + sz * (z + 1);
+            bool bulk = true;
+            for (int r = 0; r < 9; ++r)
+                bulk = bulk && pf_row_fluid(flags, row + (r % 3 - 1) * sy + (r / 3 - 1) * sz, 0, nx + 1);
+            if (bulk) {
+                CK_PRAGMA(omp simd)
+                for (int x = 1; x <= nx; ++x)
+                    pf_gradient_cell<PF_NB_BULK>(row + x, phi, flags, grad, mu, sy, sz, ncell, beta, kappa, 0u);
+                continue;
+            }
+            unsigned int masks[PF_ROW_CHUNK], scratch[9 * (PF_ROW_CHUNK + 2)];
+            for (int x0 = 1; x0 <= nx; x0 += PF_ROW_CHUNK) {
+                const int len = nx + 1 - x0 < PF_ROW_CHUNK ? nx + 1 - x0 : PF_ROW_CHUNK;
+                const long long c0 = row + x0;
+                pf_fluid_masks(flags, c0, len, sy, sz, masks, scratch);
+                CK_PRAGMA(omp simd)
+                for (int i = 0; i < len; ++i)
+                    pf_gradient_cell<PF_NB_MASK>(c0 + i, phi, flags, grad, mu, sy, sz, ncell, beta, kappa, masks[i]);
+            }
+        }
+#endif
 }
 
 // Error-free transformation (Knuth's TwoSum): s + e == a + b exactly, in float arithmetic.  Used to keep
@@ -434,15 +607,12 @@ KERNEL void phase_collide_stream(const long long n, ck_store_t* RESTRICT h /* si
     const float omega = 1.f / (mobility / CS2_7 + 0.5f);
     const float omega_plus = trt_lambda > 0.f ? 1.f / (0.5f + trt_lambda / (1.f / omega - 0.5f)) : omega;
     const float interface_factor = (1.f - 0.5f * omega) * 4.f / width;
-    // two loops, so that the local even step has no neighbour logic and vectorises on the host
-    if (!(parity & 1)) {
-        const long long sy = (long long)(nx + 2), sz = sy * (ny + 2);
-        FOR_EACH_CELL(x, y, z, nx, ny, nz) {
-            const long long c = (x + 1) + sy * (y + 1) + sz * (z + 1);
+#define PF_CELL_ARGS c, ncell, grad, u, source, omega, interface_factor, source_scale, omega_plus
+    // even step of cell c, flag test included (PF_ST_EVEN: the AA even store)
 #if CK_STORAGE_FP16 && !defined(__CUDACC__)
-            // host, fp16: g++ does not if-convert the skip of non-fluid cells into masked 16-bit stores, and the
-            // loop ran scalar; every cell is computed and a non-fluid cell stores its slots' own bits back
-            const bool keep = flags[c] != PF_FLUID;
+    // host, fp16: g++ does not if-convert the skip of non-fluid cells into masked 16-bit stores, and the
+    // loop ran scalar; every cell is computed and a non-fluid cell stores its slots' own bits back
+#define PF_EVEN_SKIP const bool keep = flags[c] != PF_FLUID;
 #define PF_ST_EVEN(q, i, v)                  \
     {                                        \
         const ck_store_t old_ = h[i];        \
@@ -451,48 +621,132 @@ KERNEL void phase_collide_stream(const long long n, ck_store_t* RESTRICT h /* si
         h[i] = keep ? old_ : new_;           \
     }
 #else
-            if (flags[c] != PF_FLUID) continue;
+#define PF_EVEN_SKIP \
+    if (flags[c] != PF_FLUID) continue;
 #define PF_ST_EVEN(q, i, v) PF_ST(h, q, i, v)
 #endif
-            PfCell in;
-            in.f0 = PF_LD(h, 0, c);
-            in.f1 = PF_LD(h, 1, ncell + c);
-            in.f2 = PF_LD(h, 2, 2 * ncell + c);
-            in.f3 = PF_LD(h, 3, 3 * ncell + c);
-            in.f4 = PF_LD(h, 4, 4 * ncell + c);
-            in.f5 = PF_LD(h, 5, 5 * ncell + c);
-            in.f6 = PF_LD(h, 6, 6 * ncell + c);
-            const PfCell out = pf_collide(in, c, ncell, grad, u, source, omega, interface_factor, source_scale, omega_plus);
-            PF_ST_EVEN(0, c, out.f0);  // store in the opposite slots (AA even step)
-            PF_ST_EVEN(2, 2 * ncell + c, out.f1);
-            PF_ST_EVEN(1, ncell + c, out.f2);
-            PF_ST_EVEN(4, 4 * ncell + c, out.f3);
-            PF_ST_EVEN(3, 3 * ncell + c, out.f4);
-            PF_ST_EVEN(6, 6 * ncell + c, out.f5);
-            PF_ST_EVEN(5, 5 * ncell + c, out.f6);
-#undef PF_ST_EVEN
+    // the even step's body after the skip: load, collide, store in the opposite slots (AA even step)
+#define PF_EVEN_BODY(ST)                                                                                    \
+    {                                                                                                       \
+        PfCell in;                                                                                          \
+        in.f0 = PF_LD(h, 0, c);                                                                             \
+        in.f1 = PF_LD(h, 1, ncell + c);                                                                     \
+        in.f2 = PF_LD(h, 2, 2 * ncell + c);                                                                 \
+        in.f3 = PF_LD(h, 3, 3 * ncell + c);                                                                 \
+        in.f4 = PF_LD(h, 4, 4 * ncell + c);                                                                 \
+        in.f5 = PF_LD(h, 5, 5 * ncell + c);                                                                 \
+        in.f6 = PF_LD(h, 6, 6 * ncell + c);                                                                 \
+        const PfCell out = pf_collide(in, PF_CELL_ARGS);                                                    \
+        ST(0, c, out.f0);                                                                                   \
+        ST(2, 2 * ncell + c, out.f1);                                                                       \
+        ST(1, ncell + c, out.f2);                                                                           \
+        ST(4, 4 * ncell + c, out.f3);                                                                       \
+        ST(3, 3 * ncell + c, out.f4);                                                                       \
+        ST(6, 6 * ncell + c, out.f5);                                                                       \
+        ST(5, 5 * ncell + c, out.f6);                                                                       \
+    }
+    // the odd step of interior cell (X, Y, Z) with the boundary rules (pf_load / pf_store)
+#define PF_ODD_CELL(X, Y, Z)                                                                                \
+    {                                                                                                       \
+        long long nb[7];                                                                                    \
+        pf_neighbours(X, Y, Z, nx, ny, nz, px, py, pz, nb);                                                 \
+        const long long c = nb[0];                                                                          \
+        if (flags[c] == PF_FLUID) {                                                                         \
+            float f[7];                                                                                     \
+            pf_load<1>(h, flags, phi, u, ncell, nb, 1, f);                                                  \
+            PfCell in;                                                                                      \
+            in.f0 = f[0];                                                                                   \
+            in.f1 = f[1];                                                                                   \
+            in.f2 = f[2];                                                                                   \
+            in.f3 = f[3];                                                                                   \
+            in.f4 = f[4];                                                                                   \
+            in.f5 = f[5];                                                                                   \
+            in.f6 = f[6];                                                                                   \
+            const PfCell out = pf_collide(in, PF_CELL_ARGS);                                                \
+            const float post[7] = {out.f0, out.f1, out.f2, out.f3, out.f4, out.f5, out.f6};                 \
+            pf_store(h, flags, phi, u, ncell, nb, 1, post);                                                 \
+        }                                                                                                   \
+    }
+#if CK_ON_GPU
+    // two loops, so that the local even step has no neighbour logic
+    if (!(parity & 1)) {
+        const long long sy = (long long)(nx + 2), sz = sy * (ny + 2);
+        FOR_EACH_CELL(x, y, z, nx, ny, nz) {
+            const long long c = (x + 1) + sy * (y + 1) + sz * (z + 1);
+            PF_EVEN_SKIP
+            PF_EVEN_BODY(PF_ST_EVEN)
         }
     } else {
-        FOR_EACH_CELL(x, y, z, nx, ny, nz) {
-            long long nb[7];
-            pf_neighbours(x + 1, y + 1, z + 1, nx, ny, nz, px, py, pz, nb);
-            const long long c = nb[0];
-            if (flags[c] != PF_FLUID) continue;
-            float f[7];
-            pf_load<1>(h, flags, phi, u, ncell, nb, 1, f);
-            PfCell in;
-            in.f0 = f[0];
-            in.f1 = f[1];
-            in.f2 = f[2];
-            in.f3 = f[3];
-            in.f4 = f[4];
-            in.f5 = f[5];
-            in.f6 = f[6];
-            const PfCell out = pf_collide(in, c, ncell, grad, u, source, omega, interface_factor, source_scale, omega_plus);
-            const float post[7] = {out.f0, out.f1, out.f2, out.f3, out.f4, out.f5, out.f6};
-            pf_store(h, flags, phi, u, ncell, nb, 1, post);
-        }
+        FOR_EACH_CELL(x, y, z, nx, ny, nz) PF_ODD_CELL(x + 1, y + 1, z + 1)
     }
+#else
+    // host row scheme: a bulk run (pf_bulk_row: the row and, for the odd step, its 4 neighbour rows all fluid)
+    // takes a flag-free `omp simd` loop, the odd one with the row's constant neighbour offsets (pull from
+    // h[opp q][c - d_q], push to h[q][c + d_q]: in a bulk run no link meets a boundary); everything else the
+    // per-cell code of the GPU path.  The same arithmetic per cell everywhere (pf_collide).  Before, the odd
+    // step ran scalar (neighbour logic per link) and the even one read the flag inside its x loop.
+    const long long sy = (long long)(nx + 2), sz = sy * (ny + 2);
+#define PF_ST_BULK(q, i, v) PF_ST(h, q, i, v)
+    if (!(parity & 1)) {
+        CK_PRAGMA(omp parallel for collapse(2) schedule(static))
+        for (int z = 0; z < nz; ++z)
+            for (int y = 0; y < ny; ++y) {
+                const long long row = sy * (y + 1) + sz * (z + 1);
+                if (pf_row_fluid(flags, row, 1, nx)) {
+                    CK_PRAGMA(omp simd)
+                    for (int X = 1; X <= nx; ++X) {
+                        const long long c = row + X;
+                        PF_EVEN_BODY(PF_ST_BULK)
+                    }
+                    continue;
+                }
+                CK_PRAGMA(omp simd)
+                for (int X = 1; X <= nx; ++X) {
+                    const long long c = row + X;
+                    PF_EVEN_SKIP
+                    PF_EVEN_BODY(PF_ST_EVEN)
+                }
+            }
+    } else {
+        CK_PRAGMA(omp parallel for collapse(2) schedule(static))
+        for (int Z = 1; Z <= nz; ++Z)
+            for (int Y = 1; Y <= ny; ++Y) {
+                long long off[7];
+                const bool bulk = pf_bulk_row<1>(flags, Y, Z, nx, ny, nz, px, py, pz, off);
+                const long long row = sy * Y + sz * Z;
+                const int xa = bulk ? 2 : nx + 1, xb = bulk ? nx - 1 : nx;
+                const long long o1 = off[1], o2 = off[2], o3 = off[3], o4 = off[4], o5 = off[5], o6 = off[6];
+                CK_PRAGMA(omp simd)
+                for (int X = xa; X <= xb; ++X) {
+                    const long long c = row + X;
+                    PfCell in;
+                    in.f0 = PF_LD(h, 0, c);
+                    in.f1 = PF_LD(h, 1, 2 * ncell + c + o2);
+                    in.f2 = PF_LD(h, 2, ncell + c + o1);
+                    in.f3 = PF_LD(h, 3, 4 * ncell + c + o4);
+                    in.f4 = PF_LD(h, 4, 3 * ncell + c + o3);
+                    in.f5 = PF_LD(h, 5, 6 * ncell + c + o6);
+                    in.f6 = PF_LD(h, 6, 5 * ncell + c + o5);
+                    const PfCell out = pf_collide(in, PF_CELL_ARGS);
+                    PF_ST(h, 0, c, out.f0);
+                    PF_ST(h, 1, ncell + c + o1, out.f1);
+                    PF_ST(h, 2, 2 * ncell + c + o2, out.f2);
+                    PF_ST(h, 3, 3 * ncell + c + o3, out.f3);
+                    PF_ST(h, 4, 4 * ncell + c + o4, out.f4);
+                    PF_ST(h, 5, 5 * ncell + c + o5, out.f5);
+                    PF_ST(h, 6, 6 * ncell + c + o6, out.f6);
+                }
+                for (int X = 1; X <= nx; ++X)
+                    if (X < xa || X > xb) PF_ODD_CELL(X, Y, Z)
+            }
+    }
+#undef PF_ST_BULK
+#endif
+#undef PF_ODD_CELL
+#undef PF_EVEN_BODY
+#undef PF_EVEN_SKIP
+#undef PF_ST_EVEN
+#undef PF_CELL_ARGS
 }
 
 // Global volume sums for the volume controller (Eq. 52), in float64 over interior FLUID cells:

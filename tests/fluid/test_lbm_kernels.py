@@ -199,3 +199,25 @@ def test_collide_stream_matches_reference_on_rows_wider_than_a_vector(cpu, effec
     np.testing.assert_allclose(sk["f"][:, state], sr["f"][:, state], rtol=0, atol=ATOL)
     np.testing.assert_allclose(sk["velocity"], sr["velocity"], rtol=0, atol=ATOL)
     assert np.abs(sk["f"] - random_state(31 + parity, b, shape=(6, 7, 40))["f"]).max() > 1e-3
+
+
+@pytest.mark.parametrize("effects", ["single", "two_phase_st", "all"])
+@pytest.mark.parametrize("boundaries", ["periodic", "x_walls"])
+@pytest.mark.parametrize("parity", [0, 1])
+def test_pressure_and_filter_match_reference_on_rows_wider_than_a_vector(cpu, effects, boundaries, parity):
+    """The host pressure update and filter take the row scheme of the collide (flag-free loops for rows whose
+    neighbourhood is all fluid, link masks elsewhere): a 40-cell row reaches the vector bodies of both row
+    paths. Tolerances as in test_pressure_and_filter_match_reference."""
+    b = {"periodic": Boundaries(), "x_walls": WIDE_X_WALLS}[boundaries]
+    ko, ro = KernelOps(cpu, **EFFECTS[effects]), ReferenceOps(**EFFECTS[effects])
+    sk = random_state(41 + parity, b, shape=(6, 7, 40))
+    sr = {k: v.copy() for k, v in sk.items()}
+    p0 = sk["p"].copy()
+    for ops, s in ((ko, sk), (ro, sr)):
+        ops.macro_pressure(
+            s["f"], s["flags"], s["velocity"], s["phi"], s["eps"], s["sand_v"], s["slip"], s["p"], parity, *PARAMS[:2]
+        )
+        ops.pressure_filter(s["p"], s["flags"], s["pbar"])
+    np.testing.assert_allclose(sk["p"], sr["p"], rtol=0, atol=5e-7)
+    np.testing.assert_allclose(sk["pbar"], sr["pbar"], rtol=0, atol=5e-7)
+    assert np.abs(sk["p"] - p0).max() > 1e-5

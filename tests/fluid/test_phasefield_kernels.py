@@ -36,19 +36,19 @@ def cpu(kernel_backend):
     return kernel_backend
 
 
-def random_state(seed: int, periodic, boundary_kinds=(WALL, INFLOW, OUTFLOW)):
+def random_state(seed: int, periodic, boundary_kinds=(WALL, INFLOW, OUTFLOW), shape=SHAPE, solid=0.12, inner=0.03):
     """A random but valid state: h > 0 with phi in (0, 1.4), |u| < 0.05, a small source, and flags with
-    interior obstacles plus random WALL / INFLOW / OUTFLOW cells on the ghost layer of non-periodic axes
-    (and a few inside), so every boundary rule of the AA pattern is exercised."""
+    interior obstacles (fraction ``solid``) plus random WALL / INFLOW / OUTFLOW cells on the ghost layer of
+    non-periodic axes (and a fraction ``inner`` inside), so every boundary rule of the AA pattern is exercised."""
     rng = np.random.default_rng(seed)
-    p = padded_shape(SHAPE)
-    flags = pad_flags(rng.random(SHAPE) < 0.12, SHAPE, periodic)
+    p = padded_shape(shape)
+    flags = pad_flags(rng.random(shape) < solid, shape, periodic)
     kinds = np.asarray(boundary_kinds, dtype=np.uint8)
     ghost = flags == WALL
     ghost[1:-1, 1:-1, 1:-1] = False
     flags[ghost] = rng.choice(kinds, size=int(ghost.sum()))
-    inner = flags[1:-1, 1:-1, 1:-1]
-    inner[(rng.random(SHAPE) < 0.03) & (inner == FLUID)] = rng.choice(kinds)
+    cells = flags[1:-1, 1:-1, 1:-1]
+    cells[(rng.random(shape) < inner) & (cells == FLUID)] = rng.choice(kinds)
     h = (rng.random((7, *p)) * 0.2).astype(np.float32)
     phi = rng.random(p).astype(np.float32)
     grad = (rng.random((3, *p)) - 0.5).astype(np.float32)
@@ -242,6 +242,37 @@ def test_source_compiled_out_matches_the_reference_and_a_zero_source(cpu, parity
     for ops in (on_k, PhaseFieldReferenceOps(periodic)):
         with pytest.raises(ValueError, match="source term"):
             ops.volume_sums(s["phi"], None, s["flags"])
+
+
+@pytest.mark.parametrize("periodic", [(True, True, False), (False, True, True)])
+@pytest.mark.parametrize("parity", [0, 1])
+def test_kernels_match_reference_on_rows_wider_than_a_vector(cpu, periodic, parity):
+    """The host kernels run flag-free vector loops over x for rows whose neighbourhood is all fluid (with the
+    row's constant neighbour offsets; the wrapping end cells and every other row take the per-cell code):
+    40-cell rows with few obstacles reach both paths, every boundary kind on the non-periodic ghosts."""
+    shape = (6, 7, 40)
+    s = random_state(60 + parity, periodic, shape=shape, solid=0.004, inner=0.002)
+    kernel, ref = PhaseFieldKernelOps(cpu, periodic), PhaseFieldReferenceOps(periodic)
+    h_k, h_r = s["h"].copy(), s["h"].copy()
+    args = (s["phi"], s["grad"], s["u"], s["source"], s["flags"], parity, 0.04, 4.5, 0.6)
+    kernel.collide_stream(h_k, *args)
+    ref.collide_stream(h_r, *args)
+    assert np.abs(h_k - h_r).max() < ATOL
+    assert np.abs(h_k - s["h"]).max() > 1e-2
+    pshape = padded_shape(shape)
+    phi_k = np.full(pshape, -9.0, dtype=np.float32)
+    inflow = s["flags"] == INFLOW
+    phi_k[inflow] = s["phi"][inflow]
+    phi_r = phi_k.copy()
+    kernel.macroscopic(h_k, phi_k, s["u"], s["flags"], parity + 1)
+    ref.macroscopic(h_k, phi_r, s["u"], s["flags"], parity + 1)
+    assert np.abs(phi_k - phi_r).max() < ATOL and phi_k.min() >= 0.0
+    g_k, g_r = np.zeros((3, *pshape), np.float32), np.zeros((3, *pshape), np.float32)
+    mu_k, mu_r = np.zeros(pshape, np.float32), np.zeros(pshape, np.float32)
+    kernel.gradients(phi_k, s["flags"], g_k, mu_k, 0.9, 0.7)
+    ref.gradients(phi_k, s["flags"], g_r, mu_r, 0.9, 0.7)
+    assert np.abs(g_k - g_r).max() < ATOL and np.abs(mu_k - mu_r).max() < ATOL
+    assert np.abs(g_k).max() > 0.1
 
 
 # GPU builds (nvcc sm_80/sm_90 without spills, NVRTC with the backend's options) for both values of
