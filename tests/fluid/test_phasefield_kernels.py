@@ -64,15 +64,21 @@ def test_random_states_use_every_flag_kind():
     assert {FLUID, WALL, INFLOW, OUTFLOW} <= set(np.unique(s["flags"]).tolist())
 
 
-@pytest.mark.parametrize("periodic", PERIODIC_CASES)
-@pytest.mark.parametrize("parity", [0, 1, 7])
-def test_collide_stream_matches_reference(cpu, periodic, parity):
-    s = random_state(10 + parity, periodic)
+def _collide_stream_both(cpu, periodic, s: dict, parity: int):
+    """One phase-field collide-stream of state ``s`` by the kernel and by the reference: (ops, h_k, h_r)."""
     kernel, ref = PhaseFieldKernelOps(cpu, periodic), PhaseFieldReferenceOps(periodic)
     h_k, h_r = s["h"].copy(), s["h"].copy()
     args = (s["phi"], s["grad"], s["u"], s["source"], s["flags"], parity, 0.04, 4.5, 0.6)
     kernel.collide_stream(h_k, *args)
     ref.collide_stream(h_r, *args)
+    return kernel, ref, h_k, h_r
+
+
+@pytest.mark.parametrize("periodic", PERIODIC_CASES)
+@pytest.mark.parametrize("parity", [0, 1, 7])
+def test_collide_stream_matches_reference(cpu, periodic, parity):
+    s = random_state(10 + parity, periodic)
+    kernel, ref, h_k, h_r = _collide_stream_both(cpu, periodic, s, parity)
     assert np.abs(h_k - h_r).max() < ATOL
     # the step really changed h (the comparison is not between two untouched copies)
     assert np.abs(h_k - s["h"]).max() > 1e-2
@@ -252,11 +258,7 @@ def test_kernels_match_reference_on_rows_wider_than_a_vector(cpu, periodic, pari
     40-cell rows with few obstacles reach both paths, every boundary kind on the non-periodic ghosts."""
     shape = (6, 7, 40)
     s = random_state(60 + parity, periodic, shape=shape, solid=0.004, inner=0.002)
-    kernel, ref = PhaseFieldKernelOps(cpu, periodic), PhaseFieldReferenceOps(periodic)
-    h_k, h_r = s["h"].copy(), s["h"].copy()
-    args = (s["phi"], s["grad"], s["u"], s["source"], s["flags"], parity, 0.04, 4.5, 0.6)
-    kernel.collide_stream(h_k, *args)
-    ref.collide_stream(h_r, *args)
+    kernel, ref, h_k, h_r = _collide_stream_both(cpu, periodic, s, parity)
     assert np.abs(h_k - h_r).max() < ATOL
     assert np.abs(h_k - s["h"]).max() > 1e-2
     pshape = padded_shape(shape)
