@@ -65,7 +65,7 @@ def test_random_states_use_every_flag_kind():
 
 
 def _collide_stream_both(cpu, periodic, s: dict, parity: int):
-    """One phase-field collide-stream of state ``s`` by the kernel and by the reference: (ops, h_k, h_r)."""
+    """One phase-field collide-stream of state ``s`` by the kernel and by the reference: (kernel ops, reference ops, h_k, h_r)."""
     kernel, ref = PhaseFieldKernelOps(cpu, periodic), PhaseFieldReferenceOps(periodic)
     h_k, h_r = s["h"].copy(), s["h"].copy()
     args = (s["phi"], s["grad"], s["u"], s["source"], s["flags"], parity, 0.04, 4.5, 0.6)
