@@ -185,7 +185,7 @@ typedef unsigned short ck_store_t;
 static inline __attribute__((always_inline)) float ck_half_to_float_(const unsigned short b) {
     const uint32_t sign = (uint32_t)(b & 0x8000u) << 16, em = b & 0x7fffu;
     uint32_t n = (em << 13) + 0x38000000u;              // rebias the exponent (normal numbers)
-    n = em >= 0x7c00u ? n + 0x38000000u : n;             // inf / NaN: exponent all ones
+    n += 0x38000000u & (0u - (uint32_t)(em >= 0x7c00u));  // inf / NaN: exponent all ones (a mask, not a select)
     // subnormal: em * 2^-24, exact; blended by a mask (a select between it and n stops g++ if-converting)
     const uint32_t sub = __builtin_bit_cast(uint32_t, (float)(int)em * 5.9604644775390625e-8f);
     const uint32_t m = 0u - (uint32_t)(em < 0x0400u);
@@ -197,8 +197,12 @@ static inline __attribute__((always_inline)) unsigned short ck_float_to_half_(co
     const uint32_t sub = __builtin_bit_cast(uint32_t, __builtin_bit_cast(float, a) + 0.5f) - 0x3f000000u;
     // normal: rebias, round to nearest even, take the bits (a carry into the exponent gives inf correctly)
     const uint32_t nrm = (a + 0xc8000fffu + ((a >> 13) & 1u)) >> 13;  // 0xc8000fff = ((15 - 127) << 23) + 0xfff
-    const uint32_t big = a > 0x7f800000u ? 0x7e00u : 0x7c00u;        // NaN -> quiet NaN, else inf
-    const uint32_t o = a >= 0x47800000u ? big : (a < 0x38800000u ? sub : nrm);
+    // a >= 65520 (as bits): NaN -> quiet NaN 0x7e00, else inf 0x7c00; below 2^-14: subnormal; else normal.
+    // Blended by masks: g++ 12 leaves the selects as branches, and the collide x loop with fp16 storage ran
+    // scalar ("control flow in loop")
+    const uint32_t big = 0x7c00u | (0x0200u & (0u - (uint32_t)(a > 0x7f800000u)));
+    const uint32_t mbig = 0u - (uint32_t)(a >= 0x47800000u), msub = 0u - (uint32_t)(a < 0x38800000u);
+    const uint32_t o = (big & mbig) | (((sub & msub) | (nrm & ~msub)) & ~mbig);
     return (unsigned short)(o | (sign >> 16));
 }
 #define CK_LOAD(p, i, scale) (ck_half_to_float_((p)[i]) * (1.f / (scale)))

@@ -110,12 +110,40 @@ CONSTANT int QOF27[27] = {20, 8, 22, 10, 2, 16, 24, 14, 25, 12, 4, 18, 6, 0,
 
 // all 27 central moments kc[a*9 + b*3 + c] about (ux, uy, uz) of the populations fj (by direction; must not
 // alias kc): z, y, x passes
+// (straight-line: an inner loop left in the host x loop stops it vectorising)
 LBM_INLINE void lbm_central_moments(const float* RESTRICT fj, const float ux, const float uy, const float uz,
                                     float* RESTRICT kc) {
-    for (int i = 0; i < 27; ++i) kc[i] = fj[QOF27[i]];
-    for (int l = 0; l < 9; ++l) chimera_forward(kc[l * 3], kc[l * 3 + 1], kc[l * 3 + 2], uz);
-    for (int l = 0; l < 9; ++l) chimera_forward(kc[l / 3 * 9 + l % 3], kc[l / 3 * 9 + 3 + l % 3], kc[l / 3 * 9 + 6 + l % 3], uy);
-    for (int l = 0; l < 9; ++l) chimera_forward(kc[l], kc[9 + l], kc[18 + l], ux);
+#define LBM_CM_LD(i) kc[i] = fj[QOF27[i]];
+#define LBM_CM_Z(l) chimera_forward(kc[(l) * 3], kc[(l) * 3 + 1], kc[(l) * 3 + 2], uz);
+#define LBM_CM_Y(l) chimera_forward(kc[(l) / 3 * 9 + (l) % 3], kc[(l) / 3 * 9 + 3 + (l) % 3], kc[(l) / 3 * 9 + 6 + (l) % 3], uy);
+#define LBM_CM_X(l) chimera_forward(kc[l], kc[9 + (l)], kc[18 + (l)], ux);
+    LBM_FOR27(LBM_CM_LD)
+    LBM_REP9(LBM_CM_Z, 0)
+    LBM_REP9(LBM_CM_Y, 0)
+    LBM_REP9(LBM_CM_X, 0)
+#undef LBM_CM_LD
+#undef LBM_CM_Z
+#undef LBM_CM_Y
+#undef LBM_CM_X
+}
+
+// the same central moments from the x-line sums X0 = f- + f0 + f+, X1 = f+ - f-, X2 = f+ + f- of the 9 (y, z)
+// lines (index (c_y + 1) * 3 + (c_z + 1)), which the collision has already formed: the x pass is
+// k0 = X0, k1 = X1 - u X0, k2 = X2 - 2u X1 + u^2 X0 (chimera_forward's), then y and z as above.  Same terms as
+// lbm_central_moments in another order (the passes along different axes commute): float32 round-off apart.
+LBM_INLINE void lbm_central_moments_xlines(const float* RESTRICT X0, const float* RESTRICT X1,
+                                           const float* RESTRICT X2, const float ux, const float uy, const float uz,
+                                           float* RESTRICT kc) {
+#define LBM_CM_XL(l) \
+    kc[l] = X0[l], kc[9 + (l)] = X1[l] - ux * X0[l], kc[18 + (l)] = X2[l] - (ux + ux) * X1[l] + ux * ux * X0[l];
+#define LBM_CM_Y(l) chimera_forward(kc[(l) / 3 * 9 + (l) % 3], kc[(l) / 3 * 9 + 3 + (l) % 3], kc[(l) / 3 * 9 + 6 + (l) % 3], uy);
+#define LBM_CM_Z(l) chimera_forward(kc[(l) * 3], kc[(l) * 3 + 1], kc[(l) * 3 + 2], uz);
+    LBM_REP9(LBM_CM_XL, 0)
+    LBM_REP9(LBM_CM_Y, 0)
+    LBM_REP9(LBM_CM_Z, 0)
+#undef LBM_CM_XL
+#undef LBM_CM_Y
+#undef LBM_CM_Z
 }
 
 // host rows are processed in chunks of this many cells (the link masks of a chunk live on the stack)
@@ -133,9 +161,26 @@ LBM_INLINE void lbm_central_second(const float m0, const float mx, const float m
     k[5] = myz - uy * mz - uz * my + uy * uz * m0;
 }
 
+// Host wall rows: GUARD = 1 runs every cell of a chunk through the same arithmetic and stores the results only
+// where bit 0 of the mask says the cell is FLUID; elsewhere the old values are written back (read and blended:
+// no branch, so the x loop vectorises; a `continue` past non-fluid cells left it scalar).  Each store address
+// belongs to this cell alone in this pass (the AA pattern's push is one-to-one), so writing back the value
+// already there races with nothing.  A non-fluid cell's arithmetic may produce inf / NaN (eps = 0 in a solid):
+// the blend discards it.
+#if CK_STORAGE_FP16
+#define LBM_STORE_GUARDED(p, i, v, live)                                                             \
+    {                                                                                                \
+        const unsigned short o_ = (p)[i], n_ = ck_float_to_half_((v) * CK_F_SCALE);                  \
+        const unsigned short m_ = (unsigned short)(0u - (unsigned int)(live));                       \
+        (p)[i] = (unsigned short)((n_ & m_) | (o_ & (unsigned short)~m_));                           \
+    }
+#else
+#define LBM_STORE_GUARDED(p, i, v, live) (p)[i] = lbm_select(live, v, (p)[i]);
+#endif
+
 // one fluid cell: load, forces, collision, store (ODD = parity & 1; MODE: how the stencils learn the kind of a
-// neighbour, see lbm_gradient; `mask` = lbm_link_mask of c for LBM_NB_MASK)
-template <int ODD, int MODE>
+// neighbour, see lbm_gradient; `mask` = lbm_link_mask of c for LBM_NB_MASK; GUARD: see above, host only)
+template <int ODD, int MODE, int GUARD = 0>
 LBM_INLINE void lbm_collide_cell(const long long c, ck_store_t* RESTRICT f, const unsigned char* RESTRICT flags,
                                  float* RESTRICT vel, const float* RESTRICT phi, const float* RESTRICT mu,
                                  const float* RESTRICT eps, const float* RESTRICT force,
@@ -313,22 +358,32 @@ LBM_INLINE void lbm_collide_cell(const long long c, ck_store_t* RESTRICT f, cons
         // The populations are read again (same addresses, nothing stored yet) rather than kept live through the
         // force computation.
 #if CK_TWO_PHASE
-        const float nu_ref = nu_h < nu_l ? nu_h : nu_l;  // not fminf: it stops g++ vectorising (README)
+        const float nu_ref = lbm_select((unsigned int)(nu_h < nu_l), nu_h, nu_l);  // not fminf: it stops g++ vectorising
 #else
         const float nu_ref = nu_h;
 #endif
         const float odd_tau = (tau - 0.5f) - 3.f * nu + 3.f * nu_ref;  // 3 (nu_ref + nu_t)
         float ro = 1.f / (0.5f + lambda_odd / odd_tau);
-        ro = (ro < 1.f && nu_ref < odd_nu_max) ? ro : 1.f;
+        ro = lbm_select((unsigned int)(ro < 1.f) & (unsigned int)(nu_ref < odd_nu_max), ro, 1.f);  // no branch
         const float co = 0.125f * (1.f - ro), rf = 2.f - ro;  // k* = (1 - r_o) k + (2 - r_o) k^F / 2
         // central moments of the populations: those of the stored deviations (the transform is linear) plus
         // those of the weights w about u, products of the 1D moments (1, -u, 1/3 + u^2) of (1/6, 2/3, 1/6)
+        // (the host takes them from the x-line sums of the stored values, kept on its stack anyway, times
+        // 1 / CK_F_SCALE, exact; the GPU reads the populations again rather than keep 27 sums live through the
+        // force computation)
         float kc[27];
+#if CK_ON_GPU
         {
             float fr[27];
             lbm_load<ODD>(f, c, N, px, pxy, fr);
             lbm_central_moments(fr, ux, uy, uz, kc);
         }
+#else
+        lbm_central_moments_xlines(X0, X1, X2, ux, uy, uz, kc);
+#define LBM_CM_UNSCALE(i) kc[i] *= 1.f / CK_F_SCALE;
+        LBM_FOR27(LBM_CM_UNSCALE)
+#undef LBM_CM_UNSCALE
+#endif
         const float wx2 = 1.f / 3.f + uxx, wy2 = 1.f / 3.f + uyy, wz2 = 1.f / 3.f + uzz;
         kc[19] -= wx2 * uz, kc[11] -= ux * wz2, kc[21] -= wx2 * uy, kc[13] -= ux * uy * uz, kc[5] -= uy * wz2;
         kc[23] -= wx2 * uy * wz2, kc[15] -= ux * wy2, kc[7] -= wy2 * uz, kc[25] -= wx2 * wy2 * uz;
@@ -377,20 +432,39 @@ LBM_INLINE void lbm_collide_cell(const long long c, ck_store_t* RESTRICT f, cons
     // difference between spilling and not under 128 registers)
     const int spx = CK_PER_ITEM(px);
     const long long spxy = CK_PER_ITEM(pxy), sN = CK_PER_ITEM(N);
+    const unsigned int live = GUARD ? (mask & 1u) : 1u;  // 32-bit, not bool (lbm_select)
+#if CK_ON_GPU
+#define LBM_PUT_AT(idx, v) CK_STORE(f, idx, v, CK_F_SCALE);
+#else
+#define LBM_PUT_AT(idx, v)                    \
+    if (GUARD) {                              \
+        LBM_STORE_GUARDED(f, idx, v, live)    \
+    } else {                                  \
+        CK_STORE(f, idx, v, CK_F_SCALE);      \
+    }
+#endif
 #define LBM_PUT(i)                                                              \
-    if (ODD)                                                                    \
-        CK_STORE(f, QOF27[i] * sN + c + LBM_OFFSET(QOF27[i], spx, spxy), K[i], CK_F_SCALE); \
-    else                                                                        \
-        CK_STORE(f, opposite_dir(QOF27[i]) * sN + c, K[i], CK_F_SCALE);
+    if (ODD) {                                                                  \
+        LBM_PUT_AT(QOF27[i] * sN + c + LBM_OFFSET(QOF27[i], spx, spxy), K[i])   \
+    } else {                                                                    \
+        LBM_PUT_AT(opposite_dir(QOF27[i]) * sN + c, K[i])                       \
+    }
 #define LBM_BACK_Z(ij)                                                            \
     chimera_backward2_shift(K[(ij) * 3], K[(ij) * 3 + 1], K[(ij) * 3 + 2], uz, uz2, uzz, 0.f - LBM_REST_Z(ij)); \
     LBM_PUT((ij) * 3) LBM_PUT((ij) * 3 + 1) LBM_PUT((ij) * 3 + 2)
     LBM_REP9(LBM_BACK_Z, 0)
 #undef LBM_BACK_Z
 #undef LBM_PUT
-    vel[c] = ux;
-    vel[N + c] = uy;
-    vel[2 * N + c] = uz;
+#undef LBM_PUT_AT
+    if (GUARD) {  // a wall cell's velocity is its wall velocity (the bounce-back reads it): kept
+        vel[c] = lbm_select(live, ux, vel[c]);
+        vel[N + c] = lbm_select(live, uy, vel[N + c]);
+        vel[2 * N + c] = lbm_select(live, uz, vel[2 * N + c]);
+    } else {
+        vel[c] = ux;
+        vel[N + c] = uy;
+        vel[2 * N + c] = uz;
+    }
 }
 
 KERNEL void lbm_collide_stream(const long long n, ck_store_t* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
@@ -427,7 +501,8 @@ KERNEL void lbm_collide_stream(const long long n, ck_store_t* RESTRICT f /* size
     // (no flag logic, no masked lanes), else LBM_NB_MASK over the whole row with link masks gathered first
     // (lbm_link_masks).  A byte read inside the collide loop makes g++ pick 64 lanes (four zmm registers per
     // float) and spill the populations to the stack (measured 2-3x).  Splitting a wall row into bulk cells and
-    // masked end cells was measured slower: the short loops cost more than the mask logic saves.
+    // masked end cells was measured slower: the short loops cost more than the mask logic saves.  The masked loop
+// runs its non-fluid cells too and keeps their values (GUARD = 1).
 #define LBM_COLLIDE_LOOP(ODD)                                                                          \
     CK_PRAGMA(omp parallel for collapse(2) schedule(static))                                           \
     for (int z = 0; z < nz; ++z)                                                                       \
@@ -445,11 +520,8 @@ KERNEL void lbm_collide_stream(const long long n, ck_store_t* RESTRICT f /* size
                 const long long c0 = row + x0;                                                         \
                 lbm_link_masks(flags, c0, len, px, pxy, masks, scratch);                               \
                 CK_PRAGMA(omp simd)                                                                    \
-                for (int i = 0; i < len; ++i) {                                                        \
-                    const unsigned int m = masks[i];                                                   \
-                    if (!(m & 1u)) continue;                                                           \
-                    lbm_collide_cell<ODD, LBM_NB_MASK>(c0 + i, LBM_CELL_ARGS(px, pxy, N), m);          \
-                }                                                                                      \
+                for (int i = 0; i < len; ++i)                                                          \
+                    lbm_collide_cell<ODD, LBM_NB_MASK, 1>(c0 + i, LBM_CELL_ARGS(px, pxy, N), masks[i]);  \
             }                                                                                          \
         }
 #endif

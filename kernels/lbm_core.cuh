@@ -38,9 +38,24 @@
 #define LBM_INLINE static inline __attribute__((always_inline))
 #endif
 
-// clamp to [0, 1] with selects: fminf/fmaxf calls stop g++ from vectorising the host x loop (measured: the
-// two-phase collide ran 5x slower with them)
-LBM_INLINE float lbm_clamp01(const float v) { return v < 0.f ? 0.f : (v > 1.f ? 1.f : v); }
+// c ? a : b for c = 0 or 1.  On the host a bit-mask blend: g++ 12 if-converts neither float selects nor
+// fminf / fmaxf calls inside the collide x loop ("control flow in loop": the two-phase and odd-rate variants
+// ran scalar); the blend is plain integer lane arithmetic and vectorises.  The condition is a 32-bit value,
+// not a bool: a bool in the x loop makes g++ size its lanes for bytes (vectorisation factor 32, four ymm
+// registers per float) and give up as unprofitable.  The GPU takes the select (one instruction).
+LBM_INLINE float lbm_select(const unsigned int c, const float a, const float b) {
+#if CK_ON_GPU
+    return c ? a : b;
+#else
+    const uint32_t m = 0u - c;
+    return __builtin_bit_cast(float, (__builtin_bit_cast(uint32_t, a) & m) | (__builtin_bit_cast(uint32_t, b) & ~m));
+#endif
+}
+
+// clamp to [0, 1] (NaN passes through, as with the selects it replaces)
+LBM_INLINE float lbm_clamp01(const float v) {
+    return lbm_select((unsigned int)(v < 0.f), 0.f, lbm_select((unsigned int)(v > 1.f), 1.f, v));
+}
 
 // a neighbour whose scalar values enter the stencils: fluid, or an outflow ghost;
 // for f: cells that are pulled from / pushed to (outflow ghosts are refilled by lbm_halo_copy / lbm_outflow_fix) (which holds the outlet's
@@ -118,9 +133,9 @@ template <int EXTRAP, int MODE = LBM_NB_FLAGS>
 LBM_INLINE void lbm_gradient(const float* RESTRICT s, const unsigned char* RESTRICT flags, const long long c,
                              const int px, const long long pxy, float* RESTRICT g, const unsigned int mask = 0u) {
     const float sc = s[c];
+#if CK_ON_GPU
 #define LBM_NB_STENCIL(q, cell) \
     (MODE == LBM_NB_BULK ? true : (MODE == LBM_NB_MASK ? ((mask >> (q)) & 1u) != 0u : LBM_STENCIL_CELL(flags[cell])))
-#if CK_ON_GPU
 #define LBM_NB_STENCIL_G(q, cell)                                                                           \
     (MODE == LBM_NB_BULK ? true                                                                            \
                          : (MODE == LBM_NB_MASK ? ((gmask >> (q)) & 1u) != 0u : LBM_STENCIL_CELL(flags[cell])))
@@ -163,16 +178,27 @@ LBM_INLINE void lbm_gradient(const float* RESTRICT s, const unsigned char* RESTR
     g[1] = g1;
     g[2] = g2;
 #else
+    // 0 / 1 as a 32-bit value (lbm_select)
+#define LBM_NB_STENCIL(q, cell)                                           \
+    (MODE == LBM_NB_BULK ? 1u                                             \
+                         : (MODE == LBM_NB_MASK ? ((mask >> (q)) & 1u)    \
+                                                : (unsigned int)LBM_STENCIL_CELL(flags[cell])))
+    // the 26 neighbour values, read whatever the neighbour's kind (every padded cell holds a value) and once
+    // each: the extrapolation's s(x - c_j) is v[opp j].  With a second read of s(x - c_j) per link and float
+    // selects g++ judged the masked collide x loop "not profitable" and left it scalar.
+    float v[27];
+#define LBM_GRAD_LD(q) v[q] = s[c + LBM_OFFSET(q, px, pxy)];
+    LBM_FOR26(LBM_GRAD_LD)
+#undef LBM_GRAD_LD
     float d[27];  // d_j by cube index (c_x + 1) * 9 + (c_y + 1) * 3 + (c_z + 1)
     d[13] = 0.f;
 #define LBM_GRAD_LINK(q)                                                                                  \
     {                                                                                                    \
-        const long long nb = c + LBM_OFFSET(q, px, pxy);                                                 \
-        const bool snb = LBM_NB_STENCIL(q, nb);                                                          \
-        float dq = MODE == LBM_NB_BULK ? s[nb] : (snb ? s[nb] - sc : 0.f);                               \
+        const unsigned int snb = LBM_NB_STENCIL(q, c + LBM_OFFSET(q, px, pxy));                          \
+        float dq = MODE == LBM_NB_BULK ? v[q] : lbm_select(snb, v[q] - sc, 0.f);                         \
         if (EXTRAP && MODE != LBM_NB_BULK) {                                                             \
-            const long long mb = c - LBM_OFFSET(q, px, pxy);                                             \
-            dq = (!snb && LBM_NB_STENCIL(opposite_dir(q), mb)) ? sc - s[mb] : dq;                         \
+            const unsigned int smb = LBM_NB_STENCIL(opposite_dir(q), c - LBM_OFFSET(q, px, pxy));        \
+            dq = lbm_select((snb ^ 1u) & smb, sc - v[opposite_dir(q)], dq);                              \
         }                                                                                                \
         d[LBM_C3(CX27[q], CY27[q], CZ27[q])] = dq;                                                       \
     }
