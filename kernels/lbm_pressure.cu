@@ -27,12 +27,15 @@
 // GPU = 1 (the GPU loop): ODD is the runtime `odd` (a branch around the loads only), and the link mask and the
 // slip flag are read here, where the stencils need them, not passed in: computed before the loads, they stayed
 // live through them and the fp16 mixture variants spilled 4-8 B on sm_80 / sm_90 (measured).
-template <int ODD, int MODE, int SCALAR, int GPU = 0>
+// GUARD = 1 (host wall rows): every cell of the chunk goes through the arithmetic; p is written only where bit 0
+// of the mask says FLUID, elsewhere its value is kept (a blend, no branch: lbm_collide_stream's scheme).
+template <int ODD, int MODE, int SCALAR, int GPU = 0, int GUARD = 0>
 LBM_INLINE void lbm_pressure_cell(const long long c, const ck_store_t* RESTRICT f, const unsigned char* RESTRICT flags,
                                   const float* RESTRICT vel, const float* RESTRICT phi, const float* RESTRICT eps,
                                   const float* RESTRICT sand_v, float* RESTRICT p, const int px, const long long pxy,
                                   const long long N, const float rho_h, const float rho_l, unsigned int mask,
-                                  bool slip_on, const int odd = 0, const unsigned char* RESTRICT slip_cells = nullptr) {
+                                  unsigned int slip_on, const int odd = 0,
+                                  const unsigned char* RESTRICT slip_cells = nullptr) {
     float fj[27];
     if (GPU ? odd != 0 : ODD != 0)
         lbm_load<1, SCALAR>(f, c, N, px, pxy, fj);
@@ -61,10 +64,9 @@ LBM_INLINE void lbm_pressure_cell(const long long c, const ck_store_t* RESTRICT 
     const float div_v = gvx[0] + gvy[1] + gvz[2];
     // the slip term only in the cells of slip_cells, not in the layers next to a wall (1, or 3 with the odd-rate
     // floor): there a porosity step grows a grid-scale mode (reference docstring)
-    if (GPU) slip_on = slip_cells[c] != 0;
-    const float slip = slip_on ? (ux - sand_v[c]) * ge[0] + (uy - sand_v[N + c]) * ge[1] +
-                                     (uz - sand_v[2 * N + c]) * ge[2]
-                               : 0.f;
+    if (GPU) slip_on = slip_cells[c] != 0 ? 1u : 0u;
+    const float slip = lbm_select(slip_on, (ux - sand_v[c]) * ge[0] + (uy - sand_v[N + c]) * ge[1] +
+                                               (uz - sand_v[2 * N + c]) * ge[2], 0.f);
 #if CK_TWO_PHASE
     // weighted by the water fraction: in the light phase the slip's pressure, accelerated by 1/rho, pumped
     // the air through a sand ball at the interface upward (reference docstring)
@@ -82,7 +84,8 @@ LBM_INLINE void lbm_pressure_cell(const long long c, const ck_store_t* RESTRICT 
     (void)phi, (void)rho_l;
     const float rho = rho_h;
 #endif
-    p[c] = p[c] - CS2 * rho * divergence;
+    const float pc = p[c], pn = pc - CS2 * rho * divergence;
+    p[c] = GUARD ? lbm_select(mask & 1u, pn, pc) : pn;
 }
 
 KERNEL void lbm_macro_pressure(const long long n, const ck_store_t* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
@@ -118,10 +121,10 @@ KERNEL void lbm_macro_pressure(const long long n, const ck_store_t* RESTRICT f /
     const long long N = pxy * (nz + 2);
 #if CK_MIXTURE
 #define LBM_P_ROWS(row) lbm_rows_all_fluid(flags, row, 0, nx + 1, px, pxy)
-#define LBM_P_SLIP(i) (slipw[i] != 0u)
+#define LBM_P_SLIP(i) slipw[i]
 #else
 #define LBM_P_ROWS(row) lbm_row_fluid(flags, row, 1, nx)
-#define LBM_P_SLIP(i) false
+#define LBM_P_SLIP(i) 0u
 #endif
 #define LBM_P_LOOP(ODD)                                                                                   \
     CK_PRAGMA(omp parallel for collapse(2) schedule(static))                                              \
@@ -136,7 +139,7 @@ KERNEL void lbm_macro_pressure(const long long n, const ck_store_t* RESTRICT f /
                 const long long c0 = row + x0;                                                            \
                 if (CK_MIXTURE) {                                                                         \
                     CK_PRAGMA(omp simd)                                                                   \
-                    for (int i = 0; i < len; ++i) slipw[i] = slip_cells[c0 + i];                          \
+                    for (int i = 0; i < len; ++i) slipw[i] = slip_cells[c0 + i] != 0 ? 1u : 0u;           \
                 }                                                                                         \
                 if (bulk) {                                                                               \
                     CK_PRAGMA(omp simd)                                                                   \
@@ -147,11 +150,9 @@ KERNEL void lbm_macro_pressure(const long long n, const ck_store_t* RESTRICT f /
                 }                                                                                         \
                 lbm_link_masks(flags, c0, len, px, pxy, masks, scratch);                                  \
                 CK_PRAGMA(omp simd)                                                                       \
-                for (int i = 0; i < len; ++i) {                                                           \
-                    const unsigned int m = masks[i];                                                      \
-                    if (!(m & 1u)) continue;                                                              \
-                    lbm_pressure_cell<ODD, LBM_NB_MASK, 0>(c0 + i, LBM_P_ARGS(px, pxy, N), m, LBM_P_SLIP(i)); \
-                }                                                                                         \
+                for (int i = 0; i < len; ++i)                                                             \
+                    lbm_pressure_cell<ODD, LBM_NB_MASK, 0, 0, 1>(c0 + i, LBM_P_ARGS(px, pxy, N), masks[i],    \
+                                                                 LBM_P_SLIP(i));                          \
             }                                                                                             \
         }
     if (parity & 1) {
@@ -170,25 +171,34 @@ KERNEL void lbm_macro_pressure(const long long n, const ck_store_t* RESTRICT f /
 // extrapolation 2 p(x) - p(x - c_j) (the centre value if x - c_j is not a stencil cell either).  MODE as in
 // lbm_gradient: LBM_NB_FLAGS reads the neighbours' flags, LBM_NB_MASK takes them from `mask`, LBM_NB_BULK (all
 // stencil cells) skips the tests; the same terms in the same order in all three (bitwise equal results).
-template <int MODE>
+// GUARD = 1 (host wall rows): pbar written only where bit 0 of the mask says FLUID (lbm_pressure_cell's).
+// The neighbour values are read once each whatever their kind (p(x - c_j) is v[opp j]) and the selects are
+// 32-bit blends (lbm_select): with bool conditions and second reads g++ left the masked x loop scalar.
+template <int MODE, int GUARD = 0>
 LBM_INLINE void lbm_filter_cell(const long long c, const float* RESTRICT p, const unsigned char* RESTRICT flags,
                                 float* RESTRICT pbar, const int px, const long long pxy, const unsigned int mask) {
 #define LBM_F_STENCIL(q, cell) \
-    (MODE == LBM_NB_BULK ? true : (MODE == LBM_NB_MASK ? ((mask >> (q)) & 1u) != 0u : LBM_STENCIL_CELL(flags[cell])))
+    (MODE == LBM_NB_BULK ? 1u : (MODE == LBM_NB_MASK ? ((mask >> (q)) & 1u) : (unsigned int)LBM_STENCIL_CELL(flags[cell])))
     const float pc = p[c];
+    float v[27];
+#define LBM_F_LD(q) v[q] = p[c + LBM_OFFSET(q, px, pxy)];
+    LBM_FOR26(LBM_F_LD)
+#undef LBM_F_LD
     float acc = 0.f;
 #define LBM_AVG(q)                                                                               \
     {                                                                                           \
-        const long long nb = c + LBM_OFFSET(q, px, pxy), mb = c - LBM_OFFSET(q, px, pxy);       \
-        const bool snb = LBM_F_STENCIL(q, nb);                                                  \
-        float d = snb ? p[nb] - pc : 0.f;                                                       \
-        if (MODE != LBM_NB_BULK) d = (!snb && LBM_F_STENCIL(opposite_dir(q), mb)) ? pc - p[mb] : d; \
+        const unsigned int snb = LBM_F_STENCIL(q, c + LBM_OFFSET(q, px, pxy));                  \
+        float d = lbm_select(snb, v[q] - pc, 0.f);                                              \
+        if (MODE != LBM_NB_BULK) {                                                              \
+            const unsigned int smb = LBM_F_STENCIL(opposite_dir(q), c - LBM_OFFSET(q, px, pxy)); \
+            d = lbm_select((snb ^ 1u) & smb, pc - v[opposite_dir(q)], d);                       \
+        }                                                                                       \
         acc += W27[q] * d;                                                                      \
     }
     LBM_FOR26(LBM_AVG)
 #undef LBM_AVG
 #undef LBM_F_STENCIL
-    pbar[c] = pc + acc;
+    pbar[c] = GUARD ? lbm_select(mask & 1u, pc + acc, pbar[c]) : pc + acc;
 }
 
 KERNEL void lbm_pressure_filter(const long long n, const float* RESTRICT p /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
@@ -221,11 +231,7 @@ KERNEL void lbm_pressure_filter(const long long n, const float* RESTRICT p /* si
                 const long long c0 = row + x0;
                 lbm_link_masks(flags, c0, len, px, pxy, masks, scratch);
                 CK_PRAGMA(omp simd)
-                for (int i = 0; i < len; ++i) {
-                    const unsigned int m = masks[i];
-                    if (!(m & 1u)) continue;
-                    lbm_filter_cell<LBM_NB_MASK>(c0 + i, p, flags, pbar, px, pxy, m);
-                }
+                for (int i = 0; i < len; ++i) lbm_filter_cell<LBM_NB_MASK, 1>(c0 + i, p, flags, pbar, px, pxy, masks[i]);
             }
         }
 #endif
