@@ -292,3 +292,22 @@ extern "C" __attribute__((visibility("default"))) int couplekit_get_num_threads(
     return omp_get_max_threads();
 }
 #endif
+
+// c ? a : b for c = 0 or 1.  On the host a bit-mask blend: g++ 12 if-converts neither float selects nor
+// fminf / fmaxf calls inside the host x loops ("control flow in loop": the two-phase and odd-rate variants
+// ran scalar); the blend is plain integer lane arithmetic and vectorises.  The condition is a 32-bit value,
+// not a bool: a bool in the x loop makes g++ size its lanes for bytes (vectorisation factor 32, four ymm
+// registers per float) and give up as unprofitable.  The GPU takes the select (one instruction).
+#if defined(__CUDACC__)
+__device__ __forceinline__
+#else
+static inline __attribute__((always_inline))  // an out-of-line call in an `omp simd` loop stops the vectoriser
+#endif
+float ck_select(const unsigned int c, const float a, const float b) {
+#if CK_ON_GPU
+    return c ? a : b;
+#else
+    const uint32_t m = 0u - c;
+    return __builtin_bit_cast(float, (__builtin_bit_cast(uint32_t, a) & m) | (__builtin_bit_cast(uint32_t, b) & ~m));
+#endif
+}

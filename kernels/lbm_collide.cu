@@ -175,7 +175,7 @@ LBM_INLINE void lbm_central_second(const float m0, const float mx, const float m
         (p)[i] = (unsigned short)((n_ & m_) | (o_ & (unsigned short)~m_));                           \
     }
 #else
-#define LBM_STORE_GUARDED(p, i, v, live) (p)[i] = lbm_select(live, v, (p)[i]);
+#define LBM_STORE_GUARDED(p, i, v, live) (p)[i] = ck_select(live, v, (p)[i]);
 #endif
 
 // one fluid cell: load, forces, collision, store (ODD = parity & 1; MODE: how the stencils learn the kind of a
@@ -358,13 +358,13 @@ LBM_INLINE void lbm_collide_cell(const long long c, ck_store_t* RESTRICT f, cons
         // The populations are read again (same addresses, nothing stored yet) rather than kept live through the
         // force computation.
 #if CK_TWO_PHASE
-        const float nu_ref = lbm_select((unsigned int)(nu_h < nu_l), nu_h, nu_l);  // not fminf: it stops g++ vectorising
+        const float nu_ref = ck_select((unsigned int)(nu_h < nu_l), nu_h, nu_l);  // not fminf: it stops g++ vectorising
 #else
         const float nu_ref = nu_h;
 #endif
         const float odd_tau = (tau - 0.5f) - 3.f * nu + 3.f * nu_ref;  // 3 (nu_ref + nu_t)
         float ro = 1.f / (0.5f + lambda_odd / odd_tau);
-        ro = lbm_select((unsigned int)(ro < 1.f) & (unsigned int)(nu_ref < odd_nu_max), ro, 1.f);  // no branch
+        ro = ck_select((unsigned int)(ro < 1.f) & (unsigned int)(nu_ref < odd_nu_max), ro, 1.f);  // no branch
         const float co = 0.125f * (1.f - ro), rf = 2.f - ro;  // k* = (1 - r_o) k + (2 - r_o) k^F / 2
         // central moments of the populations: those of the stored deviations (the transform is linear) plus
         // those of the weights w about u, products of the 1D moments (1, -u, 1/3 + u^2) of (1/6, 2/3, 1/6)
@@ -432,7 +432,7 @@ LBM_INLINE void lbm_collide_cell(const long long c, ck_store_t* RESTRICT f, cons
     // difference between spilling and not under 128 registers)
     const int spx = CK_PER_ITEM(px);
     const long long spxy = CK_PER_ITEM(pxy), sN = CK_PER_ITEM(N);
-    const unsigned int live = GUARD ? (mask & 1u) : 1u;  // 32-bit, not bool (lbm_select)
+    const unsigned int live = GUARD ? (mask & 1u) : 1u;  // 32-bit, not bool (ck_select)
 #if CK_ON_GPU
 #define LBM_PUT_AT(idx, v) CK_STORE(f, idx, v, CK_F_SCALE);
 #else
@@ -457,9 +457,9 @@ LBM_INLINE void lbm_collide_cell(const long long c, ck_store_t* RESTRICT f, cons
 #undef LBM_PUT
 #undef LBM_PUT_AT
     if (GUARD) {  // a wall cell's velocity is its wall velocity (the bounce-back reads it): kept
-        vel[c] = lbm_select(live, ux, vel[c]);
-        vel[N + c] = lbm_select(live, uy, vel[N + c]);
-        vel[2 * N + c] = lbm_select(live, uz, vel[2 * N + c]);
+        vel[c] = ck_select(live, ux, vel[c]);
+        vel[N + c] = ck_select(live, uy, vel[N + c]);
+        vel[2 * N + c] = ck_select(live, uz, vel[2 * N + c]);
     } else {
         vel[c] = ux;
         vel[N + c] = uy;

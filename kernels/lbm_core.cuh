@@ -38,23 +38,9 @@
 #define LBM_INLINE static inline __attribute__((always_inline))
 #endif
 
-// c ? a : b for c = 0 or 1.  On the host a bit-mask blend: g++ 12 if-converts neither float selects nor
-// fminf / fmaxf calls inside the collide x loop ("control flow in loop": the two-phase and odd-rate variants
-// ran scalar); the blend is plain integer lane arithmetic and vectorises.  The condition is a 32-bit value,
-// not a bool: a bool in the x loop makes g++ size its lanes for bytes (vectorisation factor 32, four ymm
-// registers per float) and give up as unprofitable.  The GPU takes the select (one instruction).
-LBM_INLINE float lbm_select(const unsigned int c, const float a, const float b) {
-#if CK_ON_GPU
-    return c ? a : b;
-#else
-    const uint32_t m = 0u - c;
-    return __builtin_bit_cast(float, (__builtin_bit_cast(uint32_t, a) & m) | (__builtin_bit_cast(uint32_t, b) & ~m));
-#endif
-}
-
 // clamp to [0, 1] (NaN passes through, as with the selects it replaces)
 LBM_INLINE float lbm_clamp01(const float v) {
-    return lbm_select((unsigned int)(v < 0.f), 0.f, lbm_select((unsigned int)(v > 1.f), 1.f, v));
+    return ck_select((unsigned int)(v < 0.f), 0.f, ck_select((unsigned int)(v > 1.f), 1.f, v));
 }
 
 // a neighbour whose scalar values enter the stencils: fluid, or an outflow ghost;
@@ -178,7 +164,7 @@ LBM_INLINE void lbm_gradient(const float* RESTRICT s, const unsigned char* RESTR
     g[1] = g1;
     g[2] = g2;
 #else
-    // 0 / 1 as a 32-bit value (lbm_select)
+    // 0 / 1 as a 32-bit value (ck_select)
 #define LBM_NB_STENCIL(q, cell)                                           \
     (MODE == LBM_NB_BULK ? 1u                                             \
                          : (MODE == LBM_NB_MASK ? ((mask >> (q)) & 1u)    \
@@ -195,10 +181,10 @@ LBM_INLINE void lbm_gradient(const float* RESTRICT s, const unsigned char* RESTR
 #define LBM_GRAD_LINK(q)                                                                                  \
     {                                                                                                    \
         const unsigned int snb = LBM_NB_STENCIL(q, c + LBM_OFFSET(q, px, pxy));                          \
-        float dq = MODE == LBM_NB_BULK ? v[q] : lbm_select(snb, v[q] - sc, 0.f);                         \
+        float dq = MODE == LBM_NB_BULK ? v[q] : ck_select(snb, v[q] - sc, 0.f);                         \
         if (EXTRAP && MODE != LBM_NB_BULK) {                                                             \
             const unsigned int smb = LBM_NB_STENCIL(opposite_dir(q), c - LBM_OFFSET(q, px, pxy));        \
-            dq = lbm_select((snb ^ 1u) & smb, sc - v[opposite_dir(q)], dq);                              \
+            dq = ck_select((snb ^ 1u) & smb, sc - v[opposite_dir(q)], dq);                              \
         }                                                                                                \
         d[LBM_C3(CX27[q], CY27[q], CZ27[q])] = dq;                                                       \
     }

@@ -65,8 +65,14 @@ LBM_INLINE void lbm_pressure_cell(const long long c, const ck_store_t* RESTRICT 
     // the slip term only in the cells of slip_cells, not in the layers next to a wall (1, or 3 with the odd-rate
     // floor): there a porosity step grows a grid-scale mode (reference docstring)
     if (GPU) slip_on = slip_cells[c] != 0 ? 1u : 0u;
-    const float slip = lbm_select(slip_on, (ux - sand_v[c]) * ge[0] + (uy - sand_v[N + c]) * ge[1] +
+#if CK_ON_GPU
+    const float slip = slip_on ? (ux - sand_v[c]) * ge[0] + (uy - sand_v[N + c]) * ge[1] +
+                                     (uz - sand_v[2 * N + c]) * ge[2]
+                               : 0.f;  // loads only where needed (as a blend: 124 -> 128 registers)
+#else
+    const float slip = ck_select(slip_on, (ux - sand_v[c]) * ge[0] + (uy - sand_v[N + c]) * ge[1] +
                                                (uz - sand_v[2 * N + c]) * ge[2], 0.f);
+#endif
 #if CK_TWO_PHASE
     // weighted by the water fraction: in the light phase the slip's pressure, accelerated by 1/rho, pumped
     // the air through a sand ball at the interface upward (reference docstring)
@@ -85,7 +91,7 @@ LBM_INLINE void lbm_pressure_cell(const long long c, const ck_store_t* RESTRICT 
     const float rho = rho_h;
 #endif
     const float pc = p[c], pn = pc - CS2 * rho * divergence;
-    p[c] = GUARD ? lbm_select(mask & 1u, pn, pc) : pn;
+    p[c] = GUARD ? ck_select(mask & 1u, pn, pc) : pn;
 }
 
 KERNEL void lbm_macro_pressure(const long long n, const ck_store_t* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
@@ -173,32 +179,45 @@ KERNEL void lbm_macro_pressure(const long long n, const ck_store_t* RESTRICT f /
 // stencil cells) skips the tests; the same terms in the same order in all three (bitwise equal results).
 // GUARD = 1 (host wall rows): pbar written only where bit 0 of the mask says FLUID (lbm_pressure_cell's).
 // The neighbour values are read once each whatever their kind (p(x - c_j) is v[opp j]) and the selects are
-// 32-bit blends (lbm_select): with bool conditions and second reads g++ left the masked x loop scalar.
+// 32-bit blends (ck_select): with bool conditions and second reads g++ left the masked x loop scalar.
 template <int MODE, int GUARD = 0>
 LBM_INLINE void lbm_filter_cell(const long long c, const float* RESTRICT p, const unsigned char* RESTRICT flags,
                                 float* RESTRICT pbar, const int px, const long long pxy, const unsigned int mask) {
 #define LBM_F_STENCIL(q, cell) \
     (MODE == LBM_NB_BULK ? 1u : (MODE == LBM_NB_MASK ? ((mask >> (q)) & 1u) : (unsigned int)LBM_STENCIL_CELL(flags[cell])))
     const float pc = p[c];
+    float acc = 0.f;
+#if CK_ON_GPU
+    // the GPU reads at the link and only where the value is used (with the host's form below, every value
+    // read up front and blended: 56 -> 116 registers)
+#define LBM_AVG(q)                                                                               \
+    {                                                                                           \
+        const long long nb = c + LBM_OFFSET(q, px, pxy), mb = c - LBM_OFFSET(q, px, pxy);       \
+        const bool snb = LBM_F_STENCIL(q, nb);                                                  \
+        float d = snb ? p[nb] - pc : 0.f;                                                       \
+        if (MODE != LBM_NB_BULK) d = (!snb && LBM_F_STENCIL(opposite_dir(q), mb)) ? pc - p[mb] : d; \
+        acc += W27[q] * d;                                                                      \
+    }
+#else
     float v[27];
 #define LBM_F_LD(q) v[q] = p[c + LBM_OFFSET(q, px, pxy)];
     LBM_FOR26(LBM_F_LD)
 #undef LBM_F_LD
-    float acc = 0.f;
 #define LBM_AVG(q)                                                                               \
     {                                                                                           \
         const unsigned int snb = LBM_F_STENCIL(q, c + LBM_OFFSET(q, px, pxy));                  \
-        float d = lbm_select(snb, v[q] - pc, 0.f);                                              \
+        float d = ck_select(snb, v[q] - pc, 0.f);                                               \
         if (MODE != LBM_NB_BULK) {                                                              \
             const unsigned int smb = LBM_F_STENCIL(opposite_dir(q), c - LBM_OFFSET(q, px, pxy)); \
-            d = lbm_select((snb ^ 1u) & smb, pc - v[opposite_dir(q)], d);                       \
+            d = ck_select((snb ^ 1u) & smb, pc - v[opposite_dir(q)], d);                        \
         }                                                                                       \
         acc += W27[q] * d;                                                                      \
     }
+#endif
     LBM_FOR26(LBM_AVG)
 #undef LBM_AVG
 #undef LBM_F_STENCIL
-    pbar[c] = GUARD ? lbm_select(mask & 1u, pc + acc, pbar[c]) : pc + acc;
+    pbar[c] = GUARD ? ck_select(mask & 1u, pc + acc, pbar[c]) : pc + acc;
 }
 
 KERNEL void lbm_pressure_filter(const long long n, const float* RESTRICT p /* size: (nx + 2) * (ny + 2) * (nz + 2) */,

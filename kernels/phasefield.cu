@@ -417,9 +417,15 @@ PF_INLINE void pf_gradient_cell(const long long c, const float* RESTRICT phi, co
     for (int k = 0; k < 27; ++k) {
         const int dx = k % 3 - 1, dy = (k / 3) % 3 - 1, dz = k / 9 - 1;
         const long long o = c + dx + sy * dy + sz * dz;
-        const bool fluid = MODE == PF_NB_BULK ? true
-                                              : (MODE == PF_NB_MASK ? ((mask >> k) & 1u) != 0u : flags[o] == PF_FLUID);
-        const float v = fluid ? phi[o] : p0;
+        // 0 / 1 as 32-bit values and a blend (ck_select): a bool select kept the host mask loop scalar
+        const unsigned int fluid = MODE == PF_NB_BULK ? 1u
+                                                      : (MODE == PF_NB_MASK ? ((mask >> k) & 1u)
+                                                                            : (unsigned int)(flags[o] == PF_FLUID));
+#if CK_ON_GPU
+        const float v = fluid ? phi[o] : p0;  // the load only where needed (the blend's load: 56 -> 80 registers)
+#else
+        const float v = ck_select(fluid, phi[o], p0);
+#endif
         const float w = PF_W27_CUBE[k];
         gx += (w * dx) * v;
         gy += (w * dy) * v;
@@ -429,14 +435,14 @@ PF_INLINE void pf_gradient_cell(const long long c, const float* RESTRICT phi, co
 #endif
     }
     // MODE == PF_NB_MASK: a non-fluid cell gets zeros (a select, so the host mask loop has no branch)
-    const bool self = MODE == PF_NB_MASK ? ((mask >> 13) & 1u) != 0u : true;
+    const unsigned int self = MODE == PF_NB_MASK ? ((mask >> 13) & 1u) : 1u;
     // Eq. 21: 3 sum_j w_j c_j phi(x + c_j)  (3 = 1/cs^2 of D3Q27)
-    grad[c] = self ? 3.f * gx : 0.f;
-    grad[ncell + c] = self ? 3.f * gy : 0.f;
-    grad[2 * ncell + c] = self ? 3.f * gz : 0.f;
+    grad[c] = ck_select(self, 3.f * gx, 0.f);
+    grad[ncell + c] = ck_select(self, 3.f * gy, 0.f);
+    grad[2 * ncell + c] = ck_select(self, 3.f * gz, 0.f);
 #if CK_PF_SURFACE_TENSION
     // Eqs. 22-23
-    mu[c] = self ? 4.f * beta * p0 * (p0 - 1.f) * (p0 - 0.5f) - kappa * (6.f * lap) : 0.f;
+    mu[c] = ck_select(self, 4.f * beta * p0 * (p0 - 1.f) * (p0 - 0.5f) - kappa * (6.f * lap), 0.f);
 #endif
 }
 
