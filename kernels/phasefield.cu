@@ -553,10 +553,11 @@ PF_INLINE PfCell pf_collide(const PfCell in, const long long c, const long long 
     const float p0 = mass + mass_comp;
     const float gx = grad[c], gy = grad[ncell + c], gz = grad[2 * ncell + c];
     const float g2 = gx * gx + gy * gy + gz * gz;
-    // (1 - omega/2) |H| / |grad phi|, Eq. 49.  The guarded sqrt argument is a plain select, not fmaxf: the
-    // host compiler vectorises the even-step loop with it (given -fno-math-errno for the sqrtf itself)
-    const float g2_safe = g2 > PF_GRAD_EPS2 ? g2 : PF_GRAD_EPS2;
-    const float hscale = g2 > PF_GRAD_EPS2 ? interface_factor * p0 * (1.f - p0) / sqrtf(g2_safe) : 0.f;
+    // (1 - omega/2) |H| / |grad phi|, Eq. 49.  The guard is a 32-bit blend (ck_select), not fmaxf or a float
+    // select: with either, g++ 12 left every x loop of this kernel scalar ("control flow in loop")
+    const unsigned int big = (unsigned int)(g2 > PF_GRAD_EPS2);
+    const float g2_safe = ck_select(big, g2, PF_GRAD_EPS2);
+    const float hscale = ck_select(big, interface_factor * p0 * (1.f - p0) / sqrtf(g2_safe), 0.f);
     const float hx = hscale * gx, hy = hscale * gy, hz = hscale * gz;
 #if CK_PF_SOURCE
     const float s = source_scale * source[c];
@@ -615,21 +616,27 @@ KERNEL void phase_collide_stream(const long long n, ck_store_t* RESTRICT h /* si
     const float interface_factor = (1.f - 0.5f * omega) * 4.f / width;
 #define PF_CELL_ARGS c, ncell, grad, u, source, omega, interface_factor, source_scale, omega_plus
     // even step of cell c, flag test included (PF_ST_EVEN: the AA even store)
-#if CK_STORAGE_FP16 && !defined(__CUDACC__)
-    // host, fp16: g++ does not if-convert the skip of non-fluid cells into masked 16-bit stores, and the
-    // loop ran scalar; every cell is computed and a non-fluid cell stores its slots' own bits back
-#define PF_EVEN_SKIP const bool keep = flags[c] != PF_FLUID;
-#define PF_ST_EVEN(q, i, v)                  \
-    {                                        \
-        const ck_store_t old_ = h[i];        \
-        ck_store_t new_;                     \
-        PF_ST(&new_, q, 0, v);               \
-        h[i] = keep ? old_ : new_;           \
-    }
-#else
 #define PF_EVEN_SKIP \
     if (flags[c] != PF_FLUID) continue;
 #define PF_ST_EVEN(q, i, v) PF_ST(h, q, i, v)
+#if !CK_ON_GPU
+    // host rows with non-fluid cells: every cell is computed and a non-fluid one (live = 0, from flags widened
+    // to 32 bits before the loop) stores its slots' own bits back, blended without a branch.  A skip of
+    // non-fluid cells, a bool, or a flag byte read in the loop each left it scalar (g++ 12, -fopt-info-vec).
+    // The even step writes only the cell's own slots, so the write-back races with nothing.
+#if CK_STORAGE_FP16
+#define PF_KEEP_BLEND(old_, new_, live) \
+    ((ck_store_t)(((new_) & (ck_store_t)(0u - (live))) | ((old_) & (ck_store_t) ~(ck_store_t)(0u - (live)))))
+#else
+#define PF_KEEP_BLEND(old_, new_, live) ck_select(live, new_, old_)
+#endif
+#define PF_ST_GUARDED(q, i, v)                       \
+    {                                                \
+        const ck_store_t old_ = h[i];                \
+        ck_store_t new_;                             \
+        PF_ST(&new_, q, 0, v);                       \
+        h[i] = PF_KEEP_BLEND(old_, new_, live);      \
+    }
 #endif
     // the even step's body after the skip: load, collide, store in the opposite slots (AA even step)
 #define PF_EVEN_BODY(ST)                                                                                    \
@@ -706,11 +713,18 @@ KERNEL void phase_collide_stream(const long long n, ck_store_t* RESTRICT h /* si
                     }
                     continue;
                 }
-                CK_PRAGMA(omp simd)
-                for (int X = 1; X <= nx; ++X) {
-                    const long long c = row + X;
-                    PF_EVEN_SKIP
-                    PF_EVEN_BODY(PF_ST_EVEN)
+                unsigned int fluid[PF_ROW_CHUNK];
+                for (int x0 = 1; x0 <= nx; x0 += PF_ROW_CHUNK) {
+                    const int len = nx + 1 - x0 < PF_ROW_CHUNK ? nx + 1 - x0 : PF_ROW_CHUNK;
+                    const long long c0 = row + x0;
+                    CK_PRAGMA(omp simd)
+                    for (int i = 0; i < len; ++i) fluid[i] = flags[c0 + i] == PF_FLUID ? 1u : 0u;
+                    CK_PRAGMA(omp simd)
+                    for (int i = 0; i < len; ++i) {
+                        const long long c = c0 + i;
+                        const unsigned int live = fluid[i];
+                        PF_EVEN_BODY(PF_ST_GUARDED)
+                    }
                 }
             }
     } else {
@@ -747,6 +761,8 @@ KERNEL void phase_collide_stream(const long long n, ck_store_t* RESTRICT h /* si
             }
     }
 #undef PF_ST_BULK
+#undef PF_ST_GUARDED
+#undef PF_KEEP_BLEND
 #endif
 #undef PF_ODD_CELL
 #undef PF_EVEN_BODY
