@@ -264,6 +264,8 @@ KERNEL void lbm_momentum(const long long n, const ck_store_t* RESTRICT f /* size
                          float* RESTRICT out /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */, const int parity,
                          const int nx, const int ny, const int nz) {
     const int odd = parity & 1;
+#define LBM_MOM(q) ux += CX27[q] * fj[q], uy += CY27[q] * fj[q], uz += CZ27[q] * fj[q];
+#if CK_ON_GPU
     FOR_EACH_CELL(x, y, z, nx, ny, nz) {
         // CK_PER_ITEM: the 27 load offsets recomputed per cell, not hoisted (142 -> 72 registers on sm_90)
         const int px = CK_PER_ITEM(nx + 2);
@@ -273,15 +275,60 @@ KERNEL void lbm_momentum(const long long n, const ck_store_t* RESTRICT f /* size
         if (flags[c] != FLAG_FLUID) continue;
         float fj[27];
         if (odd)
-            lbm_load<1, 1>(f, c, N, px, pxy, fj);  // scalar on the host: CK_LOAD_SCALAR
+            lbm_load<1, 1>(f, c, N, px, pxy, fj);
         else
             lbm_load<0, 1>(f, c, N, px, pxy, fj);
         float ux = 0.f, uy = 0.f, uz = 0.f;
-#define LBM_MOM(q) ux += CX27[q] * fj[q], uy += CY27[q] * fj[q], uz += CZ27[q] * fj[q];
         LBM_FOR26(LBM_MOM)
-#undef LBM_MOM
         out[c] = ux;
         out[N + c] = uy;
         out[2 * N + c] = uz;
     }
+#else
+    // host: rows in parallel, each x loop over every cell of the row (`omp simd`, the parity a template
+    // constant), a non-fluid cell keeping its values (a blend with flags widened to 32 bits first, as the
+    // other row loops; with the flag test and the skip the loop ran scalar).  Same sums as the GPU path.
+    const int px = nx + 2;
+    const long long pxy = (long long)px * (ny + 2);
+    const long long N = pxy * (nz + 2);
+    // each population read and summed at once (a local fj[27] array was left in memory: "not suitable for
+    // scatter store", scalar loop); lbm_load's read rule
+#define LBM_MOM_AT(q)                                                                                  \
+    {                                                                                                  \
+        const float v_ = mom_odd ? CK_LOAD(f, opposite_dir(q) * N + c - LBM_OFFSET(q, px, pxy), CK_F_SCALE) \
+                                 : CK_LOAD(f, (q) * N + c, CK_F_SCALE);                                 \
+        ux += CX27[q] * v_, uy += CY27[q] * v_, uz += CZ27[q] * v_;                                    \
+    }
+#define LBM_MOM_LOOP(ODD)                                                                          \
+    CK_PRAGMA(omp parallel for collapse(2) schedule(static))                                       \
+    for (int z = 0; z < nz; ++z)                                                                   \
+        for (int y = 0; y < ny; ++y) {                                                             \
+            const long long row = px * (long long)(y + 1) + pxy * (z + 1);                         \
+            unsigned int live[LBM_P_CHUNK];                                                        \
+            for (int x0 = 1; x0 <= nx; x0 += LBM_P_CHUNK) {                                        \
+                const int len = nx + 1 - x0 < LBM_P_CHUNK ? nx + 1 - x0 : LBM_P_CHUNK;             \
+                const long long c0 = row + x0;                                                     \
+                CK_PRAGMA(omp simd)                                                                \
+                for (int i = 0; i < len; ++i) live[i] = flags[c0 + i] == FLAG_FLUID ? 1u : 0u;     \
+                CK_PRAGMA(omp simd)                                                                \
+                for (int i = 0; i < len; ++i) {                                                    \
+                    const long long c = c0 + i;                                                    \
+                    constexpr int mom_odd = ODD;                                                   \
+                    float ux = 0.f, uy = 0.f, uz = 0.f;                                            \
+                    LBM_FOR26(LBM_MOM_AT)                                                          \
+                    out[c] = ck_select(live[i], ux, out[c]);                                       \
+                    out[N + c] = ck_select(live[i], uy, out[N + c]);                               \
+                    out[2 * N + c] = ck_select(live[i], uz, out[2 * N + c]);                       \
+                }                                                                                  \
+            }                                                                                      \
+        }
+    if (odd) {
+        LBM_MOM_LOOP(1)
+    } else {
+        LBM_MOM_LOOP(0)
+    }
+#undef LBM_MOM_LOOP
+#undef LBM_MOM_AT
+#endif
+#undef LBM_MOM
 }

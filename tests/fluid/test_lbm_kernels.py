@@ -179,6 +179,27 @@ def test_momentum_matches_reference(cpu, boundaries, parity):
 WIDE_X_WALLS = Boundaries({"x-": Face("wall"), "x+": Face("wall", velocity=(0.0, 0.02, 0.0))})
 
 
+@pytest.mark.parametrize("boundaries", ["periodic", "x_walls"])
+@pytest.mark.parametrize("parity", [0, 1])
+def test_momentum_on_rows_wider_than_a_vector_keeps_non_fluid_cells(cpu, boundaries, parity):
+    """The host momentum loop runs every cell of a row (vector bodies on 40-cell rows) and blends: the
+    obstacle's and the ghosts' values given in `out` must come back unchanged, the fluid cells' match the
+    reference (tolerance as above)."""
+    b = {"periodic": Boundaries(), "x_walls": WIDE_X_WALLS}[boundaries]
+    ko, ro = KernelOps(cpu), ReferenceOps()
+    sk = random_state(61 + parity, b, shape=(6, 7, 40))
+    sr = {k: v.copy() for k, v in sk.items()}
+    rng = np.random.default_rng(5)
+    out_k = rng.uniform(-1.0, 1.0, sk["velocity"].shape).astype(np.float32)
+    out_r = out_k.copy()
+    ko.momentum(sk["f"], sk["flags"], sk["velocity"], out_k, parity)
+    ro.momentum(sr["f"], sr["flags"], sr["velocity"], out_r, parity)
+    np.testing.assert_allclose(out_k, out_r, rtol=0, atol=1e-6)
+    fluid = sk["flags"] == 0
+    assert (~fluid).sum() > 0 and np.array_equal(out_k[:, ~fluid], out_r[:, ~fluid])
+    assert np.abs(out_k[:, fluid] - out_r[:, fluid]).max() < 1e-6 and np.abs(out_r[:, fluid]).max() > 1e-2
+
+
 @pytest.mark.parametrize("effects", ["single", "all"])
 @pytest.mark.parametrize("boundaries", ["periodic", "x_walls"])
 @pytest.mark.parametrize("parity", [0, 1])
