@@ -348,6 +348,34 @@ KERNEL void phase_macroscopic(const long long n,
             long long off[7];                                                                                \
             const bool bulk = pf_bulk_row<ODD>(flags, Y, Z, nx, ny, nz, px, py, pz, off);                    \
             const long long row = sy * Y + sz * Z;                                                           \
+            if (!ODD && !bulk) {                                                                             \
+                /* even step, a row with non-fluid cells: every interior cell by one vector loop, the     */ \
+                /* kind blended in (flags widened to 32 bits first), then the row's two x ghosts          */ \
+                unsigned int isf[PF_ROW_CHUNK], isi[PF_ROW_CHUNK];                                           \
+                for (int x0 = 1; x0 <= nx; x0 += PF_ROW_CHUNK) {                                             \
+                    const int len = nx + 1 - x0 < PF_ROW_CHUNK ? nx + 1 - x0 : PF_ROW_CHUNK;                 \
+                    const long long c0 = row + x0;                                                           \
+                    CK_PRAGMA(omp simd)                                                                      \
+                    for (int i = 0; i < len; ++i) {                                                          \
+                        isf[i] = flags[c0 + i] == PF_FLUID ? 1u : 0u;                                        \
+                        isi[i] = flags[c0 + i] == PF_INFLOW ? 1u : 0u;                                       \
+                    }                                                                                        \
+                    CK_PRAGMA(omp simd)                                                                      \
+                    for (int i = 0; i < len; ++i) {                                                          \
+                        const long long c = c0 + i;                                                          \
+                        const float s = (float)((double)PF_LD(h, 0, c) + (double)PF_LD(h, 1, ncell + c) +    \
+                                                (double)PF_LD(h, 2, 2 * ncell + c) +                         \
+                                                (double)PF_LD(h, 3, 3 * ncell + c) +                         \
+                                                (double)PF_LD(h, 4, 4 * ncell + c) +                         \
+                                                (double)PF_LD(h, 5, 5 * ncell + c) +                         \
+                                                (double)PF_LD(h, 6, 6 * ncell + c));                         \
+                        phi[c] = ck_select(isf[i], s, ck_select(isi[i], phi[c], 0.f));                       \
+                    }                                                                                        \
+                }                                                                                            \
+                pf_macro_cell(0, Y, Z, h, phi, u, flags, nx, ny, nz, px, py, pz, parity, ncell);             \
+                pf_macro_cell(nx + 1, Y, Z, h, phi, u, flags, nx, ny, nz, px, py, pz, parity, ncell);        \
+                continue;                                                                                    \
+            }                                                                                                \
             const int xa = bulk ? (ODD ? 2 : 1) : nx + 1, xb = bulk ? (ODD ? nx - 1 : nx) : nx;               \
             const long long o1 = off[1], o2 = off[2], o3 = off[3], o4 = off[4], o5 = off[5], o6 = off[6];     \
             CK_PRAGMA(omp simd)                                                                              \
