@@ -57,6 +57,11 @@ LBM_INLINE float lbm_clamp01(const float v) {
 // neighbour offset of direction q in a padded grid with row length px and plane size pxy
 #define LBM_OFFSET(q, px, pxy) ((long long)CX27[q] + (long long)(px) * CY27[q] + (long long)(pxy) * CZ27[q])
 
+// index in f of population q of padded cell c under the read rule of the parity (ODD = parity & 1, a
+// compile-time constant): F[q][c] even, F[opp q][c - c_q] odd
+#define LBM_PULL_INDEX(ODD, q, c, N, px, pxy) \
+    ((ODD) ? opposite_dir(q) * (N) + (c) - LBM_OFFSET(q, px, pxy) : (q) * (N) + (c))
+
 // populations f_j(x, t) of padded cell c under the read rule of the parity (ODD = parity & 1).  The odd pull
 // reads every neighbour alike: wall links were prepared by lbm_wall_prefill, outflow / periodic ghosts by
 // lbm_halo_copy, so the host loop has contiguous loads only and vectorises.
@@ -65,7 +70,7 @@ template <int ODD, int SCALAR = 0>
 LBM_INLINE void lbm_load(const ck_store_t* RESTRICT f, const long long c, const long long N, const int px,
                          const long long pxy, float* RESTRICT fj) {
 #define LBM_LD(p, i) (SCALAR ? CK_LOAD_SCALAR(p, i, CK_F_SCALE) : CK_LOAD(p, i, CK_F_SCALE))
-#define LBM_LOAD(q) fj[q] = ODD ? LBM_LD(f, opposite_dir(q) * N + c - LBM_OFFSET(q, px, pxy)) : LBM_LD(f, (q) * N + c);
+#define LBM_LOAD(q) fj[q] = LBM_LD(f, LBM_PULL_INDEX(ODD, q, c, N, px, pxy));
     LBM_FOR27(LBM_LOAD)
 #undef LBM_LOAD
 #undef LBM_LD
@@ -77,9 +82,7 @@ LBM_INLINE void lbm_load(const ck_store_t* RESTRICT f, const long long c, const 
 template <int ODD>
 LBM_INLINE void lbm_load_scaled(const ck_store_t* RESTRICT f, const long long c, const long long N, const int px,
                                 const long long pxy, float* RESTRICT fj) {
-#define LBM_LOAD(q)                                                                  \
-    fj[q] = ODD ? CK_LOAD(f, opposite_dir(q) * N + c - LBM_OFFSET(q, px, pxy), 1.f) \
-                : CK_LOAD(f, (q) * N + c, 1.f);
+#define LBM_LOAD(q) fj[q] = CK_LOAD(f, LBM_PULL_INDEX(ODD, q, c, N, px, pxy), 1.f);
     LBM_FOR27(LBM_LOAD)
 #undef LBM_LOAD
 }

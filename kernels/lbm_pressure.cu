@@ -292,12 +292,11 @@ KERNEL void lbm_momentum(const long long n, const ck_store_t* RESTRICT f /* size
     const long long pxy = (long long)px * (ny + 2);
     const long long N = pxy * (nz + 2);
     // each population read and summed at once (a local fj[27] array was left in memory: "not suitable for
-    // scatter store", scalar loop); lbm_load's read rule
-#define LBM_MOM_AT(q)                                                                                  \
-    {                                                                                                  \
-        const float v_ = mom_odd ? CK_LOAD(f, opposite_dir(q) * N + c - LBM_OFFSET(q, px, pxy), CK_F_SCALE) \
-                                 : CK_LOAD(f, (q) * N + c, CK_F_SCALE);                                 \
-        ux += CX27[q] * v_, uy += CY27[q] * v_, uz += CZ27[q] * v_;                                    \
+    // scatter store", scalar loop), by lbm_load's read rule
+#define LBM_MOM_AT(q)                                                                       \
+    {                                                                                       \
+        const float v_ = CK_LOAD(f, LBM_PULL_INDEX(mom_odd, q, c, N, px, pxy), CK_F_SCALE); \
+        ux += CX27[q] * v_, uy += CY27[q] * v_, uz += CZ27[q] * v_;                         \
     }
 #define LBM_MOM_LOOP(ODD)                                                                          \
     CK_PRAGMA(omp parallel for collapse(2) schedule(static))                                       \
