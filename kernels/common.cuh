@@ -311,3 +311,17 @@ float ck_select(const unsigned int c, const float a, const float b) {
     return __builtin_bit_cast(float, (__builtin_bit_cast(uint32_t, a) & m) | (__builtin_bit_cast(uint32_t, b) & ~m));
 #endif
 }
+
+#if !CK_ON_GPU
+// host: the stored value `new_` where live = 1, else `old_`, blended bit by bit without a branch (the guarded
+// stores of the wall-row loops, which write a non-fluid cell's old value back); fp32 and fp16 storage
+static inline __attribute__((always_inline)) ck_store_t ck_store_blend(const unsigned int live, const ck_store_t new_,
+                                                                       const ck_store_t old_) {
+#if CK_STORAGE_FP16
+    const ck_store_t m = (ck_store_t)(0u - live);
+    return (ck_store_t)((new_ & m) | (old_ & (ck_store_t)~m));
+#else
+    return ck_select(live, new_, old_);
+#endif
+}
+#endif

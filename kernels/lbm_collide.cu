@@ -167,16 +167,12 @@ LBM_INLINE void lbm_central_second(const float m0, const float mx, const float m
 // belongs to this cell alone in this pass (the AA pattern's push is one-to-one), so writing back the value
 // already there races with nothing.  A non-fluid cell's arithmetic may produce inf / NaN (eps = 0 in a solid):
 // the blend discards it.
-#if CK_STORAGE_FP16
-#define LBM_STORE_GUARDED(p, i, v, live)                                                             \
-    {                                                                                                \
-        const unsigned short o_ = (p)[i], n_ = ck_float_to_half_((v) * CK_F_SCALE);                  \
-        const unsigned short m_ = (unsigned short)(0u - (unsigned int)(live));                       \
-        (p)[i] = (unsigned short)((n_ & m_) | (o_ & (unsigned short)~m_));                           \
+#define LBM_STORE_GUARDED(p, i, v, live)               \
+    {                                                  \
+        ck_store_t n_;                                 \
+        CK_STORE(&n_, 0, v, CK_F_SCALE);               \
+        (p)[i] = ck_store_blend(live, n_, (p)[i]);     \
     }
-#else
-#define LBM_STORE_GUARDED(p, i, v, live) (p)[i] = ck_select(live, v, (p)[i]);
-#endif
 
 // one fluid cell: load, forces, collision, store (ODD = parity & 1; MODE: how the stencils learn the kind of a
 // neighbour, see lbm_gradient; `mask` = lbm_link_mask of c for LBM_NB_MASK; GUARD: see above, host only)
@@ -501,8 +497,8 @@ KERNEL void lbm_collide_stream(const long long n, ck_store_t* RESTRICT f /* size
     // (no flag logic, no masked lanes), else LBM_NB_MASK over the whole row with link masks gathered first
     // (lbm_link_masks).  A byte read inside the collide loop makes g++ pick 64 lanes (four zmm registers per
     // float) and spill the populations to the stack (measured 2-3x).  Splitting a wall row into bulk cells and
-    // masked end cells was measured slower: the short loops cost more than the mask logic saves.  The masked loop
-// runs its non-fluid cells too and keeps their values (GUARD = 1).
+    // masked end cells was measured slower: the short loops cost more than the mask logic saves.  The masked
+    // loop runs its non-fluid cells too and keeps their values (GUARD = 1).
 #define LBM_COLLIDE_LOOP(ODD)                                                                          \
     CK_PRAGMA(omp parallel for collapse(2) schedule(static))                                           \
     for (int z = 0; z < nz; ++z)                                                                       \

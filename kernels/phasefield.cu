@@ -652,18 +652,11 @@ KERNEL void phase_collide_stream(const long long n, ck_store_t* RESTRICT h /* si
     // to 32 bits before the loop) stores its slots' own bits back, blended without a branch.  A skip of
     // non-fluid cells, a bool, or a flag byte read in the loop each left it scalar (g++ 12, -fopt-info-vec).
     // The even step writes only the cell's own slots, so the write-back races with nothing.
-#if CK_STORAGE_FP16
-#define PF_KEEP_BLEND(old_, new_, live) \
-    ((ck_store_t)(((new_) & (ck_store_t)(0u - (live))) | ((old_) & (ck_store_t) ~(ck_store_t)(0u - (live)))))
-#else
-#define PF_KEEP_BLEND(old_, new_, live) ck_select(live, new_, old_)
-#endif
 #define PF_ST_GUARDED(q, i, v)                       \
     {                                                \
-        const ck_store_t old_ = h[i];                \
         ck_store_t new_;                             \
         PF_ST(&new_, q, 0, v);                       \
-        h[i] = PF_KEEP_BLEND(old_, new_, live);      \
+        h[i] = ck_store_blend(live, new_, h[i]);     \
     }
 #endif
     // the even step's body after the skip: load, collide, store in the opposite slots (AA even step)
@@ -790,7 +783,6 @@ KERNEL void phase_collide_stream(const long long n, ck_store_t* RESTRICT h /* si
     }
 #undef PF_ST_BULK
 #undef PF_ST_GUARDED
-#undef PF_KEEP_BLEND
 #endif
 #undef PF_ODD_CELL
 #undef PF_EVEN_BODY
