@@ -169,8 +169,9 @@ def use_pressure_buoyancy(sim, capillary: bool) -> None:
         phi = np.clip(host(fl.phi)[1:-1, 1:-1, 1:-1].astype(np.float64), 0.0, 1.0)
         rho = prm.rho_l + (prm.rho_h - prm.rho_l) * phi
         extra = rho * g - grad  # lattice force density per unit ε_s
-        if capillary and fl.mu is not None:
-            extra = extra + host(fl.mu)[1:-1, 1:-1, 1:-1] * isotropic_gradient(host(fl.phi), flags)
+        mu = fl.phase_gradients()[1] if capillary else None
+        if mu is not None:
+            extra = extra + host(mu)[1:-1, 1:-1, 1:-1] * isotropic_gradient(host(fl.phi), flags)
         es = host(c.eps_sand)[1:-1, 1:-1, 1:-1].astype(np.float64)
         m = host(sand.grid_m)
         active = (m > 0) & (flags[1:-1, 1:-1, 1:-1] == 0)

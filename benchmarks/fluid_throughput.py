@@ -92,7 +92,7 @@ def ours_collide(backend, n: int, storage: str = "fp32"):
     def run():
         for parity in (0, 1):
             ops.collide_stream(
-                s.f, s.flags, s.velocity, None, None, None, None, s.pbar, parity, 1.0, 1.0, 0.01, 0.01, 0, 0, 0
+                s.f, s.flags, s.velocity, None, None, None, s.pbar, parity, 1.0, 1.0, 0.01, 0.01, 0, 0, 0
             )
 
     return run
@@ -144,7 +144,7 @@ def two_phase_stage_times(backend, n: int, steps: int = 6) -> dict[str, float]:
 
     for name in ("halo_copy", "macro_pressure", "pressure_filter", "collide_stream", "fold", "outflow_fix"):
         wrap(s.ops, name, "flow." + name)
-    for name in ("collide_stream", "macroscopic", "gradients", "volume_sums"):
+    for name in ("collide_stream", "macroscopic", "volume_sums"):
         if hasattr(s.pf_ops, name):
             wrap(s.pf_ops, name, "phase." + name)
     t = time.perf_counter()

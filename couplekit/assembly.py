@@ -545,7 +545,7 @@ def build_scheduler(scene: Scene, fluid, sand, coupler, *, timing: bool = True, 
 
 # ---------------------------------------------------------------------------------------------- memory
 _FLUID_FLOATS_PER_CELL = 27 + 3 + 1 + 1  # f, velocity (the walls' velocities in the wall cells), p, pbar
-_PHASE_FLOATS_PER_CELL = 7 + 1 + 3  # h, phi, grad phi; + mu with surface tension, + the source term in coupled
+_PHASE_FLOATS_PER_CELL = 7 + 1  # h, phi (grad phi and mu: computed in the collides); + the source term in coupled
 # scenes with it on (FluidSolver; effect_memory counts each effect's fields)
 _SAND_FLOATS_PER_NODE = 1 + 3 + 1 + 1  # mass, momentum (overwritten by the velocity: SandSolver.grid_v), volume, sdf
 _SAND_FLOATS_PER_PARTICLE = 3 + 3 + 9 + 9 + 6 + 1 + 1 + 1 + 1 + 1  # x v C F tau q vc saturation mass volume
@@ -566,9 +566,8 @@ def memory_estimate(scene: Scene) -> dict[str, float]:
     if scene.fluid is not None:
         floats = _FLUID_FLOATS_PER_CELL
         if scene.fluid.phases == 2:
-            sigma = scene.fluid.surface_tension > 0 and scene.effects.surface_tension
             source = scene.has_sand and scene.effects.source_term
-            floats += _PHASE_FLOATS_PER_CELL + int(sigma) + int(source)
+            floats += _PHASE_FLOATS_PER_CELL + int(source)
         out["fluid"] = padded * (4 * floats + 1)  # + 1 byte of flags
         if scene.fluid.storage == "fp16":  # f and h in 2 B instead of 4 (couplekit.fluid.storage)
             populations = 27 + (7 if scene.fluid.phases == 2 else 0)

@@ -4,7 +4,8 @@ effect allocates, per padded fluid cell ((nx+2)(ny+2)(nz+2)), per sand-grid cell
 These are the arrays the solvers allocate for an effect (couplekit.fluid.solver, couplekit.coupling.coupler,
 couplekit.scene.forces); tests/test_bench.py checks each against the bytes a scene with the effect on
 allocates more than the same scene with it off.  An effect with 0 bytes either needs no field (volume
-controller: a reduction; the closures: local rates; drag, buoyancy: the force field belongs to the coupling)
+controller: a reduction; the closures: local rates; surface tension: the flow's collide computes μ_φ from φ;
+drag, buoyancy: the force field belongs to the coupling)
 or would keep its field when it is off because a kernel reads it in every variant, recorded in
 :data:`KEPT_WHEN_OFF` (none now).  The source term S_φ costs 4 B per cell: without it (fluid-only scenes,
 the Fig. 14 ablation) the phase-field kernels take the ``CK_PF_SOURCE=0`` variant and the field is not
@@ -21,8 +22,9 @@ F32 = 4
 
 # effect -> (bytes per padded fluid cell, bytes per sand-grid cell, bytes per particle)
 EFFECT_BYTES = {
-    "phase_field": (F32 * (7 + 1 + 3), 0, 0),  # h, phi, grad phi
-    "surface_tension": (F32 * 1, 0, 0),  # mu
+    # h, phi (grad phi is computed inside the phase-field collide, kernels/phasefield.cu pf_gradient_sums)
+    "phase_field": (F32 * (7 + 1), 0, 0),
+    "surface_tension": (0, 0, 0),  # mu_phi: computed inside the flow collide from phi (lbm_laplacian_sum)
     "volume_controller": (0, 0, 0),
     "source_term": (F32 * 1, 0, 0),  # S_phi (coupled two-phase scenes; compiled out otherwise, CK_PF_SOURCE=0)
     "coupling": (F32 * (1 + 3 + 3 + 1 + 3 + 1) + 1, F32 * 1, 0),  # ε, u_s, force, ε_sand, fluid u, ε_prev, slip

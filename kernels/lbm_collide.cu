@@ -1,7 +1,8 @@
 // Fused collide + stream of the velocity-based D3Q27 NOCM-MRT flow (paper Eqs. 8-13, 15-20), AA pattern.
 // Spec: couplekit/fluid/reference.py ReferenceOps.collide_stream.
 // Defines: CK_TWO_PHASE (rho, mu from phi, Eq. 4; viscous correction F_mu), CK_SURFACE_TENSION (F_s = mu_phi
-// grad phi from the chemical-potential field `mu`), CK_MIXTURE (fluid fraction eps), CK_EXT_FORCE (force
+// grad phi, the chemical potential mu_phi of Eq. 22 computed here from phi with the coefficients beta, kappa),
+// CK_MIXTURE (fluid fraction eps), CK_EXT_FORCE (force
 // density input, e.g. drag), CK_LES (Smagorinsky subgrid viscosity, constant c_les), CK_ODD_RATE (odd-moment
 // rate floor lambda_odd, in cells with nu < odd_nu_max).  Switched-off inputs may be any float array (they are
 // not read); the closures' scalars are not read when their define is 0.  The closures are compile-time
@@ -178,12 +179,12 @@ LBM_INLINE void lbm_central_second(const float m0, const float mx, const float m
 // neighbour, see lbm_gradient; `mask` = lbm_link_mask of c for LBM_NB_MASK; GUARD: see above, host only)
 template <int ODD, int MODE, int GUARD = 0>
 LBM_INLINE void lbm_collide_cell(const long long c, ck_store_t* RESTRICT f, const unsigned char* RESTRICT flags,
-                                 float* RESTRICT vel, const float* RESTRICT phi, const float* RESTRICT mu,
-                                 const float* RESTRICT eps, const float* RESTRICT force,
+                                 float* RESTRICT vel, const float* RESTRICT phi, const float* RESTRICT eps, const float* RESTRICT force,
                                  const float* RESTRICT pbar, const int px, const long long pxy, const long long N,
                                  const float rho_h, const float rho_l, const float nu_h, const float nu_l,
                                  const float gx, const float gy, const float gz, const float c_les,
-                                 const float lambda_odd, const float odd_nu_max, const unsigned int mask) {
+                                 const float lambda_odd, const float odd_nu_max, const float beta,
+                                 const float kappa, const unsigned int mask) {
     float fj[27];
     lbm_load_scaled<ODD>(f, c, N, px, pxy, fj);  // (f - w) * CK_F_SCALE: the moments take the scale out
 
@@ -241,15 +242,21 @@ LBM_INLINE void lbm_collide_cell(const long long c, ck_store_t* RESTRICT f, cons
     const float e = 1.f;
 #endif
 
+#if !(CK_TWO_PHASE && CK_SURFACE_TENSION)
+    (void)beta, (void)kappa;
+#endif
     // acceleration, Eq. 15: -grad pbar / rho + g (+ F_s / rho) (+ F_ext / (eps rho))
     float gp[3];
     lbm_gradient<1, MODE>(pbar, flags, c, px, pxy, gp, mask);
     float ax = gx - gp[0] * inv_rho, ay = gy - gp[1] * inv_rho, az = gz - gp[2] * inv_rho;
 #if CK_TWO_PHASE
-    float gphi[3];
-    lbm_gradient<0, MODE>(phi, flags, c, px, pxy, gphi, mask);
+    float gphi[4];  // grad phi and, with surface tension, the Laplacian's sum (lbm_gradient's LAP)
+    lbm_gradient<0, MODE, CK_SURFACE_TENSION>(phi, flags, c, px, pxy, gphi, mask);
 #if CK_SURFACE_TENSION
-    const float chem = mu[c] * inv_rho;
+    // Eq. 22: mu_phi = 4 beta phi (phi - 1)(phi - 1/2) - kappa lap phi, lap phi = 6 sum_j w_j d_j (Eq. 23)
+    const float pc = phi[c];
+    const float mu_phi = 4.f * beta * pc * (pc - 1.f) * (pc - 0.5f) - kappa * (6.f * gphi[3]);
+    const float chem = mu_phi * inv_rho;
     ax += chem * gphi[0];
     ay += chem * gphi[1];
     az += chem * gphi[2];
@@ -466,18 +473,19 @@ LBM_INLINE void lbm_collide_cell(const long long c, ck_store_t* RESTRICT f, cons
 KERNEL void lbm_collide_stream(const long long n, ck_store_t* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
                                const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                                float* RESTRICT vel /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
-                               const float* RESTRICT phi, const float* RESTRICT mu, const float* RESTRICT eps,
+                               const float* RESTRICT phi, const float* RESTRICT eps,
                                const float* RESTRICT force,
                                const float* RESTRICT pbar /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                                const int parity, const int nx, const int ny, const int nz, const float rho_h,
                                const float rho_l, const float nu_h, const float nu_l, const float gx,
                                const float gy, const float gz, const float c_les,
-                               const float lambda_odd, const float odd_nu_max) {
+                               const float lambda_odd, const float odd_nu_max, const float beta, const float kappa) {
     const int px = nx + 2;
     const long long pxy = (long long)px * (ny + 2);
     const long long N = pxy * (nz + 2);
 #define LBM_CELL_ARGS(px, pxy, N) \
-    f, flags, vel, phi, mu, eps, force, pbar, px, pxy, N, rho_h, rho_l, nu_h, nu_l, gx, gy, gz, c_les, lambda_odd, odd_nu_max
+    f, flags, vel, phi, eps, force, pbar, px, pxy, N, rho_h, rho_l, nu_h, nu_l, gx, gy, gz, c_les, lambda_odd, odd_nu_max, \
+        beta, kappa
 #if CK_ON_GPU
     // one thread per cell; the flag tests of the stencils cost little next to the memory traffic.  The grid
     // sizes pass through CK_PER_ITEM inside the loop (common.cuh): hoisted out of the grid-stride loop, the 27

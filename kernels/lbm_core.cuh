@@ -118,7 +118,10 @@ LBM_INLINE void lbm_store(ck_store_t* RESTRICT f, const long long c, const long 
 #define LBM_NB_BULK 1
 #define LBM_NB_MASK 2
 #define LBM_C3(x, y, z) (((x) + 1) * 9 + ((y) + 1) * 3 + ((z) + 1))
-template <int EXTRAP, int MODE = LBM_NB_FLAGS>
+// LAP = 1 (EXTRAP = 0 only): g[3] also receives the isotropic Laplacian's sum sum_j w_j d_j (Eq. 23 without its
+// factor 2 / cs^2 = 6) with the same rule and the same reads: the flow's collide takes the chemical potential of
+// Eq. 22 from it, so no mu field is stored.
+template <int EXTRAP, int MODE = LBM_NB_FLAGS, int LAP = 0>
 LBM_INLINE void lbm_gradient(const float* RESTRICT s, const unsigned char* RESTRICT flags, const long long c,
                              const int px, const long long pxy, float* RESTRICT g, const unsigned int mask = 0u) {
     const float sc = s[c];
@@ -139,7 +142,7 @@ LBM_INLINE void lbm_gradient(const float* RESTRICT s, const unsigned char* RESTR
     const int gpx = CK_PER_ITEM(px);
     const long long gpxy = CK_PER_ITEM(pxy);
     const unsigned int gmask = CK_PER_ITEM(mask);
-    float g0 = 0.f, g1 = 0.f, g2 = 0.f;
+    float g0 = 0.f, g1 = 0.f, g2 = 0.f, lap = 0.f;
 #define LBM_GRAD_PAIR(q)                                                                                 \
     {                                                                                                    \
         const long long o = LBM_OFFSET(q, gpx, gpxy);                                                    \
@@ -152,6 +155,7 @@ LBM_INLINE void lbm_gradient(const float* RESTRICT s, const unsigned char* RESTR
             dp = ep;                                                                                     \
             dm = em;                                                                                     \
         }                                                                                                \
+        if (LAP) lap += W27[q] * (MODE == LBM_NB_BULK ? (vp - sc) + (vm - sc) : dp + dm);             \
         const float dd = (3.f * W27[q]) * (dp - dm);                                                     \
         if (CX27[q] != 0) g0 = CX27[q] > 0 ? g0 + dd : g0 - dd;                                          \
         if (CY27[q] != 0) g1 = CY27[q] > 0 ? g1 + dd : g1 - dd;                                          \
@@ -166,6 +170,7 @@ LBM_INLINE void lbm_gradient(const float* RESTRICT s, const unsigned char* RESTR
     g[0] = g0;
     g[1] = g1;
     g[2] = g2;
+    if (LAP) g[3] = lap;
 #else
     // 0 / 1 as a 32-bit value (ck_select)
 #define LBM_NB_STENCIL(q, cell)                                           \
@@ -210,6 +215,13 @@ LBM_INLINE void lbm_gradient(const float* RESTRICT s, const unsigned char* RESTR
 #undef LBM_DX
 #undef LBM_DY
 #undef LBM_DZ
+    if (LAP) {
+        float lap = 0.f;
+#define LBM_LAP_TERM(q) lap += W27[q] * (MODE == LBM_NB_BULK ? v[q] - sc : d[LBM_C3(CX27[q], CY27[q], CZ27[q])]);
+        LBM_FOR26(LBM_LAP_TERM)
+#undef LBM_LAP_TERM
+        g[3] = lap;
+    }
 #endif
 }
 

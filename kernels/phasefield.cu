@@ -124,6 +124,17 @@ static inline __attribute__((always_inline)) void pf_fluid_masks(const unsigned 
         masks[i] = m;
     }
 }
+
+// true when the cells 0..nx + 1 of the 9 padded rows around the row starting at `row` (itself included) are all
+// FLUID: then every 27-point stencil of that row's interior cells sees only FLUID cells (PF_NB_BULK)
+static inline __attribute__((always_inline)) bool pf_rows9_fluid(const unsigned char* RESTRICT flags,
+                                                                 const long long row, const long long sy,
+                                                                 const long long sz, const int nx) {
+    bool bulk = true;
+    for (int r = 0; r < 9; ++r)
+        bulk = bulk && pf_row_fluid(flags, row + (r % 3 - 1) * sy + (r / 3 - 1) * sz, 0, nx + 1);
+    return bulk;
+}
 #endif
 
 // D3Q27 weights in 3x3x3 cube order, index (dz+1)*9 + (dy+1)*3 + (dx+1) (the isotropic stencils, Eqs. 21, 23)
@@ -422,29 +433,31 @@ KERNEL void phase_macroscopic(const long long n,
 // link, as the flow's stencils).  phi must have its ghost layer filled (phase_macroscopic does).  Interior
 // cells only; non-fluid cells get 0.  n = nx*ny*nz.  Without CK_PF_SURFACE_TENSION, mu, beta and kappa
 // are not used (pass a 1-element dummy for mu).
-// One cell c of phase_gradients.  MODE: how the kind of a neighbour is known: PF_NB_FLAGS reads its flag,
-// PF_NB_MASK takes bit k of `mask` (pf_fluid_masks; bit 13: c itself is FLUID, else c gets zeros), PF_NB_BULK:
-// the caller guarantees that c and all its neighbours are FLUID.  The same terms in the same order in all three
-// (bitwise equal results).
+// MODE: how a stencil learns the kind of a neighbour: PF_NB_FLAGS reads its flag, PF_NB_MASK takes bit k of `mask`
+// (pf_fluid_masks), PF_NB_BULK: the caller guarantees that c and all its neighbours are FLUID.
 #define PF_NB_FLAGS 0
 #define PF_NB_BULK 1
 #define PF_NB_MASK 2
+// The raw stencil sums of cell c: sum_k w_k d_k v_k (x, y, z) and sum_k w_k (v_k - phi_c) (lap), v_k = phi of
+// neighbour k where it is FLUID, phi_c otherwise.  By value (a struct, as PfCell): sums passed out by reference
+// kept the host x loops scalar.
+struct PfGrad {
+    float x, y, z, lap;
+};
+
 template <int MODE>
-PF_INLINE void pf_gradient_cell(const long long c, const float* RESTRICT phi, const unsigned char* RESTRICT flags,
-                                float* RESTRICT grad, float* RESTRICT mu, const long long sy, const long long sz,
-                                const long long ncell, const float beta, const float kappa,
-                                const unsigned int mask) {
+PF_INLINE PfGrad pf_gradient_sums(const long long c, const float* RESTRICT phi, const unsigned char* RESTRICT flags,
+                                  const long long sy, const long long sz, const unsigned int mask) {
     const float p0 = phi[c];
-    float gx = 0.f, gy = 0.f, gz = 0.f;
-#if CK_PF_SURFACE_TENSION
-    float lap = 0.f;
-#else
-    (void)mu, (void)beta, (void)kappa;
-#endif
+    PfGrad g;
+    g.x = 0.f, g.y = 0.f, g.z = 0.f, g.lap = 0.f;
+    // the strides through CK_PER_ITEM (common.cuh): inside phase_collide_stream the 26 offsets were otherwise
+    // computed once and kept live (sm_90: 95 -> 128 registers with the stencil in the collide)
+    const long long isy = CK_PER_ITEM(sy), isz = CK_PER_ITEM(sz);
     PF_UNROLL
     for (int k = 0; k < 27; ++k) {
         const int dx = k % 3 - 1, dy = (k / 3) % 3 - 1, dz = k / 9 - 1;
-        const long long o = c + dx + sy * dy + sz * dz;
+        const long long o = c + dx + isy * dy + isz * dz;
         // 0 / 1 as 32-bit values and a blend (ck_select): a bool select kept the host mask loop scalar
         const unsigned int fluid = MODE == PF_NB_BULK ? 1u
                                                       : (MODE == PF_NB_MASK ? ((mask >> k) & 1u)
@@ -455,22 +468,35 @@ PF_INLINE void pf_gradient_cell(const long long c, const float* RESTRICT phi, co
         const float v = ck_select(fluid, phi[o], p0);
 #endif
         const float w = PF_W27_CUBE[k];
-        gx += (w * dx) * v;
-        gy += (w * dy) * v;
-        gz += (w * dz) * v;
-#if CK_PF_SURFACE_TENSION
-        lap += w * (v - p0);
-#endif
+        g.x += (w * dx) * v;
+        g.y += (w * dy) * v;
+        g.z += (w * dz) * v;
+        g.lap += w * (v - p0);
     }
+    return g;
+}
+
+// One cell c of phase_gradients (see pf_gradient_sums for MODE; with PF_NB_MASK bit 13 of `mask` says whether c
+// itself is FLUID, else c gets zeros).  The same terms in the same order in all three modes (bitwise equal).
+template <int MODE>
+PF_INLINE void pf_gradient_cell(const long long c, const float* RESTRICT phi, const unsigned char* RESTRICT flags,
+                                float* RESTRICT grad, float* RESTRICT mu, const long long sy, const long long sz,
+                                const long long ncell, const float beta, const float kappa,
+                                const unsigned int mask) {
+    const PfGrad g = pf_gradient_sums<MODE>(c, phi, flags, sy, sz, mask);
+#if !CK_PF_SURFACE_TENSION
+    (void)mu, (void)beta, (void)kappa;
+#endif
     // MODE == PF_NB_MASK: a non-fluid cell gets zeros (a select, so the host mask loop has no branch)
     const unsigned int self = MODE == PF_NB_MASK ? ((mask >> 13) & 1u) : 1u;
     // Eq. 21: 3 sum_j w_j c_j phi(x + c_j)  (3 = 1/cs^2 of D3Q27)
-    grad[c] = ck_select(self, 3.f * gx, 0.f);
-    grad[ncell + c] = ck_select(self, 3.f * gy, 0.f);
-    grad[2 * ncell + c] = ck_select(self, 3.f * gz, 0.f);
+    grad[c] = ck_select(self, 3.f * g.x, 0.f);
+    grad[ncell + c] = ck_select(self, 3.f * g.y, 0.f);
+    grad[2 * ncell + c] = ck_select(self, 3.f * g.z, 0.f);
 #if CK_PF_SURFACE_TENSION
     // Eqs. 22-23
-    mu[c] = ck_select(self, 4.f * beta * p0 * (p0 - 1.f) * (p0 - 0.5f) - kappa * (6.f * lap), 0.f);
+    const float p0 = phi[c];
+    mu[c] = ck_select(self, 4.f * beta * p0 * (p0 - 1.f) * (p0 - 0.5f) - kappa * (6.f * g.lap), 0.f);
 #endif
 }
 
@@ -501,10 +527,7 @@ KERNEL void phase_gradients(const long long n, const float* RESTRICT phi /* size
     for (int z = 0; z < nz; ++z)
         for (int y = 0; y < ny; ++y) {
             const long long row = sy * (y + 1) + sz * (z + 1);
-            bool bulk = true;
-            for (int r = 0; r < 9; ++r)
-                bulk = bulk && pf_row_fluid(flags, row + (r % 3 - 1) * sy + (r / 3 - 1) * sz, 0, nx + 1);
-            if (bulk) {
+            if (pf_rows9_fluid(flags, row, sy, sz, nx)) {
                 CK_PRAGMA(omp simd)
                 for (int x = 1; x <= nx; ++x)
                     pf_gradient_cell<PF_NB_BULK>(row + x, phi, flags, grad, mu, sy, sz, ncell, beta, kappa, 0u);
@@ -565,7 +588,7 @@ PF_INLINE float pf_relax(const int q, const float fq, const float feq, const flo
 }
 
 // Collision of Eq. 48 of cell c (see phase_collide_stream): pre-collision populations in, post out.
-PF_INLINE PfCell pf_collide(const PfCell in, const long long c, const long long ncell, const float* RESTRICT grad,
+PF_INLINE PfCell pf_collide(const PfCell in, const long long c, const long long ncell, const PfGrad grad,
                             const float* RESTRICT u, const float* RESTRICT source, const float omega,
                             const float interface_factor, const float source_scale, const float omega_plus) {
     // Eq. 47 with compensated sums: together with the rest population below, Sigma phi changes per step
@@ -579,7 +602,8 @@ PF_INLINE PfCell pf_collide(const PfCell in, const long long c, const long long 
     pf_accumulate(mass, mass_comp, in.f5);
     pf_accumulate(mass, mass_comp, in.f6);
     const float p0 = mass + mass_comp;
-    const float gx = grad[c], gy = grad[ncell + c], gz = grad[2 * ncell + c];
+    // Eq. 21: grad phi = 3 sum_j w_j c_j phi(x + c_j) of this step's phi (pf_gradient_sums; 3 = 1/cs^2 of D3Q27)
+    const float gx = 3.f * grad.x, gy = 3.f * grad.y, gz = 3.f * grad.z;
     const float g2 = gx * gx + gy * gy + gz * gz;
     // (1 - omega/2) |H| / |grad phi|, Eq. 49.  The guard is a 32-bit blend (ck_select), not fmaxf or a float
     // select: with either, g++ 12 left every x loop of this kernel scalar ("control flow in loop")
@@ -627,11 +651,11 @@ PF_INLINE PfCell pf_collide(const PfCell in, const long long c, const long long 
 //   omega = 1/tau, tau = M / cs^2 + 1/2 (mobility M, cs^2 = 1/4)
 //   trt_lambda > 0: two relaxation times, the pairs' symmetric non-equilibrium relaxed at omega_plus with
 //         (1/omega - 1/2)(1/omega_plus - 1/2) = trt_lambda (Ginzburg's "magic" product; 0 = Eq. 48's single rate)
-// grad: grad phi of the same step (phase_gradients); u: fluid velocity (and the velocity of INFLOW cells);
-// phi: read only at INFLOW cells (their phase value); source: S_phi.  n = nx*ny*nz.
+// grad phi (Eq. 21) is computed here from phi of the same step (pf_gradient_sums; phi with its ghost layer filled,
+// phase_macroscopic): no stored gradient field, no pass of its own.  u: fluid velocity (and the velocity of
+// INFLOW cells); phi: also the phase value of INFLOW cells; source: S_phi.  n = nx*ny*nz.
 KERNEL void phase_collide_stream(const long long n, ck_store_t* RESTRICT h /* size: 7 * (nx + 2) * (ny + 2) * (nz + 2) */,
                                  const float* RESTRICT phi /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
-                                 const float* RESTRICT grad /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
                                  const float* RESTRICT u /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
                                  const float* RESTRICT source /* size >= 1 */ /* (nx + 2)(ny + 2)(nz + 2); a placeholder with CK_PF_SOURCE=0 */,
                                  const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
@@ -639,10 +663,13 @@ KERNEL void phase_collide_stream(const long long n, ck_store_t* RESTRICT h /* si
                                  const int pz, const int parity, const float mobility, const float width,
                                  const float source_scale, const float trt_lambda) {
     const long long ncell = (long long)(nx + 2) * (ny + 2) * (nz + 2);
+    const long long sy = (long long)(nx + 2), sz = sy * (ny + 2);
     const float omega = 1.f / (mobility / CS2_7 + 0.5f);
     const float omega_plus = trt_lambda > 0.f ? 1.f / (0.5f + trt_lambda / (1.f / omega - 0.5f)) : omega;
     const float interface_factor = (1.f - 0.5f * omega) * 4.f / width;
-#define PF_CELL_ARGS c, ncell, grad, u, source, omega, interface_factor, source_scale, omega_plus
+    // the gradient of cell c by stencil mode MODE (pf_gradient_sums) and the per-cell arguments of pf_collide
+#define PF_GRAD(MODE, mask) pf_gradient_sums<MODE>(c, phi, flags, sy, sz, mask)
+#define PF_CELL_ARGS(G) c, ncell, G, u, source, omega, interface_factor, source_scale, omega_plus
     // even step of cell c, flag test included (PF_ST_EVEN: the AA even store)
 #define PF_EVEN_SKIP \
     if (flags[c] != PF_FLUID) continue;
@@ -659,9 +686,11 @@ KERNEL void phase_collide_stream(const long long n, ck_store_t* RESTRICT h /* si
         h[i] = ck_store_blend(live, new_, h[i]);     \
     }
 #endif
-    // the even step's body after the skip: load, collide, store in the opposite slots (AA even step)
-#define PF_EVEN_BODY(ST)                                                                                    \
+    // the even step's body after the skip: load, collide with gradient sums G, store in the opposite slots (AA
+    // even step)
+#define PF_EVEN_BODY(ST, G)                                                                                 \
     {                                                                                                       \
+        const PfGrad g_ = G; /* before the loads: its stencil does not hold the 7 populations live */        \
         PfCell in;                                                                                          \
         in.f0 = PF_LD(h, 0, c);                                                                             \
         in.f1 = PF_LD(h, 1, ncell + c);                                                                     \
@@ -670,7 +699,7 @@ KERNEL void phase_collide_stream(const long long n, ck_store_t* RESTRICT h /* si
         in.f4 = PF_LD(h, 4, 4 * ncell + c);                                                                 \
         in.f5 = PF_LD(h, 5, 5 * ncell + c);                                                                 \
         in.f6 = PF_LD(h, 6, 6 * ncell + c);                                                                 \
-        const PfCell out = pf_collide(in, PF_CELL_ARGS);                                                    \
+        const PfCell out = pf_collide(in, PF_CELL_ARGS(g_));                                                \
         ST(0, c, out.f0);                                                                                   \
         ST(2, 2 * ncell + c, out.f1);                                                                       \
         ST(1, ncell + c, out.f2);                                                                           \
@@ -686,6 +715,7 @@ KERNEL void phase_collide_stream(const long long n, ck_store_t* RESTRICT h /* si
         pf_neighbours(X, Y, Z, nx, ny, nz, px, py, pz, nb);                                                 \
         const long long c = nb[0];                                                                          \
         if (flags[c] == PF_FLUID) {                                                                         \
+            const PfGrad g_ = PF_GRAD(PF_NB_FLAGS, 0u);                                                     \
             float f[7];                                                                                     \
             pf_load<1>(h, flags, phi, u, ncell, nb, 1, f);                                                  \
             PfCell in;                                                                                      \
@@ -696,7 +726,7 @@ KERNEL void phase_collide_stream(const long long n, ck_store_t* RESTRICT h /* si
             in.f4 = f[4];                                                                                   \
             in.f5 = f[5];                                                                                   \
             in.f6 = f[6];                                                                                   \
-            const PfCell out = pf_collide(in, PF_CELL_ARGS);                                                \
+            const PfCell out = pf_collide(in, PF_CELL_ARGS(g_));                                            \
             const float post[7] = {out.f0, out.f1, out.f2, out.f3, out.f4, out.f5, out.f6};                 \
             pf_store(h, flags, phi, u, ncell, nb, 1, post);                                                 \
         }                                                                                                   \
@@ -704,51 +734,72 @@ KERNEL void phase_collide_stream(const long long n, ck_store_t* RESTRICT h /* si
 #if CK_ON_GPU
     // two loops, so that the local even step has no neighbour logic
     if (!(parity & 1)) {
-        const long long sy = (long long)(nx + 2), sz = sy * (ny + 2);
         FOR_EACH_CELL(x, y, z, nx, ny, nz) {
             const long long c = (x + 1) + sy * (y + 1) + sz * (z + 1);
             PF_EVEN_SKIP
-            PF_EVEN_BODY(PF_ST_EVEN)
+            PF_EVEN_BODY(PF_ST_EVEN, PF_GRAD(PF_NB_FLAGS, 0u))
         }
     } else {
         FOR_EACH_CELL(x, y, z, nx, ny, nz) PF_ODD_CELL(x + 1, y + 1, z + 1)
     }
 #else
-    // host row scheme: a bulk run (pf_bulk_row: the row and, for the odd step, its 4 neighbour rows all fluid)
-    // takes a flag-free `omp simd` loop, the odd one with the row's constant neighbour offsets (pull from
-    // h[opp q][c - d_q], push to h[q][c + d_q]: in a bulk run no link meets a boundary); everything else the
-    // per-cell code of the GPU path.  The same arithmetic per cell everywhere (pf_collide).  Before, the odd
-    // step ran scalar (neighbour logic per link) and the even one read the flag inside its x loop.
-    const long long sy = (long long)(nx + 2), sz = sy * (ny + 2);
+    // host row scheme: a bulk run takes a flag-free `omp simd` loop, the odd one with the row's constant neighbour
+    // offsets (pull from h[opp q][c - d_q], push to h[q][c + d_q]: in a bulk run no link meets a boundary); the
+    // gradient's 27-point stencil takes PF_NB_BULK where the 9 rows around are all FLUID (pf_rows9_fluid), else
+    // the neighbour masks of pf_fluid_masks (bit 13: the cell itself, the even step's `live`); everything else
+    // the per-cell code of the GPU path.  The same arithmetic per cell everywhere (pf_collide,
+    // pf_gradient_sums).
 #define PF_ST_BULK(q, i, v) PF_ST(h, q, i, v)
     if (!(parity & 1)) {
         CK_PRAGMA(omp parallel for collapse(2) schedule(static))
         for (int z = 0; z < nz; ++z)
             for (int y = 0; y < ny; ++y) {
                 const long long row = sy * (y + 1) + sz * (z + 1);
-                if (pf_row_fluid(flags, row, 1, nx)) {
+                if (pf_rows9_fluid(flags, row, sy, sz, nx)) {
                     CK_PRAGMA(omp simd)
                     for (int X = 1; X <= nx; ++X) {
                         const long long c = row + X;
-                        PF_EVEN_BODY(PF_ST_BULK)
+                        PF_EVEN_BODY(PF_ST_BULK, PF_GRAD(PF_NB_BULK, 0u))
                     }
                     continue;
                 }
-                unsigned int fluid[PF_ROW_CHUNK];
+                unsigned int masks[PF_ROW_CHUNK], scratch[9 * (PF_ROW_CHUNK + 2)];
                 for (int x0 = 1; x0 <= nx; x0 += PF_ROW_CHUNK) {
                     const int len = nx + 1 - x0 < PF_ROW_CHUNK ? nx + 1 - x0 : PF_ROW_CHUNK;
                     const long long c0 = row + x0;
-                    CK_PRAGMA(omp simd)
-                    for (int i = 0; i < len; ++i) fluid[i] = flags[c0 + i] == PF_FLUID ? 1u : 0u;
+                    pf_fluid_masks(flags, c0, len, sy, sz, masks, scratch);
                     CK_PRAGMA(omp simd)
                     for (int i = 0; i < len; ++i) {
                         const long long c = c0 + i;
-                        const unsigned int live = fluid[i];
-                        PF_EVEN_BODY(PF_ST_GUARDED)
+                        const unsigned int mask = masks[i], live = (mask >> 13) & 1u;
+                        PF_EVEN_BODY(PF_ST_GUARDED, PF_GRAD(PF_NB_MASK, mask))
                     }
                 }
             }
     } else {
+        // the bulk run's odd x loop (X = xa .. xb, the row's neighbour offsets o1..o6), gradient G
+#define PF_ODD_RUN(xa, xb, G)                                                                               \
+    CK_PRAGMA(omp simd)                                                                                     \
+    for (int X = (xa); X <= (xb); ++X) {                                                                    \
+        const long long c = row + X;                                                                        \
+        const PfGrad g_ = G;                                                                                \
+        PfCell in;                                                                                          \
+        in.f0 = PF_LD(h, 0, c);                                                                             \
+        in.f1 = PF_LD(h, 1, 2 * ncell + c + o2);                                                            \
+        in.f2 = PF_LD(h, 2, ncell + c + o1);                                                                \
+        in.f3 = PF_LD(h, 3, 4 * ncell + c + o4);                                                            \
+        in.f4 = PF_LD(h, 4, 3 * ncell + c + o3);                                                            \
+        in.f5 = PF_LD(h, 5, 6 * ncell + c + o6);                                                            \
+        in.f6 = PF_LD(h, 6, 5 * ncell + c + o5);                                                            \
+        const PfCell out = pf_collide(in, PF_CELL_ARGS(g_));                                                \
+        PF_ST(h, 0, c, out.f0);                                                                             \
+        PF_ST(h, 1, ncell + c + o1, out.f1);                                                                \
+        PF_ST(h, 2, 2 * ncell + c + o2, out.f2);                                                            \
+        PF_ST(h, 3, 3 * ncell + c + o3, out.f3);                                                            \
+        PF_ST(h, 4, 4 * ncell + c + o4, out.f4);                                                            \
+        PF_ST(h, 5, 5 * ncell + c + o5, out.f5);                                                            \
+        PF_ST(h, 6, 6 * ncell + c + o6, out.f6);                                                            \
+    }
         CK_PRAGMA(omp parallel for collapse(2) schedule(static))
         for (int Z = 1; Z <= nz; ++Z)
             for (int Y = 1; Y <= ny; ++Y) {
@@ -757,29 +808,20 @@ KERNEL void phase_collide_stream(const long long n, ck_store_t* RESTRICT h /* si
                 const long long row = sy * Y + sz * Z;
                 const int xa = bulk ? 2 : nx + 1, xb = bulk ? nx - 1 : nx;
                 const long long o1 = off[1], o2 = off[2], o3 = off[3], o4 = off[4], o5 = off[5], o6 = off[6];
-                CK_PRAGMA(omp simd)
-                for (int X = xa; X <= xb; ++X) {
-                    const long long c = row + X;
-                    PfCell in;
-                    in.f0 = PF_LD(h, 0, c);
-                    in.f1 = PF_LD(h, 1, 2 * ncell + c + o2);
-                    in.f2 = PF_LD(h, 2, ncell + c + o1);
-                    in.f3 = PF_LD(h, 3, 4 * ncell + c + o4);
-                    in.f4 = PF_LD(h, 4, 3 * ncell + c + o3);
-                    in.f5 = PF_LD(h, 5, 6 * ncell + c + o6);
-                    in.f6 = PF_LD(h, 6, 5 * ncell + c + o5);
-                    const PfCell out = pf_collide(in, PF_CELL_ARGS);
-                    PF_ST(h, 0, c, out.f0);
-                    PF_ST(h, 1, ncell + c + o1, out.f1);
-                    PF_ST(h, 2, 2 * ncell + c + o2, out.f2);
-                    PF_ST(h, 3, 3 * ncell + c + o3, out.f3);
-                    PF_ST(h, 4, 4 * ncell + c + o4, out.f4);
-                    PF_ST(h, 5, 5 * ncell + c + o5, out.f5);
-                    PF_ST(h, 6, 6 * ncell + c + o6, out.f6);
+                if (bulk && pf_rows9_fluid(flags, row, sy, sz, nx)) {
+                    PF_ODD_RUN(xa, xb, PF_GRAD(PF_NB_BULK, 0u))
+                } else if (bulk) {
+                    unsigned int masks[PF_ROW_CHUNK], scratch[9 * (PF_ROW_CHUNK + 2)];
+                    for (int x0 = xa; x0 <= xb; x0 += PF_ROW_CHUNK) {
+                        const int len = xb + 1 - x0 < PF_ROW_CHUNK ? xb + 1 - x0 : PF_ROW_CHUNK;
+                        pf_fluid_masks(flags, row + x0, len, sy, sz, masks, scratch);
+                        PF_ODD_RUN(x0, x0 + len - 1, PF_GRAD(PF_NB_MASK, masks[X - x0]))
+                    }
                 }
                 for (int X = 1; X <= nx; ++X)
                     if (X < xa || X > xb) PF_ODD_CELL(X, Y, Z)
             }
+#undef PF_ODD_RUN
     }
 #undef PF_ST_BULK
 #undef PF_ST_GUARDED
@@ -789,6 +831,7 @@ KERNEL void phase_collide_stream(const long long n, ck_store_t* RESTRICT h /* si
 #undef PF_EVEN_SKIP
 #undef PF_ST_EVEN
 #undef PF_CELL_ARGS
+#undef PF_GRAD
 }
 
 // Global volume sums for the volume controller (Eq. 52), in float64 over interior FLUID cells:

@@ -31,16 +31,19 @@ class Traffic:
 # per interior cell and step (the fluid kernels), per particle and step (the MPM particle kernels)
 KERNEL_TRAFFIC: dict[str, Traffic] = {
     "lbm_collide_stream": Traffic(27 * F4 * 2 + FLAG + 3 * F4 + F4, "cell", "f read+write, flags, u write, p-bar"),
+    # mu_phi of Eq. 22 computed from phi's stencil (lbm_gradient's LAP), not read from a field
     "lbm_collide_stream (two-phase)": Traffic(
-        27 * F4 * 2 + FLAG + 3 * F4 + 3 * F4, "cell", "f read+write, flags, u write, p-bar, phi, mu"
+        27 * F4 * 2 + FLAG + 3 * F4 + 2 * F4, "cell", "f read+write, flags, u write, p-bar, phi"
     ),
     "lbm_macro_pressure": Traffic(27 * F4 + FLAG + 2 * F4 + F4, "cell", "f read, flags, p read+write, phi"),
     "lbm_pressure_filter": Traffic(F4 + F4 + FLAG, "cell", "p read, p-bar write, flags"),
     "lbm_momentum": Traffic(27 * F4 + FLAG + 3 * F4, "cell", "f read, flags, momentum write"),
     "phase_macroscopic": Traffic(7 * F4 + F4 + FLAG, "cell", "h read, phi write, flags"),
+    # a diagnostic now (FluidSolver.phase_gradients), not a stage of the step
     "phase_gradients": Traffic(F4 + 3 * F4 + F4 + FLAG, "cell", "phi read, grad write, mu write, flags"),
+    # grad phi computed from phi's stencil (pf_gradient_sums), not read from a field
     "phase_collide_stream": Traffic(
-        7 * F4 * 2 + F4 + 3 * F4 + 3 * F4 + F4 + FLAG, "cell", "h read+write, phi, grad, u, source, flags"
+        7 * F4 * 2 + F4 + 3 * F4 + F4 + FLAG, "cell", "h read+write, phi, u, source, flags"
     ),
     "mpm_p2g": Traffic(3 * F4 + 3 * F4 + 9 * F4 + 6 * F4 + F4 + F4, "particle", "x, v, C, tau, mass, volume"),
     "mpm_g2p": Traffic(
@@ -58,7 +61,6 @@ TWO_PHASE_STEP = (
     "lbm_pressure_filter",
     "lbm_collide_stream (two-phase)",
     "phase_macroscopic",
-    "phase_gradients",
     "phase_collide_stream",
 )
 

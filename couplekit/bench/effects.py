@@ -195,7 +195,7 @@ def ratio_summary(block_ratios: list[float]) -> dict:
 # effect -> the stages (scheduler stage timers) whose work it adds or changes; the effect's stage cost is their
 # time on minus off, as a fraction of the step off (None: no stage of its own, the step's time only)
 EFFECT_STAGES = {
-    "surface_tension": ("phase_field_macroscopic", "lbm_collide_stream"),  # μ, and the force it adds
+    "surface_tension": ("lbm_collide_stream",),  # μ_φ (from φ's stencil) and the force it adds
     "volume_controller": ("volume_controller",),
     "source_term": ("retention_source", "phase_field_collide_stream"),
     "retention": ("retention_source", "moisture"),

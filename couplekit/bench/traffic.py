@@ -36,7 +36,7 @@ FLUID_STAGE_BYTES_PER_CELL = {
     "lbm_pressure": BYTES_TWO_PHASE_STEP["lbm_macro_pressure"],
     "lbm_pressure_filter": BYTES_TWO_PHASE_STEP["lbm_pressure_filter"],
     "lbm_collide_stream": BYTES_TWO_PHASE_STEP["lbm_collide_stream (two-phase)"],
-    "phase_field_macroscopic": BYTES_TWO_PHASE_STEP["phase_macroscopic"] + BYTES_TWO_PHASE_STEP["phase_gradients"],
+    "phase_field_macroscopic": BYTES_TWO_PHASE_STEP["phase_macroscopic"],
     "phase_field_collide_stream": BYTES_TWO_PHASE_STEP["phase_collide_stream"],
     "volume_controller": 2 * F32 + 1,  # phi and source read, flags (a reduction)
 }

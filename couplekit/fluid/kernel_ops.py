@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..backend import Backend
-from .reference import check_closures
+from .reference import check_chemical_potential, check_closures
 from .storage import check_storage
 
 
@@ -148,7 +148,6 @@ class KernelOps:
         flags,
         velocity,
         phi,
-        mu,
         eps,
         force,
         pbar,
@@ -163,9 +162,11 @@ class KernelOps:
         smagorinsky: float = 0.0,
         odd_lambda: float = 0.0,
         odd_nu_max: float = 1.0,
+        chemical_potential: tuple[float, float] | None = None,
     ) -> None:
         """Fused forces + NOCM-MRT collision + AA streaming (see ReferenceOps.collide_stream)."""
         check_closures(self, smagorinsky, odd_lambda)
+        beta, kappa = check_chemical_potential(self, chemical_potential)
         n, nx, ny, nz = self._interior(flags)
         if parity & 1:
             self._wall_call(self._prefill, f, flags, velocity)
@@ -175,7 +176,6 @@ class KernelOps:
             flags,
             velocity,
             self._or_dummy(phi, self.two_phase),
-            self._or_dummy(mu, self.surface_tension),
             self._or_dummy(eps, self.mixture),
             self._or_dummy(force, self.external_force),
             pbar,
@@ -184,6 +184,8 @@ class KernelOps:
             np.int32(ny),
             np.int32(nz),
             *(np.float32(v) for v in (rho_h, rho_l, nu_h, nu_l, gx, gy, gz, smagorinsky, odd_lambda, odd_nu_max)),
+            np.float32(beta),
+            np.float32(kappa),
         )
         if parity & 1:
             self._wall_call(self._bounce, f, flags, velocity)

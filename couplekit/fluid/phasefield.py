@@ -5,15 +5,17 @@ Stages (one kernel each in ``kernels/phasefield.cu``; NumPy twin :class:`PhaseFi
 ``set_equilibrium``  h := h^eq(phi, u) as loaded at a given step parity (initialisation);
 ``macroscopic``      phi = sum_k h_k (Eq. 47) on every cell, ghost layer included;
 ``gradients``        grad phi (Eq. 21) and the chemical potential mu (Eqs. 22–23, compiled out when
-                     sigma = 0); the flow's surface tension force is F_s = mu grad phi (Eq. 20);
+                     sigma = 0) as fields: a diagnostic, not a stage of the step (the collision computes
+                     grad phi itself, the flow's collision mu for its surface tension force F_s = mu grad phi,
+                     Eq. 20);
 ``collide_stream``   Eq. 48 with the interface term (Eqs. 49–50, with the (1 - omega/2) factor), the source
                      term (Eq. 51) scaled by the volume controller gamma, in-place streaming, no-flux walls;
 ``volume_sums``      sum phi (or sum eps phi) and sum S_phi in float64, for the controller (Eq. 52,
                      :func:`volume_controller_gamma`).
 
-Per step, in this order: ``macroscopic(h, phi, u, flags, t)`` -> ``gradients(phi, ...)`` -> (flow
-stages) -> ``volume_sums`` + ``volume_controller_gamma`` (only when a source is present) ->
-``collide_stream(h, phi, grad, u, source, flags, t, ...)`` -> t += 1.
+Per step, in this order: ``macroscopic(h, phi, u, flags, t)`` -> (flow stages) -> ``volume_sums`` +
+``volume_controller_gamma`` (only when a source is present) -> ``collide_stream(h, phi, u, source, flags, t,
+...)`` -> t += 1.
 
 Storage: the flow's padded grid (:mod:`couplekit.fluid.grid`)
 -------------------------------------------------------------
@@ -181,7 +183,6 @@ class PhaseFieldKernelOps:
         self,
         h,
         phi,
-        grad,
         u,
         source,
         flags,
@@ -191,11 +192,11 @@ class PhaseFieldKernelOps:
         source_scale: float = 1.0,
         trt_lambda: float = 0.0,
     ) -> None:
-        """One step of Eq. 48 with in-place (AA) streaming and the boundary rules of the flags (``trt_lambda``:
-        see :meth:`PhaseFieldReferenceOps.collide_stream`)."""
+        """One step of Eq. 48 with in-place (AA) streaming and the boundary rules of the flags, grad phi computed
+        in the kernel from ``phi`` (``trt_lambda``: see :meth:`PhaseFieldReferenceOps.collide_stream`)."""
         nz, ny, nx = interior_shape(flags.shape)
         self._fn("phase_collide_stream")(
-            nx * ny * nz, h, phi, grad, u, self._source(source), flags, nx, ny, nz, *self._flags, int(parity),
+            nx * ny * nz, h, phi, u, self._source(source), flags, nx, ny, nz, *self._flags, int(parity),
             np.float32(mobility), np.float32(width), np.float32(source_scale), np.float32(trt_lambda),
         )  # fmt: skip
 
@@ -228,8 +229,8 @@ def make_phase_field_ops(
 class PhaseFieldRunner:
     """The phase field alone in a prescribed velocity field (validation, benchmarks, and a usage example).
 
-    Holds h, phi, grad phi, mu (with surface tension), the source S_phi (zeros; assign to it) and the step
-    counter.  ``solid``: interior obstacle mask, or ``flags``: the padded cell flags (then ``solid`` must be
+    Holds h, phi, the source S_phi (zeros; assign to it) and the step counter; grad phi is computed inside the
+    collision, mu on demand (:meth:`gradients`, with surface tension ``sigma``).  ``solid``: interior obstacle mask, or ``flags``: the padded cell flags (then ``solid`` must be
     None).  ``eta`` > 0 switches the volume controller (Eq. 52) on, with V0 recorded at construction.
     """
 
@@ -261,8 +262,6 @@ class PhaseFieldRunner:
         self.source = xp.zeros(shape, dtype=np.float32)
         self.phi = xp.zeros(shape, dtype=np.float32)
         self.phi[1:-1, 1:-1, 1:-1] = xp.asarray(np.asarray(phi0, dtype=np.float32))
-        self.grad = xp.zeros((3, *shape), dtype=np.float32)
-        self.mu = xp.zeros(shape, dtype=np.float32) if ops.surface_tension else None
         self.h = xp.zeros((7, *shape), dtype=dtype_of(getattr(ops, "storage", "fp32")))
         self.step_count = 0
         self.gamma = 1.0
@@ -271,22 +270,30 @@ class PhaseFieldRunner:
         self.v0 = self.volume()
 
     def update_macroscopic(self) -> None:
-        """phi, grad phi and mu of the current step (before its collision)."""
+        """phi of the current step (before its collision), ghost layer included."""
         self.ops.macroscopic(self.h, self.phi, self.u, self.flags, self.step_count)
-        self.ops.gradients(self.phi, self.flags, self.grad, self.mu, self.beta, self.kappa)
+
+    def gradients(self):
+        """(grad phi, mu) of the current phi as padded arrays of the ops' backend (Eqs. 21-23; mu is None
+        without surface tension): a diagnostic, the step does not need them stored."""
+        xp = self.ops.xp
+        grad = xp.zeros((3, *self.phi.shape), dtype=np.float32)
+        mu = xp.zeros(self.phi.shape, dtype=np.float32) if self.ops.surface_tension else None
+        self.ops.gradients(self.phi, self.flags, grad, mu, self.beta, self.kappa)
+        return grad, mu
 
     def volume(self) -> float:
         """Sigma phi over interior fluid cells (float64)."""
         return self.ops.volume_sums(self.phi, self.source, self.flags)[0]
 
     def step(self, n: int = 1) -> None:
-        """Advance ``n`` steps: controller factor, collide + stream, then phi / grad phi / mu."""
+        """Advance ``n`` steps: controller factor, collide + stream, then phi."""
         for _ in range(n):
             if self.eta > 0:
                 volume, source_sum = self.ops.volume_sums(self.phi, self.source, self.flags)
                 self.gamma = volume_controller_gamma(self.v0, volume, source_sum, self.eta)
             self.ops.collide_stream(
-                self.h, self.phi, self.grad, self.u, self.source, self.flags, self.step_count, self.mobility,
+                self.h, self.phi, self.u, self.source, self.flags, self.step_count, self.mobility,
                 self.width, self.gamma,
             )  # fmt: skip
             self.step_count += 1

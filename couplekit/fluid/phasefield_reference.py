@@ -52,6 +52,27 @@ def _inflow(q, phi_b, u_b):
     return 2.0 * W7[q] * phi_b * (C7[q].astype(np.float64) @ u_b) / CS2_7
 
 
+def _gradient_laplacian(phi: np.ndarray, flags: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """grad phi (Eq. 21), lap phi (Eq. 23) and phi itself on the interior, float64: only FLUID neighbours
+    contribute their value, others the centre value (the kernels' pf_gradient_sums)."""
+    p = phi.astype(np.float64)
+    fluid = flags == FLUID
+    centre = p[1:-1, 1:-1, 1:-1]
+    g = np.zeros((3, *centre.shape))
+    lap = np.zeros(centre.shape)
+    for cj, wj in zip(C27, W27, strict=True):
+        dx, dy, dz = (int(v) for v in cj)
+        sl = (
+            slice(1 + dz, p.shape[0] - 1 + dz),
+            slice(1 + dy, p.shape[1] - 1 + dy),
+            slice(1 + dx, p.shape[2] - 1 + dx),
+        )
+        neighbour = np.where(fluid[sl], p[sl], centre)
+        g += (wj / CS2) * cj.astype(np.float64)[:, None, None, None] * neighbour  # Eq. 21
+        lap += (2.0 / CS2) * wj * (neighbour - centre)  # Eq. 23
+    return g, lap, centre
+
+
 def trt_omega_plus(omega: float, trt_lambda: float) -> float:
     """Rate of the symmetric non-equilibrium of the two-relaxation-time collision: (1/omega - 1/2)(1/omega_plus
     - 1/2) = trt_lambda; omega itself (Eq. 48's single rate) when trt_lambda is 0."""
@@ -219,21 +240,8 @@ class PhaseFieldReferenceOps:
         """
         if self.surface_tension == (mu is None):
             raise ValueError("mu must be an array exactly when the ops were built with surface_tension=True")
-        p = phi.astype(np.float64)
+        g, lap, centre = _gradient_laplacian(phi, flags)
         fluid = flags == FLUID
-        centre = p[1:-1, 1:-1, 1:-1]
-        g = np.zeros((3, *centre.shape))
-        lap = np.zeros(centre.shape)
-        for cj, wj in zip(C27, W27, strict=True):
-            dx, dy, dz = (int(v) for v in cj)
-            sl = (
-                slice(1 + dz, p.shape[0] - 1 + dz),
-                slice(1 + dy, p.shape[1] - 1 + dy),
-                slice(1 + dx, p.shape[2] - 1 + dx),
-            )
-            neighbour = np.where(fluid[sl], p[sl], centre)
-            g += (wj / CS2) * cj.astype(np.float64)[:, None, None, None] * neighbour  # Eq. 21
-            lap += (2.0 / CS2) * wj * (neighbour - centre)  # Eq. 23
         not_fluid = ~fluid[1:-1, 1:-1, 1:-1]
         grad[:, 1:-1, 1:-1, 1:-1] = np.where(not_fluid, 0.0, g)
         if mu is not None:
@@ -244,7 +252,6 @@ class PhaseFieldReferenceOps:
         self,
         h,
         phi,
-        grad,
         u,
         source,
         flags,
@@ -262,14 +269,16 @@ class PhaseFieldReferenceOps:
         ``trt_lambda`` > 0: two relaxation times (TRT, Ginzburg 2005): of the non-equilibrium n = h - h^eq, the
         symmetric part (n_k + n_opp k)/2 of each pair relaxes at omega_plus (:func:`trt_omega_plus`), the
         antisymmetric part (which carries the flux, so M) at omega; 0 is Eq. 48's single rate.
-        ``phi`` is read only at INFLOW cells (the phase value they carry).
+        grad phi is that of ``phi`` (Eq. 21, as :meth:`gradients`), which is also the phase value of INFLOW cells.
         """
         grid = self._grid(flags)
         c = grid.cell
         source = self._source(source, flags)
         f = self._load(h, phi, u, grid, parity)
         phi_c = f.sum(axis=0)  # Eq. 47
-        g = grad.reshape(3, -1)[:, c].astype(np.float64)
+        g = np.zeros((3,) + phi.shape)
+        g[:, 1:-1, 1:-1, 1:-1] = _gradient_laplacian(phi, flags)[0]
+        g = g.reshape(3, -1)[:, c]
         norm = np.sqrt((g * g).sum(axis=0))
         # grad phi / |grad phi|, zero in the bulk (the kernel's threshold is |grad phi|^2 > 1e-12)
         normal = np.where(norm * norm > 1e-12, g / np.where(norm > 0, norm, 1.0), 0.0)

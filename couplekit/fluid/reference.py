@@ -97,6 +97,36 @@ def local_average(s: np.ndarray, flags: np.ndarray) -> np.ndarray:
     return out
 
 
+def isotropic_laplacian(s: np.ndarray, flags: np.ndarray) -> np.ndarray:
+    """Eq. 23: ∇²s = (2/c_s²) Σ_j w_j (s(x + c_j) − s(x)), a non-stencil neighbour taking the centre value (the
+    rule of :func:`isotropic_gradient` without extrapolation)."""
+    centre = interior(s).astype(np.float64)
+    lap = np.zeros(centre.shape)
+    for j in range(1, 27):
+        lap += W27[j] * (neighbour_values(s, flags, C27[j], False) - centre)
+    return 6.0 * lap
+
+
+def chemical_potential(phi: np.ndarray, flags: np.ndarray, beta: float, kappa: float) -> np.ndarray:
+    """Eq. 22 on the interior: μ_φ = 4β φ(φ − 1)(φ − ½) − κ ∇²φ (∇² of Eq. 23, :func:`isotropic_laplacian`)."""
+    p = interior(phi).astype(np.float64)
+    return 4.0 * beta * p * (p - 1.0) * (p - 0.5) - kappa * isotropic_laplacian(phi, flags)
+
+
+def check_chemical_potential(ops, chemical_potential: tuple[float, float] | None) -> tuple[float, float]:
+    """(β, κ) of Eq. 22 for a collide of ``ops``: required exactly when the ops were built with surface tension
+    (``couplekit.fluid.phasefield.chemical_potential_coefficients(sigma, width)``), (0, 0) otherwise."""
+    if ops.surface_tension != (chemical_potential is not None):
+        raise ValueError(
+            "chemical_potential=(beta, kappa) must be given exactly when the ops were built with surface "
+            "tension (phasefield.chemical_potential_coefficients(sigma, width))"
+        )
+    if chemical_potential is None:
+        return 0.0, 0.0
+    beta, kappa = (float(v) for v in chemical_potential)
+    return beta, kappa
+
+
 def check_closures(ops, smagorinsky: float, odd_lambda: float) -> None:
     """Refuse closure values an ops object was not built for (its ``les`` / ``odd_rate`` flags, which the
     kernels compile in): a silently ignored closure would run the paper's collision instead."""
@@ -342,10 +372,13 @@ class ReferenceOps:
         fluid = interior(flags) == FLUID
         interior(pbar)[fluid] = local_average(p, flags)[fluid]
 
-    def forces(self, fi, flags, phi, mu, eps, force, pbar, rho_h, rho_l, nu_h, nu_l, gravity, smagorinsky=0.0):
+    def forces(
+        self, fi, flags, phi, eps, force, pbar, rho_h, rho_l, nu_h, nu_l, gravity, smagorinsky=0.0, chem=(0.0, 0.0)
+    ):
         """Acceleration a (3, ...) of Eq. 15 and the shifted velocity u = Σ f c + a/2, for populations fi.
 
-        a = F_μ/(ερ) − ∇p̄/ρ + F_s/ρ + g + F_ext/(ερ), with F_s = μ_φ ∇φ (Eq. 20) and the viscous correction
+        a = F_μ/(ερ) − ∇p̄/ρ + F_s/ρ + g + F_ext/(ερ), with F_s = μ_φ ∇φ (Eq. 20; μ_φ of Eq. 22 from φ with
+        ``chem`` = (β, κ), :func:`chemical_potential`) and the viscous correction
         F_μ = ν ∇^sym u · [∇ρ + (ρ/ε)∇ε] (Eq. 16). ∇^sym u is estimated from the pre-collision
         non-equilibrium central second moments, ∇^sym u ≈ −3 r_s dev(κ_2) + (2/3)(1 − Σf) I (note §1a), about
         the velocity shifted by the other forces. Returns (a, u, r_s).
@@ -365,7 +398,7 @@ class ReferenceOps:
         if self.two_phase:
             grad_phi = isotropic_gradient(phi, flags)
             if self.surface_tension:
-                a = a + interior(mu).astype(np.float64) * grad_phi / rho
+                a = a + chemical_potential(phi, flags, *chem) * grad_phi / rho
         if self.external_force:
             a = a + interior(force).astype(np.float64) / (e * rho)
         # pre-collision second central moments about the velocity shifted by the forces so far (all but F_μ)
@@ -422,7 +455,6 @@ class ReferenceOps:
         flags,
         velocity,
         phi,
-        mu,
         eps,
         force,
         pbar,
@@ -437,15 +469,18 @@ class ReferenceOps:
         smagorinsky: float = 0.0,
         odd_lambda: float = 0.0,
         odd_nu_max: float = 1.0,
+        chemical_potential: tuple[float, float] | None = None,
     ) -> None:
         """Fused collide + stream (Eqs. 8-10): forces, NOCM-MRT collision, AA store; writes u to ``velocity``.
         ``smagorinsky``: the Smagorinsky constant C of the subgrid viscosity (0 = off, the paper's model);
         ``odd_lambda``: the floor Λ of the odd-moment rate (:func:`odd_rate`; 0 = rate 1, the paper's), applied in
-        cells whose molecular viscosity is below ``odd_nu_max``."""
+        cells whose molecular viscosity is below ``odd_nu_max``; ``chemical_potential``: (β, κ) of Eq. 22, given
+        exactly when the ops have surface tension (the collide computes μ_φ from φ itself, no stored field)."""
         check_closures(self, smagorinsky, odd_lambda)
+        chem = check_chemical_potential(self, chemical_potential)
         fi = self.load(f, flags, velocity, parity)
         a, u, r_s = self.forces(
-            fi, flags, phi, mu, eps, force, pbar, rho_h, rho_l, nu_h, nu_l, (gx, gy, gz), smagorinsky
+            fi, flags, phi, eps, force, pbar, rho_h, rho_l, nu_h, nu_l, (gx, gy, gz), smagorinsky, chem
         )
         nu = self._viscosity(phi, rho_h, rho_l, nu_h, nu_l)
         r_o = odd_rates(r_s, nu, min(nu_h, nu_l) if self.two_phase else nu_h, odd_lambda, odd_nu_max)

@@ -346,7 +346,7 @@ class FluidSolver:
         # water held outside the phase field that V of Eq. 52 counts (the sand's bound water, Eq. 53; set by
         # the coupler every step, 0 otherwise)
         self.held_volume = 0.0
-        self.phi = self.h = self.grad = self.mu = self.source_term = None
+        self.phi = self.h = self.source_term = None
         if self.two_phase:
             from . import phasefield as pf  # only two-phase scenes need (and load) the phase field
 
@@ -361,8 +361,6 @@ class FluidSolver:
             phi_p = wall_phi.astype(np.float32)  # inflow cells carry their phase value
             phi_p[INTERIOR] = phi0
             self.phi = backend.asarray(phi_p)
-            self.grad = xp.zeros((3,) + pshape, dtype=np.float32)
-            self.mu = xp.zeros(pshape, dtype=np.float32) if self.surface_tension else None
             self.h = xp.zeros((7,) + pshape, dtype=dtype_of(self.storage))
             self.source_term = xp.zeros(pshape, dtype=np.float32) if has_source else None
             self._setup_inflow_front(flags, wall_u, wall_phi, phi_p)
@@ -448,8 +446,19 @@ class FluidSolver:
         self._inflow_front_done = bool((ramp >= 1.0).all())
 
     def _phase_macroscopic(self) -> None:
+        """φ of the current step, ghosts included: grad φ and μ_φ are computed from it inside the two collides."""
         self.pf_ops.macroscopic(self.h, self.phi, self.velocity, self.flags, self.step_count)
-        self.pf_ops.gradients(self.phi, self.flags, self.grad, self.mu, self.beta, self.kappa)
+
+    def phase_gradients(self) -> tuple[Any, Any]:
+        """(grad φ, μ_φ) of the current φ (Eqs. 21-23) as padded backend arrays (μ_φ None without surface
+        tension): a diagnostic computed on demand; the step computes both inside its collides, stores neither."""
+        if not self.two_phase:
+            raise ValueError("phase_gradients needs a two-phase fluid (FluidParams phases = 2)")
+        xp = self.xp
+        grad = xp.zeros((3,) + self.phi.shape, dtype=np.float32)
+        mu = xp.zeros(self.phi.shape, dtype=np.float32) if self.surface_tension else None
+        self.pf_ops.gradients(self.phi, self.flags, grad, mu, self.beta, self.kappa)
+        return grad, mu
 
     def step(self, n: int = 1) -> None:
         """Advance ``n`` LBM steps."""
@@ -476,9 +485,9 @@ class FluidSolver:
                 force_p = self.pbar
             ops.halo_copy(force_p, self._ghost, self._image)
             ops.collide_stream(
-                self.f, self.flags, self.velocity, self.phi, self.mu, self.fluid_fraction, self.force, force_p,
+                self.f, self.flags, self.velocity, self.phi, self.fluid_fraction, self.force, force_p,
                 parity, prm.rho_h, prm.rho_l, prm.nu_h, prm.nu_l, *prm.gravity, prm.smagorinsky, self._odd_lambda,
-                prm.odd_nu_max,
+                prm.odd_nu_max, chemical_potential=(self.beta, self.kappa) if self.surface_tension else None,
             )  # fmt: skip
             if parity:
                 ops.fold(self.f, self._ghost, self._image)
@@ -494,7 +503,7 @@ class FluidSolver:
                 else:
                     source_scale = self.gamma
                 self.pf_ops.collide_stream(
-                    self.h, self.phi, self.grad, self.velocity, self.source_term, self.flags, self.step_count,
+                    self.h, self.phi, self.velocity, self.source_term, self.flags, self.step_count,
                     prm.mobility, prm.width, source_scale, self.phase_trt_lambda,
                 )  # fmt: skip
             self.step_count += 1

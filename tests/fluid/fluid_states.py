@@ -46,7 +46,7 @@ def random_state(seed: int, boundaries: Boundaries, shape=SHAPE, obstacle: bool 
         "flags": flags,
         "velocity": velocity.astype(np.float32),
         "phi": _smooth_phi(rng, pshape).astype(np.float32),
-        "mu": rng.uniform(-1e-3, 1e-3, pshape).astype(np.float32),
+        "mu": rng.uniform(-1e-3, 1e-3, pshape).astype(np.float32),  # drawn so the later arrays stay as they were
         "eps": rng.uniform(0.6, 1.0, pshape).astype(np.float32),
         "sand_v": rng.uniform(-0.02, 0.02, (3,) + pshape).astype(np.float32),
         "force": rng.uniform(-1e-4, 1e-4, (3,) + pshape).astype(np.float32),
@@ -60,7 +60,15 @@ def random_state(seed: int, boundaries: Boundaries, shape=SHAPE, obstacle: bool 
     # cells with the porosity-slip term of Eq. 39: a random half of the fluid cells (drawn last, so the other
     # arrays are those of earlier versions), for the kernels must follow whatever mask they are given
     state["slip"] = ((rng.random(pshape) < 0.5) & (flags == 0)).astype(np.uint8)
+    # (beta, kappa) of Eq. 22 for sigma = 1e-3, W = 4 (chemical_potential_coefficients): the collide computes
+    # mu_phi ~ 1e-3 from phi with them; the "mu" field above is not an input any more
+    state["chem"] = np.array([3e-3, 6e-3])
     return state
+
+
+def chem_of(ops, state):
+    """The collide's ``chemical_potential`` argument for ``ops``: the state's (beta, kappa) with surface tension."""
+    return state["chem"] if ops.surface_tension else None
 
 
 def _smooth_phi(rng, pshape) -> np.ndarray:

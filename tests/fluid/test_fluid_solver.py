@@ -109,7 +109,7 @@ def test_inflow_outflow_mass_balance():
 
 def test_single_phase_allocates_no_phase_field_and_no_inputs():
     s = _solver(get_backend("numpy"))
-    assert s.h is None and s.phi is None and s.mu is None and s.source_term is None
+    assert s.h is None and s.phi is None and s.source_term is None
     assert s.fluid_fraction is None and s.force is None and s.sand_velocity is None
     assert set(s.fields()) == {"velocity", "pressure", "density", "solid"}
     d = s.diagnostics()

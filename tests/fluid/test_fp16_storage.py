@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from fluid_states import BOUNDARY_SETS, random_state
+from fluid_states import BOUNDARY_SETS, chem_of, random_state
 
 from couplekit.backend import KernelArgumentError, get_backend
 from couplekit.backend.signature import parse_kernels
@@ -153,7 +153,7 @@ def test_an_fp16_module_refuses_float32_populations(cpu):
     s = random_state(3, BOUNDARY_SETS["periodic"])  # float32 f
     with pytest.raises(KernelArgumentError, match="float16"):
         ko.collide_stream(
-            s["f"], s["flags"], s["velocity"], None, None, None, None, s["pbar"], 0, *PARAMS, *GRAVITY
+            s["f"], s["flags"], s["velocity"], None, None, None, s["pbar"], 0, *PARAMS, *GRAVITY
         )  # fmt: skip
 
 
@@ -168,8 +168,8 @@ def test_collide_stream_matches_reference_fp16(cpu, effects, boundaries, parity)
     f0 = sk["f"].copy()
     for ops, s in ((ko, sk), (ro, sr)):
         ops.collide_stream(
-            s["f"], s["flags"], s["velocity"], s["phi"], s["mu"], s["eps"], s["force"], s["pbar"], parity,
-            *PARAMS, *GRAVITY,
+            s["f"], s["flags"], s["velocity"], s["phi"], s["eps"], s["force"], s["pbar"], parity,
+            *PARAMS, *GRAVITY, chemical_potential=chem_of(ops, s),
         )  # fmt: skip
     state = (sk["flags"] == 0) | (sk["flags"] == 3)
     # a cell with wall links reads the parked (rounded) bounced values: its velocity and its 27 outputs (pushed
@@ -264,7 +264,7 @@ def test_phase_collide_stream_matches_reference_fp16(cpu, periodic, parity):
     kernel = PhaseFieldKernelOps(cpu, periodic, storage="fp16")
     ref = PhaseFieldReferenceOps(periodic, storage="fp16")
     h_k, h_r = s["h"].copy(), s["h"].copy()
-    args = (s["phi"], s["grad"], s["u"], s["source"], s["flags"], parity, 0.04, 4.5, 0.6)
+    args = (s["phi"], s["u"], s["source"], s["flags"], parity, 0.04, 4.5, 0.6)
     kernel.collide_stream(h_k, *args)
     ref.collide_stream(h_r, *args)
     # the rest population is the exact balance of the six rounded moving ones (kernels/phasefield.cu

@@ -33,7 +33,7 @@ def _state(seed):
 def _collide(ops, f, flags, vel, pbar, nu, g):
     fpre = f.copy()
     # parity 0: purely local, the post-collision f*_j is stored in slot opp(j) of the same cell
-    ops.collide_stream(f, flags, vel, None, None, None, None, pbar, 0, 1.0, 1.0, nu, nu, *g)
+    ops.collide_stream(f, flags, vel, None, None, None, pbar, 0, 1.0, 1.0, nu, nu, *g)
     inner = (slice(None), slice(1, -1), slice(1, -1), slice(1, -1))
     # full populations (the arrays hold f - w)
     return from_stored(fpre)[inner], from_stored(f[OPP27])[inner], vel[inner].astype(np.float64)

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from fluid_states import BOUNDARY_SETS, random_state
+from fluid_states import BOUNDARY_SETS, chem_of, random_state
 
 from couplekit.fluid import KernelOps, ReferenceOps, from_stored, to_stored
 from couplekit.fluid.grid import Boundaries, Face
@@ -48,8 +48,8 @@ def test_collide_stream_matches_reference(cpu, effects, boundaries, parity):
     sk, sr = _pair(11 + parity, BOUNDARY_SETS[boundaries])
     for ops, s in ((ko, sk), (ro, sr)):
         ops.collide_stream(
-            s["f"], s["flags"], s["velocity"], s["phi"], s["mu"], s["eps"], s["force"], s["pbar"], parity,
-            *PARAMS, *GRAVITY,
+            s["f"], s["flags"], s["velocity"], s["phi"], s["eps"], s["force"], s["pbar"], parity,
+            *PARAMS, *GRAVITY, chemical_potential=chem_of(ops, s),
         )  # fmt: skip
     state = (sk["flags"] == 0) | (sk["flags"] == 3)
     np.testing.assert_allclose(sk["f"][:, state], sr["f"][:, state], rtol=0, atol=ATOL)
@@ -79,8 +79,8 @@ def test_collide_stream_closures_match_reference(cpu, closure, effects, parity):
         s["eps"][: s["eps"].shape[0] // 2] = 1.0  # sand-free cells: the odd-rate floor acts only there
     for ops, s in ((ko, sk), (ro, sr)):
         ops.collide_stream(
-            s["f"], s["flags"], s["velocity"], s["phi"], s["mu"], s["eps"], s["force"], s["pbar"], parity,
-            *PARAMS, *GRAVITY, *CLOSURES[closure],
+            s["f"], s["flags"], s["velocity"], s["phi"], s["eps"], s["force"], s["pbar"], parity,
+            *PARAMS, *GRAVITY, *CLOSURES[closure], chemical_potential=chem_of(ops, s),
         )  # fmt: skip
     state = (sk["flags"] == 0) | (sk["flags"] == 3)
     np.testing.assert_allclose(sk["f"][:, state], sr["f"][:, state], rtol=0, atol=ATOL)
@@ -90,8 +90,8 @@ def test_collide_stream_closures_match_reference(cpu, closure, effects, parity):
     plain["f"] = to_stored(from_stored(plain["f"]) * noise)
     plain["eps"][: plain["eps"].shape[0] // 2] = 1.0
     ro.collide_stream(
-        plain["f"], plain["flags"], plain["velocity"], plain["phi"], plain["mu"], plain["eps"], plain["force"],
-        plain["pbar"], parity, *PARAMS, *GRAVITY,
+        plain["f"], plain["flags"], plain["velocity"], plain["phi"], plain["eps"], plain["force"],
+        plain["pbar"], parity, *PARAMS, *GRAVITY, chemical_potential=chem_of(ro, plain),
     )  # fmt: skip
     assert np.abs(plain["f"][:, state] - sr["f"][:, state]).max() > 1e-4
 
@@ -101,7 +101,7 @@ def test_closure_values_need_their_build(cpu, ops_class):
     """A closure value passed to ops built without it is refused, not silently ignored."""
     ops = KernelOps(cpu) if ops_class == "kernel" else ReferenceOps()
     s = random_state(3, BOUNDARY_SETS["periodic"])
-    args = (s["f"], s["flags"], s["velocity"], None, None, None, None, s["pbar"], 0, *PARAMS, *GRAVITY)
+    args = (s["f"], s["flags"], s["velocity"], None, None, None, s["pbar"], 0, *PARAMS, *GRAVITY)
     with pytest.raises(ValueError, match="les=True"):
         ops.collide_stream(*args, 0.1, 0.0)
     with pytest.raises(ValueError, match="odd_rate=True"):
@@ -213,8 +213,8 @@ def test_collide_stream_matches_reference_on_rows_wider_than_a_vector(cpu, effec
     sr = {k: v.copy() for k, v in sk.items()}
     for ops, s in ((ko, sk), (ro, sr)):
         ops.collide_stream(
-            s["f"], s["flags"], s["velocity"], s["phi"], s["mu"], s["eps"], s["force"], s["pbar"], parity,
-            *PARAMS, *GRAVITY,
+            s["f"], s["flags"], s["velocity"], s["phi"], s["eps"], s["force"], s["pbar"], parity,
+            *PARAMS, *GRAVITY, chemical_potential=chem_of(ops, s),
         )  # fmt: skip
     state = (sk["flags"] == 0) | (sk["flags"] == 3)
     np.testing.assert_allclose(sk["f"][:, state], sr["f"][:, state], rtol=0, atol=ATOL)
