@@ -118,9 +118,70 @@ LBM_INLINE void lbm_store(ck_store_t* RESTRICT f, const long long c, const long 
 #define LBM_NB_BULK 1
 #define LBM_NB_MASK 2
 #define LBM_C3(x, y, z) (((x) + 1) * 9 + ((y) + 1) * 3 + ((z) + 1))
-// LAP = 1 (EXTRAP = 0 only): g[3] also receives the isotropic Laplacian's sum sum_j w_j d_j (Eq. 23 without its
-// factor 2 / cs^2 = 6) with the same rule and the same reads: the flow's collide takes the chemical potential of
-// Eq. 22 from it, so no mu field is stored.
+#if !CK_ON_GPU
+// Host: the three components of lbm_gradient (the host form below) as a value.  A vector loop that keeps the result
+// (lbm_phi_stencil_chunk) needs it so: g++ kept a local output array in memory there ("not suitable for scatter
+// store").
+struct LbmVec3 {
+    float x, y, z;
+};
+template <int EXTRAP, int MODE>
+static inline __attribute__((always_inline)) LbmVec3 lbm_gradient_host(const float* RESTRICT s,
+                                                                       const unsigned char* RESTRICT flags,
+                                                                       const long long c, const int px,
+                                                                       const long long pxy, const unsigned int mask) {
+    const float sc = s[c];
+    // 0 / 1 as a 32-bit value (ck_select)
+#define LBM_NB_STENCIL(q, cell)                                           \
+    (MODE == LBM_NB_BULK ? 1u                                             \
+                         : (MODE == LBM_NB_MASK ? ((mask >> (q)) & 1u)    \
+                                                : (unsigned int)LBM_STENCIL_CELL(flags[cell])))
+    // the 26 neighbour values, read whatever the neighbour's kind (every padded cell holds a value) and once
+    // each: the extrapolation's s(x - c_j) is v[opp j].  With a second read of s(x - c_j) per link and float
+    // selects g++ judged the masked collide x loop "not profitable" and left it scalar.
+    float v[27];
+#define LBM_GRAD_LD(q) v[q] = s[c + LBM_OFFSET(q, px, pxy)];
+    LBM_FOR26(LBM_GRAD_LD)
+#undef LBM_GRAD_LD
+    float d[27];  // d_j by cube index (c_x + 1) * 9 + (c_y + 1) * 3 + (c_z + 1)
+    d[13] = 0.f;
+#define LBM_GRAD_LINK(q)                                                                                  \
+    {                                                                                                    \
+        const unsigned int snb = LBM_NB_STENCIL(q, c + LBM_OFFSET(q, px, pxy));                          \
+        float dq = MODE == LBM_NB_BULK ? v[q] : ck_select(snb, v[q] - sc, 0.f);                         \
+        if (EXTRAP && MODE != LBM_NB_BULK) {                                                             \
+            const unsigned int smb = LBM_NB_STENCIL(opposite_dir(q), c - LBM_OFFSET(q, px, pxy));        \
+            dq = ck_select((snb ^ 1u) & smb, sc - v[opposite_dir(q)], dq);                              \
+        }                                                                                                \
+        d[LBM_C3(CX27[q], CY27[q], CZ27[q])] = dq;                                                       \
+    }
+    LBM_FOR26(LBM_GRAD_LINK)
+#undef LBM_GRAD_LINK
+#undef LBM_NB_STENCIL
+    // difference along x of the line (y, z) etc.
+#define LBM_DX(b, cc) (d[LBM_C3(1, b, cc)] - d[LBM_C3(-1, b, cc)])
+#define LBM_DY(a, cc) (d[LBM_C3(a, 1, cc)] - d[LBM_C3(a, -1, cc)])
+#define LBM_DZ(a, b) (d[LBM_C3(a, b, 1)] - d[LBM_C3(a, b, -1)])
+    LbmVec3 r;
+    r.x = (2.f / 9.f) * LBM_DX(0, 0) +
+           (1.f / 18.f) * ((LBM_DX(1, 0) + LBM_DX(-1, 0)) + (LBM_DX(0, 1) + LBM_DX(0, -1))) +
+           (1.f / 72.f) * ((LBM_DX(1, 1) + LBM_DX(-1, -1)) + (LBM_DX(1, -1) + LBM_DX(-1, 1)));
+    r.y = (2.f / 9.f) * LBM_DY(0, 0) +
+           (1.f / 18.f) * ((LBM_DY(1, 0) + LBM_DY(-1, 0)) + (LBM_DY(0, 1) + LBM_DY(0, -1))) +
+           (1.f / 72.f) * ((LBM_DY(1, 1) + LBM_DY(-1, -1)) + (LBM_DY(1, -1) + LBM_DY(-1, 1)));
+    r.z = (2.f / 9.f) * LBM_DZ(0, 0) +
+           (1.f / 18.f) * ((LBM_DZ(1, 0) + LBM_DZ(-1, 0)) + (LBM_DZ(0, 1) + LBM_DZ(0, -1))) +
+           (1.f / 72.f) * ((LBM_DZ(1, 1) + LBM_DZ(-1, -1)) + (LBM_DZ(1, -1) + LBM_DZ(-1, 1)));
+#undef LBM_DX
+#undef LBM_DY
+#undef LBM_DZ
+    return r;
+}
+#endif
+
+// LAP = 1 (GPU, EXTRAP = 0 only): g[3] also receives the isotropic Laplacian's sum sum_j w_j d_j (Eq. 23 without
+// its factor 2 / cs^2 = 6) with the same rule and the same reads: the flow's collide takes the chemical potential
+// of Eq. 22 from it, so no mu field is stored (host: lbm_laplacian_sum).
 template <int EXTRAP, int MODE = LBM_NB_FLAGS, int LAP = 0>
 LBM_INLINE void lbm_gradient(const float* RESTRICT s, const unsigned char* RESTRICT flags, const long long c,
                              const int px, const long long pxy, float* RESTRICT g, const unsigned int mask = 0u) {
@@ -172,58 +233,40 @@ LBM_INLINE void lbm_gradient(const float* RESTRICT s, const unsigned char* RESTR
     g[2] = g2;
     if (LAP) g[3] = lap;
 #else
-    // 0 / 1 as a 32-bit value (ck_select)
-#define LBM_NB_STENCIL(q, cell)                                           \
-    (MODE == LBM_NB_BULK ? 1u                                             \
-                         : (MODE == LBM_NB_MASK ? ((mask >> (q)) & 1u)    \
-                                                : (unsigned int)LBM_STENCIL_CELL(flags[cell])))
-    // the 26 neighbour values, read whatever the neighbour's kind (every padded cell holds a value) and once
-    // each: the extrapolation's s(x - c_j) is v[opp j].  With a second read of s(x - c_j) per link and float
-    // selects g++ judged the masked collide x loop "not profitable" and left it scalar.
-    float v[27];
-#define LBM_GRAD_LD(q) v[q] = s[c + LBM_OFFSET(q, px, pxy)];
-    LBM_FOR26(LBM_GRAD_LD)
-#undef LBM_GRAD_LD
-    float d[27];  // d_j by cube index (c_x + 1) * 9 + (c_y + 1) * 3 + (c_z + 1)
-    d[13] = 0.f;
-#define LBM_GRAD_LINK(q)                                                                                  \
-    {                                                                                                    \
-        const unsigned int snb = LBM_NB_STENCIL(q, c + LBM_OFFSET(q, px, pxy));                          \
-        float dq = MODE == LBM_NB_BULK ? v[q] : ck_select(snb, v[q] - sc, 0.f);                         \
-        if (EXTRAP && MODE != LBM_NB_BULK) {                                                             \
-            const unsigned int smb = LBM_NB_STENCIL(opposite_dir(q), c - LBM_OFFSET(q, px, pxy));        \
-            dq = ck_select((snb ^ 1u) & smb, sc - v[opposite_dir(q)], dq);                              \
-        }                                                                                                \
-        d[LBM_C3(CX27[q], CY27[q], CZ27[q])] = dq;                                                       \
-    }
-    LBM_FOR26(LBM_GRAD_LINK)
-#undef LBM_GRAD_LINK
-#undef LBM_NB_STENCIL
-    // difference along x of the line (y, z) etc.
-#define LBM_DX(b, cc) (d[LBM_C3(1, b, cc)] - d[LBM_C3(-1, b, cc)])
-#define LBM_DY(a, cc) (d[LBM_C3(a, 1, cc)] - d[LBM_C3(a, -1, cc)])
-#define LBM_DZ(a, b) (d[LBM_C3(a, b, 1)] - d[LBM_C3(a, b, -1)])
-    g[0] = (2.f / 9.f) * LBM_DX(0, 0) +
-           (1.f / 18.f) * ((LBM_DX(1, 0) + LBM_DX(-1, 0)) + (LBM_DX(0, 1) + LBM_DX(0, -1))) +
-           (1.f / 72.f) * ((LBM_DX(1, 1) + LBM_DX(-1, -1)) + (LBM_DX(1, -1) + LBM_DX(-1, 1)));
-    g[1] = (2.f / 9.f) * LBM_DY(0, 0) +
-           (1.f / 18.f) * ((LBM_DY(1, 0) + LBM_DY(-1, 0)) + (LBM_DY(0, 1) + LBM_DY(0, -1))) +
-           (1.f / 72.f) * ((LBM_DY(1, 1) + LBM_DY(-1, -1)) + (LBM_DY(1, -1) + LBM_DY(-1, 1)));
-    g[2] = (2.f / 9.f) * LBM_DZ(0, 0) +
-           (1.f / 18.f) * ((LBM_DZ(1, 0) + LBM_DZ(-1, 0)) + (LBM_DZ(0, 1) + LBM_DZ(0, -1))) +
-           (1.f / 72.f) * ((LBM_DZ(1, 1) + LBM_DZ(-1, -1)) + (LBM_DZ(1, -1) + LBM_DZ(-1, 1)));
-#undef LBM_DX
-#undef LBM_DY
-#undef LBM_DZ
-    if (LAP) {
-        float lap = 0.f;
-#define LBM_LAP_TERM(q) lap += W27[q] * (MODE == LBM_NB_BULK ? v[q] - sc : d[LBM_C3(CX27[q], CY27[q], CZ27[q])]);
-        LBM_FOR26(LBM_LAP_TERM)
-#undef LBM_LAP_TERM
-        g[3] = lap;
-    }
+    (void)sc;
+    static_assert(!LAP, "host: the Laplacian's sum is lbm_laplacian_sum, in a loop of its own");
+    const LbmVec3 r = lbm_gradient_host<EXTRAP, MODE>(s, flags, c, px, pxy, mask);
+    g[0] = r.x;
+    g[1] = r.y;
+    g[2] = r.z;
 #endif
 }
+
+#if !CK_ON_GPU
+// Host: the Laplacian's sum of lbm_gradient's LAP (sum_j w_j d_j, the EXTRAP = 0 rule, MODE and `mask` as there)
+// as a value, for a vector loop of its own (lbm_chemical_potential_chunk): g++ kept lbm_gradient's output array in
+// memory inside such a loop ("not suitable for scatter store").
+template <int MODE>
+static inline __attribute__((always_inline)) float lbm_laplacian_sum(const float* RESTRICT s,
+                                                                     const unsigned char* RESTRICT flags,
+                                                                     const long long c, const int px,
+                                                                     const long long pxy, const unsigned int mask) {
+    const float sc = s[c];
+    float sum = 0.f;
+#define LBM_LAP_LINK(q)                                                                                  \
+    {                                                                                                    \
+        const long long cq = c + LBM_OFFSET(q, px, pxy);                                                 \
+        const unsigned int snb = MODE == LBM_NB_BULK                                                     \
+                                     ? 1u                                                                \
+                                     : (MODE == LBM_NB_MASK ? ((mask >> (q)) & 1u)                       \
+                                                            : (unsigned int)LBM_STENCIL_CELL(flags[cq])); \
+        sum += W27[q] * ck_select(snb, s[cq] - sc, 0.f);                                                 \
+    }
+    LBM_FOR26(LBM_LAP_LINK)
+#undef LBM_LAP_LINK
+    return sum;
+}
+#endif
 
 // Link mask of a padded cell c for LBM_NB_MASK: bit 0 = c is FLUID (updated), bit j (1..26) = x + c_j is a
 // stencil cell.  LBM_FULL_MASK: a fluid cell whose every neighbour is a stencil cell.
