@@ -133,3 +133,35 @@ def test_current_velocity_is_sum_f_c_and_leaves_the_state_alone(steps):
     b.step(3)
     c.step(3)
     np.testing.assert_array_equal(b.state()["f"], c.state()["f"])
+
+
+def test_phase_gradients_diagnostic_is_eqs_21_23_of_the_current_phi():
+    """The step stores neither grad phi nor mu (the collides compute them from phi); FluidSolver.phase_gradients
+    computes both on demand: Eq. 21's gradient and Eq. 22's mu with only FLUID neighbours' values, checked cell
+    by cell against a direct sum over the 27 neighbours (float64; the kernel sums in float32: 1e-6)."""
+    from couplekit.fluid.grid import FLUID
+    from couplekit.lattice import C27, W27
+
+    s = _solver(get_backend("cpu"), two_phase=True)
+    s.step(3)
+    assert not hasattr(s, "grad") and not hasattr(s, "mu")
+    grad, mu = (s.backend.to_host(a) for a in s.phase_gradients())
+    phi = s.backend.to_host(s.phi).astype(np.float64)
+    flags = s.backend.to_host(s.flags)
+    checked = 0
+    for z, y, x in zip(*np.nonzero(flags[INTERIOR] == FLUID), strict=True):
+        c = (z + 1, y + 1, x + 1)
+        g, lap = np.zeros(3), 0.0
+        for cj, wj in zip(C27, W27, strict=True):
+            nb = (c[0] + cj[2], c[1] + cj[1], c[2] + cj[0])
+            v = phi[nb] if flags[nb] == FLUID else phi[c]
+            g += 3.0 * wj * cj * v  # Eq. 21 (c_j as (x, y, z))
+            lap += 6.0 * wj * (v - phi[c])  # Eq. 23
+        p = phi[c]
+        chem = 4.0 * s.beta * p * (p - 1.0) * (p - 0.5) - s.kappa * lap  # Eq. 22
+        np.testing.assert_allclose(grad[(slice(None), *c)], g, rtol=0, atol=1e-6)
+        assert mu[c] == pytest.approx(chem, abs=1e-6)
+        checked += 1
+    assert checked > 100 and np.abs(grad).max() > 0.05  # an interface is there
+    with pytest.raises(ValueError, match="two-phase"):
+        _solver(get_backend("cpu")).phase_gradients()
