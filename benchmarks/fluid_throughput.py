@@ -41,22 +41,22 @@ BYTES_TWO_PHASE_STEP = two_phase_step_bytes()
 
 
 NOTE = (
-    "Why the targets are missed (analysis of 2026-12-03, after the host vectorisation of every stage's x loops; "
-    "re-check when the kernels change). Collide-stream (single phase, periodic): 0.60x / 0.72x lbmpy at 64^3 / "
-    "128^3 in that run. (1) Ours moves 233 B/cell (it also writes u, reads p-bar and flags) against lbmpy's 216, "
-    "so at equal bandwidth efficiency the ceiling is 0.93x; (2) the 26-neighbour p-bar gradient and the u write "
-    "cost ~25 % (ablation of 2026-11-22: no gradient 37 -> 48 MLUPS at 96^3); (3) the vector loop is ~600 "
-    "instructions per vector of cells against lbmpy's ~470, a third of them stack spills and reloads of the "
-    "stream pointers (27 load + 27 store + 26 stencil bases), which g++ cannot keep in 16 registers. Full "
-    "two-phase step: 33 / 41 % of the roofline at 64^3 / 128^3 (was 22-24 % before 2026-12-03, when g++ left "
-    "the phase collide-stream, the wall rows of every stage and every two-phase / odd-rate collide scalar: "
-    "float selects, bools and a skip in the x loops, see -fopt-info-vec). It is still ~15 passes over memory "
-    "per step, each an OpenMP fork/join (flow: halo copies, pressure update, filter, collide-stream, fold; phase "
-    "field: collide-stream, macroscopic, gradients); the phase gradients (21 B/cell) and the filter (9 B/cell) "
-    "are compute-bound on their 27-point stencils, and the phase macroscopic's wall rows and the odd phase step's "
-    "boundary cells still run scalar (per-cell boundary rules). Next step: fuse pressure update + filter + "
-    "phase-field macroscopic / gradients into the collide kernels (lagged pressure, lbm-peers note: ~400 "
-    "B/cell-step) and one OpenMP region per step."
+    "Why the targets are missed (analysis of 2026-12-03, session 11, after the host vectorisation of every stage's "
+    "x loops and the fusion of grad phi / mu into the collides; re-check when the kernels change). Collide-stream "
+    "(single phase, periodic): 0.66x / 0.74x lbmpy at 64^3 / 128^3 in that run. (1) Ours moves 233 B/cell (it "
+    "also writes u, reads p-bar and flags) against lbmpy's 216, so at equal bandwidth efficiency the ceiling is "
+    "0.93x; (2) the 26-neighbour p-bar gradient and the u write cost ~25 % (ablation of 2026-11-22: no gradient "
+    "37 -> 48 MLUPS at 96^3); (3) the vector loop is ~600 instructions per vector of cells against lbmpy's ~470, "
+    "a third of them stack spills and reloads of the stream pointers (27 load + 27 store + 26 stencil bases), "
+    "which g++ cannot keep in 16 registers. Full two-phase step: 29 / 37 % of the roofline at 64^3 / 128^3 in "
+    "this run (33 / 41 % in session 10's, on a faster machine state; relative to the single-phase collide of the "
+    "same run 3 % faster than then). It is ~14 passes over memory per step, each an OpenMP fork/join (flow: halo "
+    "copies, pressure update, filter, collide-stream, fold; phase field: collide-stream, macroscopic); grad phi "
+    "and mu are computed in the collides (477 B/cell-step, 514 before), and on the host their 27-point stencils "
+    "are compute-bound, so they cost about what the former gradients pass did; the phase macroscopic's wall rows "
+    "and the odd phase step's boundary cells still run scalar (per-cell boundary rules). Next step: fuse the "
+    "pressure update + filter into the collide with a lagged pressure (lbm-peers note: ~400 B/cell-step) and one "
+    "OpenMP region per step."
 )
 
 
