@@ -203,7 +203,8 @@ static inline __attribute__((always_inline)) void lbm_phi_stencil_chunk(
         mu[i] = lbm_chemical_potential(phi[c0 + i], lbm_laplacian_sum<MODE>(phi, flags, c0 + i, px, pxy, m), beta,
                                        kappa);
 #else
-        (void)mu, (void)beta, (void)kappa;
+        mu[i] = 0.f;  // not read without surface tension; written so the collide gets no indeterminate value
+        (void)beta, (void)kappa;
 #endif
     }
 }
@@ -561,16 +562,19 @@ KERNEL void lbm_collide_stream(const long long n, ck_store_t* RESTRICT f /* size
 #if CK_TWO_PHASE
 #define LBM_MU_CHUNK(MODE, c0, len, masks) \
     lbm_phi_stencil_chunk<MODE>(phi, flags, c0, len, px, pxy, masks, beta, kappa, gbx, gby, gbz, mub);
+#define LBM_CHUNK_BUFFERS float mub[LBM_ROW_CHUNK], gbx[LBM_ROW_CHUNK], gby[LBM_ROW_CHUNK], gbz[LBM_ROW_CHUNK];
+#define LBM_CHUNK_VALUES(i) mub[i], gbx[i], gby[i], gbz[i]
 #else
 #define LBM_MU_CHUNK(MODE, c0, len, masks)
+#define LBM_CHUNK_BUFFERS
+#define LBM_CHUNK_VALUES(i) 0.f, 0.f, 0.f, 0.f
 #endif
 #define LBM_COLLIDE_LOOP(ODD)                                                                          \
     CK_PRAGMA(omp parallel for collapse(2) schedule(static))                                           \
     for (int z = 0; z < nz; ++z)                                                                       \
         for (int y = 0; y < ny; ++y) {                                                                 \
             const long long row = px * (long long)(y + 1) + pxy * (z + 1);                             \
-            float mub[LBM_ROW_CHUNK] = {}, gbx[LBM_ROW_CHUNK] = {}, gby[LBM_ROW_CHUNK] = {};            \
-            float gbz[LBM_ROW_CHUNK] = {};                                                             \
+            LBM_CHUNK_BUFFERS                                                                          \
             unsigned int masks[LBM_ROW_CHUNK], scratch[10 * (LBM_ROW_CHUNK + 2)];                      \
             const bool bulk = lbm_rows_all_fluid(flags, row, 0, nx + 1, px, pxy);                      \
             for (int x0 = 1; x0 <= nx; x0 += LBM_ROW_CHUNK) {                                          \
@@ -581,15 +585,15 @@ KERNEL void lbm_collide_stream(const long long n, ck_store_t* RESTRICT f /* size
                     CK_PRAGMA(omp simd)                                                                \
                     for (int i = 0; i < len; ++i)                                                      \
                         lbm_collide_cell<ODD, LBM_NB_BULK>(c0 + i, LBM_CELL_ARGS(px, pxy, N), LBM_FULL_MASK, \
-                                                           mub[i], gbx[i], gby[i], gbz[i]);            \
+                                                           LBM_CHUNK_VALUES(i));                       \
                     continue;                                                                          \
                 }                                                                                      \
                 lbm_link_masks(flags, c0, len, px, pxy, masks, scratch);                               \
                 LBM_MU_CHUNK(LBM_NB_MASK, c0, len, masks)                                              \
                 CK_PRAGMA(omp simd)                                                                    \
                 for (int i = 0; i < len; ++i)                                                          \
-                    lbm_collide_cell<ODD, LBM_NB_MASK, 1>(c0 + i, LBM_CELL_ARGS(px, pxy, N), masks[i], mub[i], \
-                                                          gbx[i], gby[i], gbz[i]);                     \
+                    lbm_collide_cell<ODD, LBM_NB_MASK, 1>(c0 + i, LBM_CELL_ARGS(px, pxy, N), masks[i],          \
+                                                          LBM_CHUNK_VALUES(i));                        \
             }                                                                                          \
         }
 #endif
@@ -603,5 +607,7 @@ KERNEL void lbm_collide_stream(const long long n, ck_store_t* RESTRICT f /* size
 #undef LBM_CELL_ARGS
 #if !CK_ON_GPU
 #undef LBM_MU_CHUNK
+#undef LBM_CHUNK_BUFFERS
+#undef LBM_CHUNK_VALUES
 #endif
 }

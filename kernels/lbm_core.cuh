@@ -244,7 +244,7 @@ LBM_INLINE void lbm_gradient(const float* RESTRICT s, const unsigned char* RESTR
 
 #if !CK_ON_GPU
 // Host: the Laplacian's sum of lbm_gradient's LAP (sum_j w_j d_j, the EXTRAP = 0 rule, MODE and `mask` as there)
-// as a value, for a vector loop of its own (lbm_chemical_potential_chunk): g++ kept lbm_gradient's output array in
+// as a value, for a vector loop of its own (lbm_phi_stencil_chunk): g++ kept lbm_gradient's output array in
 // memory inside such a loop ("not suitable for scatter store").
 template <int MODE>
 static inline __attribute__((always_inline)) float lbm_laplacian_sum(const float* RESTRICT s,
