@@ -451,7 +451,9 @@ class FluidSolver:
 
     def phase_gradients(self) -> tuple[Any, Any]:
         """(grad φ, μ_φ) of the current φ (Eqs. 21-23) as padded backend arrays (μ_φ None without surface
-        tension): a diagnostic computed on demand; the step computes both inside its collides, stores neither."""
+        tension): a diagnostic computed on demand; the step computes both inside its collides, stores neither.
+        The stencils take only FLUID neighbours' values (the phase field's rule, as its collide's grad φ); the
+        flow's collide also takes outflow ghosts' values for its μ_φ, so next to an outflow face the two differ."""
         if not self.two_phase:
             raise ValueError("phase_gradients needs a two-phase fluid (FluidParams phases = 2)")
         xp = self.xp
