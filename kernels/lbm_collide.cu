@@ -214,7 +214,8 @@ static inline __attribute__((always_inline)) void lbm_phi_stencil_chunk(
 // neighbour, see lbm_gradient; `mask` = lbm_link_mask of c for LBM_NB_MASK; GUARD: see above, host only)
 template <int ODD, int MODE, int GUARD = 0>
 LBM_INLINE void lbm_collide_cell(const long long c, ck_store_t* RESTRICT f, const unsigned char* RESTRICT flags,
-                                 float* RESTRICT vel, const float* RESTRICT phi, const float* RESTRICT eps, const float* RESTRICT force,
+                                 float* RESTRICT vel, const float* RESTRICT phi, const float* RESTRICT eps,
+                                 const float* RESTRICT force,
                                  const float* RESTRICT pbar, const int px, const long long pxy, const long long N,
                                  const float rho_h, const float rho_l, const float nu_h, const float nu_l,
                                  const float gx, const float gy, const float gz, const float c_les,
@@ -560,12 +561,12 @@ KERNEL void lbm_collide_stream(const long long n, ck_store_t* RESTRICT f /* size
     // Two-phase: the chunk's grad phi and mu_phi (Eq. 22) are computed first by their own vector loop into the
     // stack buffers gb*, mub (lbm_phi_stencil_chunk), then read by the collide loop.
 #if CK_TWO_PHASE
-#define LBM_MU_CHUNK(MODE, c0, len, masks) \
+#define LBM_PHI_CHUNK(MODE, c0, len, masks) \
     lbm_phi_stencil_chunk<MODE>(phi, flags, c0, len, px, pxy, masks, beta, kappa, gbx, gby, gbz, mub);
 #define LBM_CHUNK_BUFFERS float mub[LBM_ROW_CHUNK], gbx[LBM_ROW_CHUNK], gby[LBM_ROW_CHUNK], gbz[LBM_ROW_CHUNK];
 #define LBM_CHUNK_VALUES(i) mub[i], gbx[i], gby[i], gbz[i]
 #else
-#define LBM_MU_CHUNK(MODE, c0, len, masks)
+#define LBM_PHI_CHUNK(MODE, c0, len, masks)
 #define LBM_CHUNK_BUFFERS
 #define LBM_CHUNK_VALUES(i) 0.f, 0.f, 0.f, 0.f
 #endif
@@ -581,7 +582,7 @@ KERNEL void lbm_collide_stream(const long long n, ck_store_t* RESTRICT f /* size
                 const int len = nx + 1 - x0 < LBM_ROW_CHUNK ? nx + 1 - x0 : LBM_ROW_CHUNK;             \
                 const long long c0 = row + x0;                                                         \
                 if (bulk) {                                                                            \
-                    LBM_MU_CHUNK(LBM_NB_BULK, c0, len, masks)                                          \
+                    LBM_PHI_CHUNK(LBM_NB_BULK, c0, len, masks)                                          \
                     CK_PRAGMA(omp simd)                                                                \
                     for (int i = 0; i < len; ++i)                                                      \
                         lbm_collide_cell<ODD, LBM_NB_BULK>(c0 + i, LBM_CELL_ARGS(px, pxy, N), LBM_FULL_MASK, \
@@ -589,7 +590,7 @@ KERNEL void lbm_collide_stream(const long long n, ck_store_t* RESTRICT f /* size
                     continue;                                                                          \
                 }                                                                                      \
                 lbm_link_masks(flags, c0, len, px, pxy, masks, scratch);                               \
-                LBM_MU_CHUNK(LBM_NB_MASK, c0, len, masks)                                              \
+                LBM_PHI_CHUNK(LBM_NB_MASK, c0, len, masks)                                              \
                 CK_PRAGMA(omp simd)                                                                    \
                 for (int i = 0; i < len; ++i)                                                          \
                     lbm_collide_cell<ODD, LBM_NB_MASK, 1>(c0 + i, LBM_CELL_ARGS(px, pxy, N), masks[i],          \
@@ -606,7 +607,7 @@ KERNEL void lbm_collide_stream(const long long n, ck_store_t* RESTRICT f /* size
 #undef LBM_COLLIDE_LOOP
 #undef LBM_CELL_ARGS
 #if !CK_ON_GPU
-#undef LBM_MU_CHUNK
+#undef LBM_PHI_CHUNK
 #undef LBM_CHUNK_BUFFERS
 #undef LBM_CHUNK_VALUES
 #endif

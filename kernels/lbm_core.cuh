@@ -185,15 +185,15 @@ static inline __attribute__((always_inline)) LbmVec3 lbm_gradient_host(const flo
 template <int EXTRAP, int MODE = LBM_NB_FLAGS, int LAP = 0>
 LBM_INLINE void lbm_gradient(const float* RESTRICT s, const unsigned char* RESTRICT flags, const long long c,
                              const int px, const long long pxy, float* RESTRICT g, const unsigned int mask = 0u) {
-    const float sc = s[c];
 #if CK_ON_GPU
+    const float sc = s[c];
 #define LBM_NB_STENCIL(q, cell) \
     (MODE == LBM_NB_BULK ? true : (MODE == LBM_NB_MASK ? ((mask >> (q)) & 1u) != 0u : LBM_STENCIL_CELL(flags[cell])))
 #define LBM_NB_STENCIL_G(q, cell)                                                                           \
     (MODE == LBM_NB_BULK ? true                                                                            \
                          : (MODE == LBM_NB_MASK ? ((gmask >> (q)) & 1u) != 0u : LBM_STENCIL_CELL(flags[cell])))
     // GPU: the sum by opposite pairs (q, q + 1 = opp q, q odd), g += 3 w_q c_q (d_q - d_opp q), accumulated as
-    // each pair is read: 2 loaded values live per pair instead of the 26 differences the factorised sum below
+    // each pair is read: 2 loaded values live per pair instead of the 26 differences the host's factorised sum
     // keeps until the end (measured on sm_90 under 128 registers, everything else as now: with the factorised
     // sum the two-phase collide-stream variants spilled 28-288 bytes, with this one none).  Same terms, other
     // summation order: float32 round-off from the host build.
@@ -233,7 +233,6 @@ LBM_INLINE void lbm_gradient(const float* RESTRICT s, const unsigned char* RESTR
     g[2] = g2;
     if (LAP) g[3] = lap;
 #else
-    (void)sc;
     static_assert(!LAP, "host: the Laplacian's sum is lbm_laplacian_sum, in a loop of its own");
     const LbmVec3 r = lbm_gradient_host<EXTRAP, MODE>(s, flags, c, px, pxy, mask);
     g[0] = r.x;

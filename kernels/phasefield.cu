@@ -29,6 +29,7 @@
 // After an even step the populations sit in reversed slots, after an odd step in natural order.
 #include "common.cuh"
 #include "lattice.cuh"
+#include "lbm_core.cuh"  // the host row tests lbm_row_fluid / lbm_rows_all_fluid (the flags are the flow's)
 
 // 0: surface tension sigma = 0, the chemical potential (double well + Laplacian) is compiled out.
 // variants: CK_PF_SURFACE_TENSION=0,1 CK_PF_SOURCE=0,1 CK_STORAGE_FP16=0,1
@@ -68,6 +69,9 @@
 #define PF_WALL 1
 #define PF_INFLOW 2
 #define PF_OUTFLOW 3
+#if PF_FLUID != FLAG_FLUID || PF_WALL != FLAG_WALL || PF_INFLOW != FLAG_INFLOW || PF_OUTFLOW != FLAG_OUTFLOW
+#error "the phase field reads the flow's cell flags (kernels/lbm_core.cuh)"
+#endif
 
 // |grad phi|^2 below which the interface normal is set to zero (bulk phases, round-off gradients)
 #define PF_GRAD_EPS2 1e-12f
@@ -89,16 +93,6 @@
 // a loop over 32-bit neighbour masks built from widened flags.  A byte (flag) read inside an x loop makes g++
 // choose byte-wide vectors (four registers per float value) or leave the loop scalar.
 #define PF_ROW_CHUNK 512
-
-// true when the cells xa..xb of the padded row starting at index `row` (X = 0) are all FLUID
-static inline __attribute__((always_inline)) bool pf_row_fluid(const unsigned char* RESTRICT flags,
-                                                               const long long row, const int xa, const int xb) {
-    unsigned int any = 0;
-    const unsigned char* r = flags + row;
-    CK_PRAGMA(omp simd reduction(| : any))
-    for (int x = xa; x <= xb; ++x) any |= r[x];
-    return any == 0;  // PF_FLUID == 0
-}
 
 // FLUID masks of the `len` cells from padded index c0 for the 27-point stencils: bit k (cube order
 // k = (dz + 1) * 9 + (dy + 1) * 3 + (dx + 1), as PF_W27_CUBE; bit 13 = the cell itself) is set when cell
@@ -125,16 +119,6 @@ static inline __attribute__((always_inline)) void pf_fluid_masks(const unsigned 
     }
 }
 
-// true when the cells 0..nx + 1 of the 9 padded rows around the row starting at `row` (itself included) are all
-// FLUID: then every 27-point stencil of that row's interior cells sees only FLUID cells (PF_NB_BULK)
-static inline __attribute__((always_inline)) bool pf_rows9_fluid(const unsigned char* RESTRICT flags,
-                                                                 const long long row, const long long sy,
-                                                                 const long long sz, const int nx) {
-    bool bulk = true;
-    for (int r = 0; r < 9; ++r)
-        bulk = bulk && pf_row_fluid(flags, row + (r % 3 - 1) * sy + (r / 3 - 1) * sz, 0, nx + 1);
-    return bulk;
-}
 #endif
 
 // D3Q27 weights in 3x3x3 cube order, index (dz+1)*9 + (dy+1)*3 + (dx+1) (the isotropic stencils, Eqs. 21, 23)
@@ -323,9 +307,9 @@ static inline __attribute__((always_inline)) bool pf_bulk_row(const unsigned cha
     for (int q = 0; q < 7; ++q) off[q] = nb[q] - nb[0];
     if (nx < 3) return false;
     const long long row = nb[0] - 2;
-    bool bulk = pf_row_fluid(flags, row, 1, nx);
+    bool bulk = lbm_row_fluid(flags, row, 1, nx);
     if (NEIGH)
-        for (int q = 3; q < 7; ++q) bulk = bulk && pf_row_fluid(flags, row + off[q], 2, nx - 1);
+        for (int q = 3; q < 7; ++q) bulk = bulk && lbm_row_fluid(flags, row + off[q], 2, nx - 1);
     return bulk;
 }
 #endif
@@ -553,13 +537,13 @@ KERNEL void phase_gradients(const long long n, const float* RESTRICT phi /* size
         pf_gradient_cell<PF_NB_FLAGS>(c, phi, flags, grad, mu, sy, sz, ncell, beta, kappa, 0u);
     }
 #else
-    // host row scheme (pf_row_fluid): the 27 flag reads per cell in the x loop made this 21 B/cell stage cost a
-    // quarter of the flow collide
+    // host row scheme (lbm_rows_all_fluid): the 27 flag reads per cell in the x loop made this 21 B/cell stage
+    // cost a quarter of the flow collide
     CK_PRAGMA(omp parallel for collapse(2) schedule(static))
     for (int z = 0; z < nz; ++z)
         for (int y = 0; y < ny; ++y) {
             const long long row = sy * (y + 1) + sz * (z + 1);
-            if (pf_rows9_fluid(flags, row, sy, sz, nx)) {
+            if (lbm_rows_all_fluid(flags, row, 0, nx + 1, (int)sy, sz)) {
                 CK_PRAGMA(omp simd)
                 for (int x = 1; x <= nx; ++x)
                     pf_gradient_cell<PF_NB_BULK>(row + x, phi, flags, grad, mu, sy, sz, ncell, beta, kappa, 0u);
@@ -789,8 +773,8 @@ KERNEL void phase_collide_stream(const long long n, ck_store_t* RESTRICT h /* si
     // offsets (pull from h[opp q][c - d_q], push to h[q][c + d_q]: in a bulk run no link meets a boundary);
     // everything else the per-cell code of the GPU path.  The gradient of a chunk of cells is computed first, by
     // its own `omp simd` loop into a stack buffer (pf_gradient_chunk): PF_NB_BULK where the 9 rows around are
-    // all FLUID (pf_rows9_fluid), else with the neighbour masks of pf_fluid_masks (bit 13: the cell itself, the
-    // even step's `live`).  The stencil inside the collide loop measured slower (48^3 walled box, 1 thread:
+    // all FLUID (lbm_rows_all_fluid), else with the neighbour masks of pf_fluid_masks (bit 13: the cell itself,
+    // the even step's `live`).  The stencil inside the collide loop measured slower (48^3 walled box, 1 thread:
     // 2.9 ms against 2.35 for the former gradient pass + collide; its loop body holds the 7 populations and the
     // stencil in 16 AVX2 registers), the buffer stays in L1.  The same arithmetic per cell everywhere.
 #define PF_ST_BULK(q, i, v) PF_ST(h, q, i, v)
@@ -801,7 +785,7 @@ KERNEL void phase_collide_stream(const long long n, ck_store_t* RESTRICT h /* si
         for (int z = 0; z < nz; ++z)
             for (int y = 0; y < ny; ++y) {
                 const long long row = sy * (y + 1) + sz * (z + 1);
-                const bool bulk9 = pf_rows9_fluid(flags, row, sy, sz, nx);
+                const bool bulk9 = lbm_rows_all_fluid(flags, row, 0, nx + 1, (int)sy, sz);
                 unsigned int masks[PF_ROW_CHUNK], scratch[9 * (PF_ROW_CHUNK + 2)];
                 float gbx[PF_ROW_CHUNK], gby[PF_ROW_CHUNK], gbz[PF_ROW_CHUNK];
                 for (int x0 = 1; x0 <= nx; x0 += PF_ROW_CHUNK) {
@@ -861,7 +845,7 @@ KERNEL void phase_collide_stream(const long long n, ck_store_t* RESTRICT h /* si
                 // chunks of the row: the gradient of every cell first (a vector loop, also for the boundary cells,
                 // whose per-cell code was 2x the odd step's time with the stencil's 27 flag reads inside it), then
                 // the bulk run's part of the chunk, then its other cells
-                const bool bulk9 = bulk && pf_rows9_fluid(flags, row, sy, sz, nx);
+                const bool bulk9 = bulk && lbm_rows_all_fluid(flags, row, 0, nx + 1, (int)sy, sz);
                 unsigned int masks[PF_ROW_CHUNK], scratch[9 * (PF_ROW_CHUNK + 2)];
                 float gbx[PF_ROW_CHUNK], gby[PF_ROW_CHUNK], gbz[PF_ROW_CHUNK];
                 for (int x0 = 1; x0 <= nx; x0 += PF_ROW_CHUNK) {
