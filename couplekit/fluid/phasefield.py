@@ -103,6 +103,7 @@ __all__ = [
     "PhaseFieldReferenceOps",
     "PhaseFieldRunner",
     "chemical_potential_coefficients",
+    "gradient_fields",
     "interior",
     "interior_shape",
     "make_phase_field_ops",
@@ -226,6 +227,17 @@ def make_phase_field_ops(
     return PhaseFieldReferenceOps(periodic, surface_tension, source, storage)
 
 
+def gradient_fields(ops, phi, flags, beta: float, kappa: float):
+    """(grad phi, mu) of ``phi`` (Eqs. 21-23) as new padded arrays of the ops' backend, mu None without surface
+    tension: the on-demand diagnostic of :meth:`PhaseFieldRunner.gradients` and ``FluidSolver.phase_gradients``
+    (the steps compute both inside their collides and store neither)."""
+    xp = ops.xp
+    grad = xp.zeros((3, *phi.shape), dtype=np.float32)
+    mu = xp.zeros(phi.shape, dtype=np.float32) if ops.surface_tension else None
+    ops.gradients(phi, flags, grad, mu, beta, kappa)
+    return grad, mu
+
+
 class PhaseFieldRunner:
     """The phase field alone in a prescribed velocity field (validation, benchmarks, and a usage example).
 
@@ -274,13 +286,9 @@ class PhaseFieldRunner:
         self.ops.macroscopic(self.h, self.phi, self.u, self.flags, self.step_count)
 
     def gradients(self):
-        """(grad phi, mu) of the current phi as padded arrays of the ops' backend (Eqs. 21-23; mu is None
-        without surface tension): a diagnostic, the step does not need them stored."""
-        xp = self.ops.xp
-        grad = xp.zeros((3, *self.phi.shape), dtype=np.float32)
-        mu = xp.zeros(self.phi.shape, dtype=np.float32) if self.ops.surface_tension else None
-        self.ops.gradients(self.phi, self.flags, grad, mu, self.beta, self.kappa)
-        return grad, mu
+        """(grad phi, mu) of the current phi (:func:`gradient_fields`): a diagnostic, the step does not need them
+        stored."""
+        return gradient_fields(self.ops, self.phi, self.flags, self.beta, self.kappa)
 
     def volume(self) -> float:
         """Sigma phi over interior fluid cells (float64)."""

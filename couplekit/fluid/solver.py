@@ -456,11 +456,7 @@ class FluidSolver:
         flow's collide also takes outflow ghosts' values for its μ_φ, so next to an outflow face the two differ."""
         if not self.two_phase:
             raise ValueError("phase_gradients needs a two-phase fluid (FluidParams phases = 2)")
-        xp = self.xp
-        grad = xp.zeros((3,) + self.phi.shape, dtype=np.float32)
-        mu = xp.zeros(self.phi.shape, dtype=np.float32) if self.surface_tension else None
-        self.pf_ops.gradients(self.phi, self.flags, grad, mu, self.beta, self.kappa)
-        return grad, mu
+        return self._pf.gradient_fields(self.pf_ops, self.phi, self.flags, self.beta, self.kappa)
 
     def step(self, n: int = 1) -> None:
         """Advance ``n`` LBM steps."""
