@@ -108,6 +108,19 @@ def test_closure_values_need_their_build(cpu, ops_class):
         ops.collide_stream(*args, 0.0, 0.015)
 
 
+@pytest.mark.parametrize("ops_class", ["kernel", "reference"])
+def test_chemical_potential_is_required_exactly_with_surface_tension(cpu, ops_class):
+    """The collide computes mu_phi from phi with (beta, kappa): refused without them when built with surface
+    tension, and refused when given to ops built without it (it would be silently ignored)."""
+    make = (lambda **k: KernelOps(cpu, **k)) if ops_class == "kernel" else (lambda **k: ReferenceOps(**k))
+    s = random_state(3, BOUNDARY_SETS["periodic"])
+    args = (s["f"], s["flags"], s["velocity"], s["phi"], s["eps"], s["force"], s["pbar"], 0, *PARAMS, *GRAVITY)
+    with pytest.raises(ValueError, match="chemical_potential"):
+        make(**EFFECTS["two_phase_st"]).collide_stream(*args)
+    with pytest.raises(ValueError, match="chemical_potential"):
+        make(two_phase=True).collide_stream(*args, chemical_potential=(3e-3, 6e-3))
+
+
 @pytest.mark.parametrize("effects", ["single", "all"])
 @pytest.mark.parametrize("boundaries", list(BOUNDARY_SETS))
 @pytest.mark.parametrize("parity", [0, 1])
