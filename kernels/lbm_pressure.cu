@@ -256,6 +256,37 @@ KERNEL void lbm_pressure_filter(const long long n, const float* RESTRICT p /* si
 #endif
 }
 
+// The filter's three-point wall rule, a list kernel run after lbm_pressure_filter: for every listed cell c
+// (an interior fluid cell of a flat wall layer) and every link j set in its mask (couplekit.fluid.grid.
+// three_point_links: x + c_j a wall, x - c_j, x - 2 c_j and the six axis neighbours of x - 2 c_j stencil cells),
+// the wall neighbour takes p(x) + p(x - c_j) - p(x - 2 c_j) instead of the filter's two-point 2 p(x) - p(x - c_j):
+// pbar[c] += w_j [(p(x - c_j) - p(x - 2 c_j)) - (p(x) - p(x - c_j))].  Both are exact for a linear profile; the
+// three-point one filters the wall-normal period-2 mode a (-1)^k of the wall layer to a / 3 as in the interior
+// (the two-point one leaves it at a: Fig. 4's colander diverged from it, docs/fluid-stability.md).  One item per
+// cell, so no two items write one pbar; the masks and cells are built once per flags array, as the wall links.
+KERNEL void lbm_filter_wall_rule(const long long n, const float* RESTRICT p /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                                 float* RESTRICT pbar /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                                 const long long* RESTRICT cell /* size: n */,
+                                 const unsigned int* RESTRICT links /* size: n */, const int nx, const int ny,
+                                 const int nz) {
+    const int px = nx + 2;
+    const long long pxy = (long long)px * (ny + 2);
+    (void)nz;
+    FOR_EACH(i, n) {
+        const long long c = cell[i];
+        const unsigned int m = links[i];
+        const float pc = p[c];
+        float acc = 0.f;
+        for (int q = 1; q < 27; ++q) {
+            if (!((m >> q) & 1u)) continue;
+            const long long o = LBM_OFFSET(q, px, pxy);
+            const float pm = p[c - o];
+            acc += W27[q] * ((pm - p[c - 2 * o]) - (pc - pm));
+        }
+        pbar[c] += acc;
+    }
+}
+
 // out = sum_j f_j c_j of the current populations (read rule of the parity, no force shift) in interior fluid
 // cells: the fluid velocity "now", as the sand-fluid exchange needs it (odd parity: ghosts and wall links
 // must have been prepared as before an odd step)

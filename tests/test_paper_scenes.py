@@ -79,16 +79,23 @@ def test_fig03_castle_loses_sand_downstream():
 
 
 def test_fig04_colander_passes_sand_and_water():
-    """Fig. 4: a water jet carrying sand (fraction 0.2) falls into the perforated bowl. By 0.4 s sand and water
-    have passed its holes: particles below the bowl's bottom (z < 0.13 m; measured 676 at 0.37 s, 1504 at
-    0.47 s) and more water below it than the pool held (measured +2 % at 0.37 s, +5 % at 0.47 s)."""
+    """Fig. 4: a water jet carrying sand (fraction 0.2) falls into the perforated bowl; the whole small variant
+    (20 frames, 0.67 s). Sand and water pass its holes: particles below the bowl's bottom (z < 0.13 m; measured
+    1008 at 0.37 s, 3524 at 0.67 s) and more water below it than the pool held (measured +3 % at 0.37 s, +18 %
+    at 0.67 s). The run stays stable to its end (it diverged at step ~1036 before the pressure filter's
+    three-point wall rule, docs/fluid-stability.md): max lattice speed measured 0.098, volume drift +2.7e-4."""
     sim = _sim("fig04_colander")
     zc = _grid(sim)[2]
     below0 = _water(sim)[zc < 0.13].sum()
-    _frames(sim, 12)
+    speed = 0.0
+    for _ in range(sim.scene.time.frames):
+        _frames(sim, 1)
+        speed = max(speed, sim.diagnostics()["max_lattice_speed"])
     x = sim.particles()["x"]
-    assert np.sum(x[2] < 0.13) >= 300
-    assert _water(sim)[zc < 0.13].sum() > 1.01 * below0
+    assert np.sum(x[2] < 0.13) >= 2500
+    assert _water(sim)[zc < 0.13].sum() > 1.10 * below0
+    assert np.isfinite(speed) and speed < 0.12, f"max lattice speed {speed}"
+    assert abs(sim.diagnostics()["fluid_volume_drift"]) < 1e-3
 
 
 def _fig05_state(sim: Simulation) -> tuple[float, float]:

@@ -326,6 +326,75 @@ def slip_cells(flags: np.ndarray, periodic: tuple[bool, bool, bool], layers: int
     return out
 
 
+def _stencil(flags: np.ndarray) -> np.ndarray:
+    """The pressure stencils' stencil cells (FLUID or OUTFLOW), as bool."""
+    return (flags == FLUID) | (flags == OUTFLOW)
+
+
+def _at(a: np.ndarray, pad: int, ox: int, oy: int, oz: int) -> np.ndarray:
+    """``a`` (already padded by ``pad`` more layers) at x + (ox, oy, oz) for every cell x of the unpadded array."""
+    pz, py, px = (s - 2 * pad for s in a.shape)
+    return a[pad + oz : pad + oz + pz, pad + oy : pad + oy + py, pad + ox : pad + ox + px]
+
+
+def flat_wall_cells(flags: np.ndarray) -> np.ndarray:
+    """Where the pressure filter may take the three-point wall rule (:func:`three_point_links`): the interior
+    cells x in a flat stretch of wall layer, as a padded bool mask. For one axis a and side s, the 9 neighbours
+    x + r with r_a = s are non-stencil cells (not FLUID, not OUTFLOW) and the other 17 are stencil cells, and the
+    same holds, with the same a and s, for the four neighbours x ± e_t along the two other axes: x is at least
+    two cells from any edge or corner of the wall (measured: with the rule also in the face cells beside an edge,
+    the edges' period-2 oscillation grew 3× faster and a column collapse diverged at its corner,
+    docs/fluid-stability.md)."""
+    from ..lattice import C27
+
+    stencil = np.pad(_stencil(flags), 1, constant_values=False)
+    inner = np.zeros(flags.shape, bool)
+    inner[INTERIOR] = True
+    out = np.zeros(flags.shape, bool)
+    for a in range(3):
+        for side in (1, -1):
+            flat = inner.copy()
+            for c in C27[1:]:
+                flat &= _at(stencil, 1, *c) == (c[a] != side)
+            if not flat.any():
+                continue
+            fb = np.pad(flat, 1, constant_values=False)
+            for t in range(3):
+                if t != a:
+                    for sg in (1, -1):
+                        e = [0, 0, 0]
+                        e[t] = sg
+                        flat = flat & _at(fb, 1, *e)
+            out |= flat
+    return out
+
+
+def three_point_links(flags: np.ndarray) -> np.ndarray:
+    """The links of the pressure filter's three-point wall rule, as a padded uint32 mask: bit j of cell x is
+    set where the filter's wall neighbour x + c_j takes p(x) + p(x − c_j) − p(x − 2c_j) instead of the two-point
+    extrapolation 2 p(x) − p(x − c_j) (Eq. 40's wall rule, :func:`couplekit.fluid.reference.local_average`).
+
+    That is where x is an interior FLUID cell of :func:`flat_wall_cells`, x + c_j is a WALL, and x − c_j,
+    x − 2c_j and the six axis neighbours of x − 2c_j are stencil cells inside the padded grid. Both rules are
+    exact for a linear (hydrostatic) profile; the three-point one filters the wall layer's wall-normal period-2
+    mode a(−1)^k to a/3 as in the interior, which the two-point one leaves unfiltered (Fig. 4's colander
+    diverged from that mode at its ceiling, docs/fluid-stability.md). Not at INFLOW neighbours, nor with
+    x − 2c_j beside a non-stencil cell: narrow outlet jets diverged with either (the same page)."""
+    from ..lattice import C27
+
+    stencil = np.pad(_stencil(flags), 3, constant_values=False)  # outside the padded grid: not a stencil cell
+    fluid = flat_wall_cells(flags) & (flags == FLUID)
+    wall = np.pad(flags == WALL, 1, constant_values=False)
+    out = np.zeros(flags.shape, np.uint32)
+    for j in range(1, 27):
+        cx, cy, cz = (int(v) for v in C27[j])
+        ok = fluid & _at(wall, 1, cx, cy, cz) & _at(stencil, 3, -cx, -cy, -cz)
+        for ox, oy, oz in ((0, 0, 0), (1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)):
+            ok &= _at(stencil, 3, ox - 2 * cx, oy - 2 * cy, oz - 2 * cz)
+        out |= ok.astype(np.uint32) << np.uint32(j)
+    return out
+
+
 def outflow_lists(shape: tuple[int, int, int], flags: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(ghost, src)``: padded indices (int64) of every OUTFLOW ghost and of its nearest interior cell."""
     nz, ny, nx = shape

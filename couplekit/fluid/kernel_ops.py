@@ -51,6 +51,7 @@ class KernelOps:
         self._collide = collide.function("lbm_collide_stream")
         self._macro = pressure.function("lbm_macro_pressure")
         self._filter = pressure.function("lbm_pressure_filter")
+        self._filter_wall = pressure.function("lbm_filter_wall_rule")
         self._momentum = pressure.function("lbm_momentum")
         self._halo = halo.function("lbm_halo_copy")
         self._halo_pop = halo.function("lbm_halo_copy_pop")
@@ -60,6 +61,8 @@ class KernelOps:
         self._bounce = halo.function("lbm_wall_bounce")
         self._links_flags = None  # the flags array the cached wall links belong to
         self._links = None
+        self._rule_flags = None  # the flags array the cached three-point wall rule's cells belong to
+        self._rule = None
         self._dummy = backend.xp.zeros(1, dtype=np.float32)
         self._dummy_mask = backend.xp.zeros(1, dtype=np.uint8)
 
@@ -86,9 +89,23 @@ class KernelOps:
             self._links_flags = flags
         return self._links
 
+    def _three_point_cells(self, flags):
+        """``(cell, links)`` of the filter's three-point wall rule: the padded index (int64) of every cell with a
+        link in :func:`couplekit.fluid.grid.three_point_links` and its link mask (uint32), built once per flags
+        array (as the wall links)."""
+        if self._rule_flags is not flags:
+            from .grid import three_point_links
+
+            links = three_point_links(self.backend.to_host(flags)).ravel()
+            cell = np.flatnonzero(links).astype(np.int64)
+            self._rule = (self.backend.asarray(cell), self.backend.asarray(links[cell].astype(np.uint32)))
+            self._rule_flags = flags
+        return self._rule
+
     def forget_links(self) -> None:
-        """Drop the cached wall links (after editing a flags array in place)."""
+        """Drop the cached wall links and three-point rule cells (after editing a flags array in place)."""
         self._links_flags = self._links = None
+        self._rule_flags = self._rule = None
 
     def _wall_call(self, fn, f, flags, velocity) -> None:
         cell, d = self._wall_links(flags)
@@ -141,6 +158,9 @@ class KernelOps:
         """Eq. 40 filter (see ReferenceOps.pressure_filter)."""
         n, nx, ny, nz = self._interior(flags)
         self._filter(n, p, flags, pbar, np.int32(nx), np.int32(ny), np.int32(nz))
+        cell, links = self._three_point_cells(flags)
+        if cell.size:
+            self._filter_wall(int(cell.size), p, pbar, cell, links, np.int32(nx), np.int32(ny), np.int32(nz))
 
     def collide_stream(
         self,

@@ -40,7 +40,7 @@ import numpy as np
 
 from ..lattice import C27, CS2, OPP27, W27
 from . import moments
-from .grid import FLUID, INTERIOR, OUTFLOW
+from .grid import FLUID, INTERIOR, OUTFLOW, three_point_links
 from .storage import check_storage, decode_f, encode_f, weights27
 
 
@@ -61,15 +61,33 @@ def stencil_cell(flags: np.ndarray) -> np.ndarray:
     return (flags == FLUID) | (flags == OUTFLOW)
 
 
-def neighbour_values(s: np.ndarray, flags: np.ndarray, c, extrapolate: bool) -> np.ndarray:
+def back2(a: np.ndarray, c) -> np.ndarray:
+    """View of padded array ``a`` at ``x − 2c`` for every interior cell x; where that is outside the padded
+    grid, the value at x (callers use it only where :func:`couplekit.fluid.grid.three_point_links` holds, which
+    keeps x − 2c inside)."""
+    cx, cy, cz = (-2 * int(v) for v in c)
+    big = np.pad(a, [(0, 0)] * (a.ndim - 3) + [(1, 1)] * 3, mode="edge")
+    pz, py, px = big.shape[-3:]
+    return big[..., 2 + cz : pz - 2 + cz, 2 + cy : py - 2 + cy, 2 + cx : px - 2 + cx]
+
+
+def neighbour_values(
+    s: np.ndarray, flags: np.ndarray, c, extrapolate: bool, three_point: np.ndarray | None = None
+) -> np.ndarray:
     """s(x + c) for every interior x, with the wall rule: a wall / inflow / solid neighbour takes the centre
-    value, or with ``extrapolate`` the linear extrapolation 2 s(x) − s(x − c) when x − c is a stencil cell."""
+    value, or with ``extrapolate`` the linear extrapolation 2 s(x) − s(x − c) when x − c is a stencil cell;
+    ``three_point`` (interior bool mask, the filter's): there the three-point s(x) + s(x − c) − s(x − 2c)
+    instead (:func:`couplekit.fluid.grid.three_point_links`)."""
     centre = interior(s).astype(np.float64)
     ok = stencil_cell(shifted(flags, c))
     out = np.where(ok, shifted(s, c), centre)
     if extrapolate:
         back = stencil_cell(shifted(flags, -np.asarray(c)))
-        out = np.where(~ok & back, 2.0 * centre - shifted(s, -np.asarray(c)), out)
+        sb = shifted(s, -np.asarray(c)).astype(np.float64)
+        ext = 2.0 * centre - sb
+        if three_point is not None:
+            ext = np.where(three_point, centre + sb - back2(s, c), ext)
+        out = np.where(~ok & back, ext, out)
     return out
 
 
@@ -87,13 +105,19 @@ def isotropic_gradient(s: np.ndarray, flags: np.ndarray, extrapolate: bool = Fal
     return grad
 
 
-def local_average(s: np.ndarray, flags: np.ndarray) -> np.ndarray:
+def local_average(s: np.ndarray, flags: np.ndarray, links: np.ndarray | None = None) -> np.ndarray:
     """Eq. 40: s̄ = Σ_j w_j s(x + c_j), wall/inflow/solid neighbours linearly extrapolated (see
-    :func:`neighbour_values`), so a hydrostatic profile passes the filter unchanged."""
+    :func:`neighbour_values`), so a hydrostatic profile passes the filter unchanged; in flat wall layers, the
+    links of ``links`` (padded uint32, :func:`couplekit.fluid.grid.three_point_links` of ``flags`` when None)
+    take the three-point rule."""
+    if links is None:
+        links = three_point_links(flags)
+    bits = interior(links)
     centre = interior(s).astype(np.float64)
     out = W27[0] * centre
     for j in range(1, 27):
-        out = out + W27[j] * neighbour_values(s, flags, C27[j], extrapolate=True)
+        rule = ((bits >> np.uint32(j)) & np.uint32(1)).astype(bool)
+        out = out + W27[j] * neighbour_values(s, flags, C27[j], True, rule)
     return out
 
 
@@ -368,7 +392,7 @@ class ReferenceOps:
             interior(out[d])[fluid] = u[d][fluid]
 
     def pressure_filter(self, p, flags, pbar) -> None:
-        """Eq. 40: p̄ = Σ_j w_j p(x + c_j) on interior fluid cells (non-fluid neighbours: centre value)."""
+        """Eq. 40: p̄ = Σ_j w_j p(x + c_j) on interior fluid cells, with :func:`local_average`'s wall rules."""
         fluid = interior(flags) == FLUID
         interior(pbar)[fluid] = local_average(p, flags)[fluid]
 
