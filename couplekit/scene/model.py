@@ -1683,6 +1683,10 @@ def water_outlet_speed_limit(interface_width: float, across_cells: int, air_latt
       (Eq. 48), and with two rates (Λ = 1/6) a drop at 0.02 diverges by step 520. Outlets at ξ = 2 ran 100
       steps at 0.02 but diverged later (4 and 6 cells by steps 320 and 240 with Λ = 0.1).
 
+    * a 5-cell outlet at ξ = 3 (session 12's map, 1500 steps, ν = 0.01): NaN by step 100 at 0.08, finite at 0.07
+      (peak 1.36 u_in) and at 0.02-0.06; finite at 0.08 with ξ = 3.25, and with 7 or 9 cells at ξ = 3. Not
+      understood (main before and after the filter's three-point wall rule alike): 0.07 below ξ = 3.25.
+
     A whole-face inflow is not limited (an 8 × 8 duct runs at ξ = 2, u = 0.02 and at ξ = 4, u = 0.08).
     """
     if interface_width < 3.0:
@@ -1691,6 +1695,8 @@ def water_outlet_speed_limit(interface_width: float, across_cells: int, air_latt
         return 0.02
     if air_lattice_viscosity > 0.01 * (1.0 + 1e-9) and interface_width < 6.0 and across_cells < 8:
         return 0.04 if interface_width < 4.0 else 0.06
+    if across_cells == 5 and interface_width < 3.25:
+        return 0.07
     return math.inf
 
 
@@ -1731,6 +1737,9 @@ def _check_water_outlets(domain: Domain, time: Time, fluid: Fluid | None, inflow
             if across < 3:
                 why = "outlets under 3 cells across"
                 fix = f"widen the outlet to >= 3 cells ({3 * domain.dx:g} m) across, or {slower}"
+            elif limit == 0.07:
+                why = "a 5-cell outlet at fluid.interface_width < 3.25"
+                fix = f"{slower}, set fluid.interface_width >= 3.25, or make the outlet 4 or 6 cells across"
             else:
                 why = f"with fluid.air_lattice_viscosity = {nu_air:g} > 0.01, outlets under 8 cells across"
                 fix = (

@@ -214,8 +214,8 @@ def test_water_jet_into_air_800_to_1_from_an_outlet_stays_finite(cpu):
 
 @pytest.mark.parametrize(
     "width,across,u_in,steps",
-    [(2.0, 4, 0.02, 100), (4.0, 4, 0.08, 400), (3.0, 3, 0.08, 400)],
-    ids=["xi2_u0.02", "xi4_u0.08", "xi3_3x3_u0.08"],
+    [(2.0, 4, 0.02, 100), (4.0, 4, 0.08, 400), (3.0, 3, 0.08, 400), (3.0, 5, 0.07, 400)],
+    ids=["xi2_u0.02", "xi4_u0.08", "xi3_3x3_u0.08", "xi3_5x5_u0.07"],
 )
 def test_narrow_outlet_jet_runs(cpu, width, across, u_in, steps):
     """Formerly a known defect (strict xfail ``test_narrow_outlet_jet_diverges``): a water jet from a 4 × 4-cell
@@ -386,6 +386,12 @@ def test_scene_refuses_a_water_outlet_outside_the_measured_stable_range():
     # a more viscous air (Fig. 1's 0.1): 0.06 at ξ = 4, 0.04 at ξ = 3, unlimited from 8 cells or ξ = 6
     assert water_outlet_speed_limit(4.0, 4, 0.1) == 0.06 and water_outlet_speed_limit(3.0, 6, 0.1) == 0.04
     assert water_outlet_speed_limit(4.0, 8, 0.1) == math.inf and water_outlet_speed_limit(6.0, 4, 0.1) == math.inf
+    # a 5-cell outlet below ξ = 3.25: 0.07 (NaN at 0.08 by step 100); the viscous air's limit is lower still
+    assert water_outlet_speed_limit(3.0, 5) == 0.07 and water_outlet_speed_limit(3.25, 5) == math.inf
+    assert water_outlet_speed_limit(3.0, 5, 0.1) == 0.04 and water_outlet_speed_limit(3.0, 4) == math.inf
+    p = problem(_outlet_scene(5, 8.0, interface_width=3.0))
+    assert p is not None and "5-cell outlet" in p.message and "interface_width >= 3.25" in p.fix, p
+    assert problem(_outlet_scene(5, 7.0, interface_width=3.0)) is None
     d = _outlet_scene(4, 8.0)
     d["fluid"]["air_lattice_viscosity"] = 0.1
     p = problem(d)
