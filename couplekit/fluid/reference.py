@@ -62,9 +62,9 @@ def stencil_cell(flags: np.ndarray) -> np.ndarray:
 
 
 def back2(a: np.ndarray, c) -> np.ndarray:
-    """View of padded array ``a`` at ``x − 2c`` for every interior cell x; where that is outside the padded
-    grid, the value at x (callers use it only where :func:`couplekit.fluid.grid.three_point_links` holds, which
-    keeps x − 2c inside)."""
+    """``a`` at ``x − 2c`` for every interior cell x; where that is outside the padded grid, the nearest value
+    on its edge (callers use it only where :func:`couplekit.fluid.grid.three_point_links` holds, which keeps
+    x − 2c inside)."""
     cx, cy, cz = (-2 * int(v) for v in c)
     big = np.pad(a, [(0, 0)] * (a.ndim - 3) + [(1, 1)] * 3, mode="edge")
     pz, py, px = big.shape[-3:]
