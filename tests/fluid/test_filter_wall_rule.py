@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from couplekit.fluid import KernelOps, ReferenceOps
-from couplekit.fluid.grid import INTERIOR, Boundaries, build_flags, flat_wall_cells, three_point_links
+from couplekit.fluid.grid import INTERIOR, Boundaries, Face, build_flags, flat_wall_cells, three_point_links
 from couplekit.fluid.reference import interior, local_average
 
 
@@ -65,13 +65,13 @@ def _two_point(p, flags):
 @pytest.mark.parametrize("n", [8, 11])
 def test_kernel_filter_matches_reference_with_the_rule_active(cpu, n):
     solid = np.zeros((n, n, n), bool)
-    solid[n // 2 :, 2:4, n // 2 - 1 : n // 2 + 2] = True  # a post standing on the floor
+    solid[n // 2 :, 2:4, n // 2 - 1 : n // 2 + 2] = True  # a post hanging from the ceiling
     flags = _box(n, solid)
     rng = np.random.default_rng(n)
     p = rng.uniform(-1e-3, 1e-3, flags.shape).astype(np.float32)
-    pbar_k = np.zeros_like(p)
+    pbar_k = cpu.asarray(np.zeros_like(p))
     pbar_r = np.zeros_like(p)
-    KernelOps(cpu).pressure_filter(cpu.asarray(p), cpu.asarray(flags), pbar_k := cpu.asarray(pbar_k))
+    KernelOps(cpu).pressure_filter(cpu.asarray(p), cpu.asarray(flags), pbar_k)
     ReferenceOps().pressure_filter(p, flags, pbar_r)
     pbar_k = cpu.to_host(pbar_k)
     fluid = flags == 0
@@ -79,6 +79,38 @@ def test_kernel_filter_matches_reference_with_the_rule_active(cpu, n):
     np.testing.assert_allclose(pbar_k[fluid], pbar_r[fluid], rtol=0, atol=5e-7)
     two = _two_point(p, flags)[interior(fluid)]
     assert np.abs(interior(pbar_r)[interior(fluid)] - two).max() > 1e-5  # the rule changed the wall layer
+
+
+@pytest.mark.parametrize(
+    "faces",
+    [
+        {
+            "y-": Face("wall"),
+            "y+": Face("wall", velocity=(0.03, 0.0, 0.0)),
+            "z-": Face("inflow", velocity=(0, 0, 0.02)),
+            "z+": Face("outflow"),
+        },
+        {"x-": Face("wall"), "x+": Face("outflow"), "z-": Face("wall"), "z+": Face("wall")},
+    ],
+    ids=["walls_inflow_outflow", "walls_outflow_x"],
+)
+def test_kernel_filter_matches_reference_beside_inflow_outflow_and_obstacles(cpu, faces):
+    shape = (10, 12, 9)
+    solid = np.zeros(shape, bool)
+    solid[3:6, 0:2, 3:5] = True  # a block on the y- wall
+    solid[7, 5:7, 6] = True  # and a small one inside
+    flags, _, _ = build_flags(shape, Boundaries(faces), solid)
+    links = three_point_links(flags)
+    assert links.any() and not links[flags != 0].any()  # only fluid cells take the rule
+    rng = np.random.default_rng(7)
+    p = rng.uniform(-1e-3, 1e-3, flags.shape).astype(np.float32)
+    pbar_k = cpu.asarray(np.zeros_like(p))
+    pbar_r = np.zeros_like(p)
+    KernelOps(cpu).pressure_filter(cpu.asarray(p), cpu.asarray(flags), pbar_k)
+    ReferenceOps().pressure_filter(p, flags, pbar_r)
+    fluid = np.zeros(flags.shape, bool)
+    fluid[INTERIOR] = flags[INTERIOR] == 0
+    np.testing.assert_allclose(cpu.to_host(pbar_k)[fluid], pbar_r[fluid], rtol=0, atol=5e-7)
 
 
 @pytest.mark.parametrize("n", [8, 11])
@@ -108,4 +140,3 @@ def test_forget_links_rebuilds_the_rule_cells(cpu):
     ops.forget_links()
     assert ops._three_point_cells(flags) is not first
     assert int(first[0].size) == int(np.count_nonzero(three_point_links(cpu.to_host(flags))))
-    assert INTERIOR  # the padded layout the masks use
