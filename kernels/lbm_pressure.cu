@@ -257,8 +257,9 @@ KERNEL void lbm_pressure_filter(const long long n, const float* RESTRICT p /* si
 }
 
 // The filter's three-point wall rule, a list kernel run after lbm_pressure_filter: for every listed cell c
-// (an interior fluid cell of a flat wall layer) and every link j set in its mask (couplekit.fluid.grid.
-// three_point_links: x + c_j a wall, x - c_j, x - 2 c_j and the six axis neighbours of x - 2 c_j stencil cells),
+// (an interior fluid cell of a flat wall layer of a wall normal to gravity, couplekit.fluid.grid.wall_rule_axes)
+// and every link j set in its mask (grid.three_point_links: x + c_j a wall, x - c_j, x - 2 c_j and the six axis
+// neighbours of x - 2 c_j stencil cells),
 // the wall neighbour takes p(x) + p(x - c_j) - p(x - 2 c_j) instead of the filter's two-point 2 p(x) - p(x - c_j):
 // pbar[c] += w_j [(p(x - c_j) - p(x - 2 c_j)) - (p(x) - p(x - c_j))].  Both are exact for a linear profile; the
 // three-point one filters the wall-normal period-2 mode a (-1)^k of the wall layer to a / 3 as in the interior

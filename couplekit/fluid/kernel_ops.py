@@ -61,7 +61,8 @@ class KernelOps:
         self._bounce = halo.function("lbm_wall_bounce")
         self._links_flags = None  # the flags array the cached wall links belong to
         self._links = None
-        self._rule_flags = None  # the flags array the cached three-point wall rule's cells belong to
+        self._rule_flags = None  # the flags array (and axes) the cached three-point wall rule's cells belong to
+        self._rule_axes = None
         self._rule = None
         self._dummy = backend.xp.zeros(1, dtype=np.float32)
         self._dummy_mask = backend.xp.zeros(1, dtype=np.uint8)
@@ -89,17 +90,18 @@ class KernelOps:
             self._links_flags = flags
         return self._links
 
-    def _three_point_cells(self, flags):
+    def _three_point_cells(self, flags, axes=(True, True, True)):
         """``(cell, links)`` of the filter's three-point wall rule: the padded index (int64) of every cell with a
-        link in :func:`couplekit.fluid.grid.three_point_links` and its link mask (uint32), built once per flags
-        array (as the wall links)."""
-        if self._rule_flags is not flags:
+        link in :func:`couplekit.fluid.grid.three_point_links` (walls normal to ``axes``) and its link mask
+        (uint32), built once per flags array and axes (as the wall links)."""
+        axes = tuple(bool(a) for a in axes)
+        if self._rule_flags is not flags or self._rule_axes != axes:
             from .grid import three_point_links
 
-            links = three_point_links(self.backend.to_host(flags)).ravel()
+            links = three_point_links(self.backend.to_host(flags), axes).ravel()
             cell = np.flatnonzero(links).astype(np.int64)
             self._rule = (self.backend.asarray(cell), self.backend.asarray(links[cell].astype(np.uint32)))
-            self._rule_flags = flags
+            self._rule_flags, self._rule_axes = flags, axes
         return self._rule
 
     def forget_links(self) -> None:
@@ -154,11 +156,11 @@ class KernelOps:
             self._wall_call(self._prefill, f, flags, velocity)
         self._momentum(n, f, flags, out, np.int32(parity), np.int32(nx), np.int32(ny), np.int32(nz))
 
-    def pressure_filter(self, p, flags, pbar) -> None:
+    def pressure_filter(self, p, flags, pbar, axes=(True, True, True)) -> None:
         """Eq. 40 filter (see ReferenceOps.pressure_filter)."""
         n, nx, ny, nz = self._interior(flags)
         self._filter(n, p, flags, pbar, np.int32(nx), np.int32(ny), np.int32(nz))
-        cell, links = self._three_point_cells(flags)
+        cell, links = self._three_point_cells(flags, axes)
         if cell.size:
             self._filter_wall(int(cell.size), p, pbar, cell, links, np.int32(nx), np.int32(ny), np.int32(nz))
 

@@ -391,10 +391,11 @@ class ReferenceOps:
         for d in range(3):
             interior(out[d])[fluid] = u[d][fluid]
 
-    def pressure_filter(self, p, flags, pbar) -> None:
-        """Eq. 40: p̄ = Σ_j w_j p(x + c_j) on interior fluid cells, with :func:`local_average`'s wall rules."""
+    def pressure_filter(self, p, flags, pbar, axes=(True, True, True)) -> None:
+        """Eq. 40: p̄ = Σ_j w_j p(x + c_j) on interior fluid cells, with :func:`local_average`'s wall rules (the
+        three-point rule on the walls normal to ``axes``, :func:`couplekit.fluid.grid.wall_rule_axes`)."""
         fluid = interior(flags) == FLUID
-        interior(pbar)[fluid] = local_average(p, flags)[fluid]
+        interior(pbar)[fluid] = local_average(p, flags, three_point_links(flags, axes))[fluid]
 
     def forces(
         self, fi, flags, phi, eps, force, pbar, rho_h, rho_l, nu_h, nu_l, gravity, smagorinsky=0.0, chem=(0.0, 0.0)

@@ -43,6 +43,7 @@ from .grid import (
     periodic_lists,
     slip_cells,
     slip_wall_layers,
+    wall_rule_axes,
 )
 from .kernel_ops import KernelOps
 from .reference import ReferenceOps, equilibrium, to_stored
@@ -340,6 +341,8 @@ class FluidSolver:
             layers = slip_wall_layers(self.odd_floor_active)
             self._slip_cells = backend.asarray(slip_cells(flags, periodic_axes, layers))
         self.force = xp.zeros((3,) + pshape, dtype=np.float32) if self.external_force else None
+        # the walls whose flat layers take the pressure filter's three-point rule: those normal to gravity
+        self._wall_rule_axes = wall_rule_axes(self.params.gravity)
 
         self.step_count = 0
         self.gamma = 1.0
@@ -474,7 +477,7 @@ class FluidSolver:
                 self._slip_cells, self.p, parity, prm.rho_h, prm.rho_l,
             )  # fmt: skip
             ops.halo_copy(self.p, self._ghost, self._image)
-            ops.pressure_filter(self.p, self.flags, self.pbar)
+            ops.pressure_filter(self.p, self.flags, self.pbar, self._wall_rule_axes)
             if prm.store_filtered_pressure:
                 # p^{n+1} := p̄: swap the buffers (non-fluid cells of both hold the same boundary values)
                 self.p, self.pbar = self.pbar, self.p

@@ -16,7 +16,15 @@ import numpy as np
 import pytest
 
 from couplekit.fluid import KernelOps, ReferenceOps
-from couplekit.fluid.grid import INTERIOR, Boundaries, Face, build_flags, flat_wall_cells, three_point_links
+from couplekit.fluid.grid import (
+    INTERIOR,
+    Boundaries,
+    Face,
+    build_flags,
+    flat_wall_cells,
+    three_point_links,
+    wall_rule_axes,
+)
 from couplekit.fluid.reference import interior, local_average
 
 
@@ -44,6 +52,22 @@ def test_flat_wall_cells_of_a_closed_box_are_the_face_cells_two_from_every_edge(
 
 
 @pytest.mark.parametrize("n", [8, 11])
+def test_flat_wall_cells_of_the_chosen_axes_only(n):
+    flags = _box(n)
+    only_z = interior(flat_wall_cells(flags, (False, False, True)))
+    assert int(only_z.sum()) == 2 * (n - 4) ** 2
+    assert only_z[0].sum() == only_z[-1].sum() == (n - 4) ** 2 and not only_z[1:-1].any()
+    links = interior(three_point_links(flags, (False, False, True)))
+    assert links[0].any() and links[-1].any() and not links[1:-1].any()
+
+
+def test_wall_rule_axes_follow_gravity():
+    assert wall_rule_axes((0.0, 0.0, -1e-5)) == (False, False, True)
+    assert wall_rule_axes((1e-6, 0.0, -1e-5)) == (True, False, True)
+    assert wall_rule_axes((0.0, 0.0, 0.0)) == (True, True, True)
+
+
+@pytest.mark.parametrize("n", [8, 11])
 def test_three_point_links_point_into_the_wall_and_keep_two_cells_of_fluid_behind(n):
     flags = _box(n)
     links = interior(three_point_links(flags))
@@ -62,8 +86,9 @@ def _two_point(p, flags):
     return local_average(p, flags, np.zeros(flags.shape, np.uint32))
 
 
+@pytest.mark.parametrize("axes", [(True, True, True), (False, False, True)], ids=["all_walls", "floor_ceiling"])
 @pytest.mark.parametrize("n", [8, 11])
-def test_kernel_filter_matches_reference_with_the_rule_active(cpu, n):
+def test_kernel_filter_matches_reference_with_the_rule_active(cpu, n, axes):
     solid = np.zeros((n, n, n), bool)
     solid[n // 2 :, 2:4, n // 2 - 1 : n // 2 + 2] = True  # a post hanging from the ceiling
     flags = _box(n, solid)
@@ -71,8 +96,8 @@ def test_kernel_filter_matches_reference_with_the_rule_active(cpu, n):
     p = rng.uniform(-1e-3, 1e-3, flags.shape).astype(np.float32)
     pbar_k = cpu.asarray(np.zeros_like(p))
     pbar_r = np.zeros_like(p)
-    KernelOps(cpu).pressure_filter(cpu.asarray(p), cpu.asarray(flags), pbar_k)
-    ReferenceOps().pressure_filter(p, flags, pbar_r)
+    KernelOps(cpu).pressure_filter(cpu.asarray(p), cpu.asarray(flags), pbar_k, axes)
+    ReferenceOps().pressure_filter(p, flags, pbar_r, axes)
     pbar_k = cpu.to_host(pbar_k)
     fluid = flags == 0
     fluid[~np.pad(np.ones((n, n, n), bool), 1)] = False
