@@ -81,7 +81,7 @@ def test_fig03_castle_loses_sand_downstream():
 def test_fig04_colander_passes_sand_and_water():
     """Fig. 4: a water jet carrying sand (fraction 0.2) falls into the perforated bowl; the whole small variant
     (20 frames, 0.67 s). Sand and water pass its holes: particles below the bowl's bottom (z < 0.13 m; measured
-    1008 at 0.37 s, 3524 at 0.67 s) and more water below it than the pool held (measured +3 % at 0.37 s, +18 %
+    1008 at 0.37 s, 3523 at 0.67 s) and more water below it than the pool held (measured +3 % at 0.37 s, +18 %
     at 0.67 s). The run stays stable to its end (it diverged at step ~1036 before the pressure filter's
     three-point wall rule, docs/fluid-stability.md): max lattice speed measured 0.098, volume drift +2.7e-4."""
     sim = _sim("fig04_colander")
