@@ -40,7 +40,7 @@ import numpy as np
 
 from ..lattice import C27, CS2, OPP27, W27
 from . import moments
-from .grid import FLUID, INTERIOR, OUTFLOW, three_point_links
+from .grid import FLUID, INTERIOR, OUTFLOW, stencil_cell, three_point_links
 from .storage import check_storage, decode_f, encode_f, weights27
 
 
@@ -54,11 +54,6 @@ def shifted(a: np.ndarray, c) -> np.ndarray:
 def interior(a: np.ndarray) -> np.ndarray:
     """View of the interior cells of a padded array."""
     return a[(Ellipsis, *INTERIOR)]
-
-
-def stencil_cell(flags: np.ndarray) -> np.ndarray:
-    """Where a neighbour's own scalar value enters the stencils: fluid cells and outflow ghosts."""
-    return (flags == FLUID) | (flags == OUTFLOW)
 
 
 def back2(a: np.ndarray, c) -> np.ndarray:
