@@ -1658,6 +1658,9 @@ def _check_max_speed(time: Time, bodies, inflows, problems: list[Problem]) -> No
         )
 
 
+_FIVE_CELL_OUTLET_LIMIT = 0.07  # water_outlet_speed_limit's 5-cell case (its message names that case by this value)
+
+
 def water_outlet_speed_limit(interface_width: float, across_cells: int, air_lattice_viscosity: float = 0.01) -> float:
     """Largest lattice speed (|velocity| dt/dx) at which a water jet from an outlet (``shape`` = 'rect' or
     'disc') into air at 800:1 was measured to stay finite, by interface width ξ (cells), the outlet's narrower
@@ -1696,7 +1699,7 @@ def water_outlet_speed_limit(interface_width: float, across_cells: int, air_latt
     if air_lattice_viscosity > 0.01 * (1.0 + 1e-9) and interface_width < 6.0 and across_cells < 8:
         return 0.04 if interface_width < 4.0 else 0.06
     if across_cells == 5 and interface_width < 3.25:
-        return 0.07
+        return _FIVE_CELL_OUTLET_LIMIT
     return math.inf
 
 
@@ -1737,7 +1740,7 @@ def _check_water_outlets(domain: Domain, time: Time, fluid: Fluid | None, inflow
             if across < 3:
                 why = "outlets under 3 cells across"
                 fix = f"widen the outlet to >= 3 cells ({3 * domain.dx:g} m) across, or {slower}"
-            elif limit == 0.07:
+            elif limit == _FIVE_CELL_OUTLET_LIMIT:
                 why = "a 5-cell outlet at fluid.interface_width < 3.25"
                 fix = f"{slower}, set fluid.interface_width >= 3.25, or make the outlet 4 or 6 cells across"
             else:
