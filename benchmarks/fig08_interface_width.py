@@ -138,7 +138,7 @@ def ball_water(sim) -> tuple[float, float, float]:
     field's φ(z), the mean over the domain's outermost columns at the same height: above it the ball has
     lifted the water with it (the pores or the surface under it wetter than the undisturbed profile)."""
     host = sim.backend.to_host
-    es = host(sim.coupler.eps_sand)[1:-1, 1:-1, 1:-1].astype(np.float64)
+    es = sim.coupler.fields()["sand_fraction"].astype(np.float64)
     phi = np.clip(host(sim.fluid.phi)[1:-1, 1:-1, 1:-1].astype(np.float64), 0.0, 1.0)
     edge = np.ones(phi.shape[1:], bool)
     edge[1:-1, 1:-1] = False  # the outermost columns
@@ -172,7 +172,7 @@ def use_pressure_buoyancy(sim, capillary: bool) -> None:
         mu = fl.phase_gradients()[1] if capillary else None
         if mu is not None:
             extra = extra + host(mu)[1:-1, 1:-1, 1:-1] * isotropic_gradient(host(fl.phi), flags)
-        es = host(c.eps_sand)[1:-1, 1:-1, 1:-1].astype(np.float64)
+        es = c.fields()["sand_fraction"].astype(np.float64)
         m = host(sand.grid_m)
         active = (m > 0) & (flags[1:-1, 1:-1, 1:-1] == 0)
         impulse = np.where(active, es * extra, 0.0) * mass_scale * (u.dx / u.dt) / u.dt * sand.dt

@@ -558,7 +558,7 @@ def memory_estimate(scene: Scene) -> dict[str, float]:
     particles the sand-carrying inflows emit over the scene's duration (``emitted_particles``,
     :func:`couplekit.sand.emission.expected_particles`). ``scheduler``: the sub-cycling scheduler's buffers
     (fluid view, force, porosity, sand velocity and absorbed-water sums; with linear interpolation last step's
-    fluid velocity)."""
+    fluid velocity; multi-rate with m > 1: the exchange velocity's own buffer)."""
     nx, ny, nz = scene.domain.resolution
     cells = nx * ny * nz
     padded = (nx + 2) * (ny + 2) * (nz + 2)
@@ -599,10 +599,14 @@ def memory_estimate(scene: Scene) -> dict[str, float]:
         # fluid mixture inputs (fluid_fraction, sand_velocity, force) and the coupler's fields
         flags = set(retention_flags(scene))
         retention, mixed = True in flags, len(flags) > 1  # mixed: + retentive fraction grid and flags
-        # padded: the fluid's ε, sand velocity and force (7), the coupler's ε_s, exchange velocity and last ε (5),
-        # the cells of Eq. 39's slip term (1 byte); interior: the water per cell (+ bound water with retention)
-        out["coupling"] = padded * (4.0 * (7 + 1 + 3 + 1) + 1) + cells * 4.0 * (1 + (3 + mixed if retention else 0))
+        # padded: the fluid's ε, sand velocity and force (7), the coupler's last ε (1; its exchange velocity
+        # shares the sand velocity's buffer, the sand and water fractions are recomputed, SandFluidCoupler),
+        # the cells of Eq. 39's slip term (1 byte); interior: with retention the bound water R, R', dR
+        # (+ the retentive sand's fraction with per-body retention)
+        out["coupling"] = padded * (4.0 * (7 + 1) + 1) + cells * 4.0 * ((3 + mixed) if retention else 0)
         out["particles"] += 4.0 * count * ((1 + mixed) if retention else 0)
+        if scene.scheduler.kind == "multirate" and scene.scheduler.sand_every > 1:
+            out["scheduler"] = 4.0 * padded * 3  # the exchange velocity's own buffer (own_fluid_velocity)
         if scene.scheduler.kind == "subcycle":
             linear = scene.scheduler.interpolation == "linear"
             out["scheduler"] = 4.0 * (padded * (3 + 3 + 1 + (3 if linear else 0)) + cells * (3 + retention))

@@ -27,7 +27,9 @@ EFFECT_BYTES = {
     "surface_tension": (0, 0, 0),  # mu_phi: computed inside the flow collide from phi (lbm_laplacian_sum)
     "volume_controller": (0, 0, 0),
     "source_term": (F32 * 1, 0, 0),  # S_phi (coupled two-phase scenes; compiled out otherwise, CK_PF_SOURCE=0)
-    "coupling": (F32 * (1 + 3 + 3 + 1 + 3 + 1) + 1, F32 * 1, 0),  # ε, u_s, force, ε_sand, fluid u, ε_prev, slip
+    # ε, u_s (which also holds the exchange's fluid u), force, ε_prev, slip (the sand and water fractions are
+    # recomputed where they are read: SandFluidCoupler)
+    "coupling": (F32 * (1 + 3 + 3 + 1) + 1, 0, 0),
     "drag_buoyancy": (0, 0, 0),
     "retention": (0, F32 * 3, F32 * 1),  # bound_in, bound, d_bound; moisture ratio per particle
     "odd_rate_floor": (0, 0, 0),

@@ -2,7 +2,8 @@
 // of Gao et al. 2018 integrated implicitly per node in closed form (notes/mpm-method.md Sec. 3.4), equal and
 // opposite on sand and fluid.  Spec: couplekit/coupling/reference.py ReferenceOps.drag_buoyancy.
 //
-// Called between the MPM P2G and the MPM grid update.  One pass over the interior cells:
+// Called between the MPM P2G and the MPM grid update.  One pass over the interior cells, eps_s of Eq. 25 from
+// the P2G's node volume (coupling_sand_fraction, as coupling_fractions computes it; not stored):
 //   rho     = rho_l + (rho_h - rho_l) clamp(phi)             (lattice density; rho_h when CK_TWO_PHASE=0)
 //   F_b     = -V_cell eps_s rho g                           (Eq. 31, SI newtons) -> dt F_b added to (mv)_i
 //   v*      = ((mv)_i + dt F_b) / m_i + dt g                 (sand velocity after the explicit forces, SI;
@@ -30,6 +31,7 @@
 // feels no buoyancy there; keep fluid obstacles and sand colliders on the same cells.
 // variants: CK_TWO_PHASE=0,1
 #include "common.cuh"
+#include "coupling_fields.cuh"
 
 #ifndef CK_TWO_PHASE
 #define CK_TWO_PHASE 1
@@ -48,12 +50,12 @@ KERNEL void coupling_drag_buoyancy(
     float* RESTRICT grid_mv /* size: 3 * nx * ny * nz */,
     float* RESTRICT force /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
     const float* RESTRICT u /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */, const float* RESTRICT phi /* size >= 1 */,
-    const float* RESTRICT eps_sand /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+    const float* RESTRICT grid_vol /* size: nx * ny * nz */,
     const float* RESTRICT eps_fluid /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
     const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */, const int nx, const int ny,
     const int nz, const float dt, const float dt_lattice, const float gx, const float gy, const float gz,
     const float mass_scale, const float velocity_scale, const float rho_h, const float rho_l, const float c_drag,
-    const float chi, const float grain_diameter) {
+    const float chi, const float grain_diameter, const float inv_cell_volume, const float eps_max) {
     const long long ncell = (long long)nx * ny * nz;
     const int PX = nx + 2;
     const long long PXY = (long long)PX * (ny + 2);
@@ -66,11 +68,11 @@ KERNEL void coupling_drag_buoyancy(
         float fbx = 0.f, fby = 0.f, fbz = 0.f, Jx = 0.f, Jy = 0.f, Jz = 0.f;
         if (m > 0.f && flags[c] == 0) {
 #if CK_TWO_PHASE
-            const float rho = rho_l + (rho_h - rho_l) * fminf(fmaxf(phi[c], 0.f), 1.f);
+            const float rho = rho_l + (rho_h - rho_l) * coupling_water_phase(phi[c]);
 #else
             const float rho = rho_h;
 #endif
-            const float es = eps_sand[c];
+            const float es = coupling_sand_fraction(grid_vol[i], inv_cell_volume, eps_max);  // Eq. 25
             const float ef = eps_fluid[c];
             // buoyancy, Eq. 31: -V_cell eps_s rho g in newtons (rho mass_scale = rho_SI V_cell)
             const float b = -es * rho * mass_scale;

@@ -5,8 +5,10 @@
 // One pass over the PADDED box (nx + 2, ny + 2, nz + 2) of the fluid fields.  Every padded cell takes its
 // values from a source node of the (unpadded) MPM grid: its own node for an interior cell; for a ghost,
 // the periodic image on a periodic axis (px/py/pz = 1) and the nearest interior node otherwise (zero normal
-// gradient).  So eps_sand / eps_fluid come out with their ghost layer filled and stencils may read them
-// directly.  The unpadded outputs (d_bound, bound_out, water) are written by interior cells only.
+// gradient).  So eps_fluid comes out with its ghost layer filled and stencils may read it directly.  The
+// unpadded outputs (d_bound, bound_out) are written by interior cells only.  The sand fraction and the water
+// fraction are not stored: the drag and the moisture G2P recompute them (kernels/coupling_fields.cuh), from
+// grid_vol and from eps_fluid, phi and bound_out.
 //
 //   eps_s  = min(eps_max, V_i / V_cell)                           (Eq. 25, V_i = sum_p V_p N_i(x_p))
 //   eps_f  = 1 - eps_s                                            (Eq. 33, no retention)
@@ -19,7 +21,7 @@
 //   R'     = R_i + dR                                             (Eq. 56)
 //   eps_f  = 1 - eps_s - R'                                       (Eq. 54 after the update: the porosity the
 //                                                                  fluid and the source term see)
-//   water  = R' + eps_f phi    (Eq. 59 summand)   /   water = eps_f phi without retention (text after Eq. 28)
+// (the water fraction R' + eps_f phi of Eq. 59, eps_f phi without retention, is the moisture G2P's)
 // phi is the liquid phase field clamped to [0, 1] (CK_TWO_PHASE=1) or 1 (single-phase water, CK_TWO_PHASE=0).
 // Eq. 55's "currently available fluid volume" eps~ phi: the phase field holds eps_prev phi of free water
 // (eps_prev = last step's porosity, the one the last source term conserved), while R_i re-rasterised from
@@ -39,6 +41,7 @@
 // eps_prev must not alias eps_fluid.
 // variants: CK_RETENTION=0,1 CK_TWO_PHASE=0,1
 #include "common.cuh"
+#include "coupling_fields.cuh"
 
 #ifndef CK_RETENTION
 #define CK_RETENTION 0
@@ -54,17 +57,17 @@ DEVICE int coupling_source_index(const int X, const int n, const int periodic) {
     return X - 1;
 }
 
-// n = (nx + 2) * (ny + 2) * (nz + 2).  Arrays of switched-off effects (bound_in, eps_prev, d_bound, bound_out
-// without retention; phi single-phase; retentive unless masked) are not read or written: pass a 1-element array.
+// n = (nx + 2) * (ny + 2) * (nz + 2).  Arrays of switched-off effects (phi, bound_in, eps_prev, d_bound,
+// bound_out without retention; phi single-phase; retentive unless masked) are not read or written: pass a
+// 1-element array.
 KERNEL void coupling_fractions(const long long n, const float* RESTRICT grid_vol /* size: nx * ny * nz */,
                                const float* RESTRICT phi /* size >= 1 */,
                                const float* RESTRICT bound_in /* size >= 1 */,
                                const float* RESTRICT retentive /* size >= 1 */,
                                const float* RESTRICT eps_prev /* size >= 1 */,
-                               float* RESTRICT eps_sand /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                                float* RESTRICT eps_fluid /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                                float* RESTRICT d_bound /* size >= 1 */, float* RESTRICT bound_out /* size >= 1 */,
-                               float* RESTRICT water /* size: nx * ny * nz */, const int nx, const int ny,
+                               const int nx, const int ny,
                                const int nz, const int px, const int py, const int pz, const float inv_cell_volume,
                                const float eps_max, const float r_max, const float absorption, const float free_share,
                                const int masked) {
@@ -77,39 +80,35 @@ KERNEL void coupling_fractions(const long long n, const float* RESTRICT grid_vol
         const long long node = ix + (long long)nx * (iy + (long long)ny * iz);
         const long long cell = X + PX * (long long)Y + PXY * Z;
         const long long image = (ix + 1) + PX * (long long)(iy + 1) + PXY * (iz + 1);
-        const float es = fminf(eps_max, grid_vol[node] * inv_cell_volume);  // Eq. 25
+        const float es = coupling_sand_fraction(grid_vol[node], inv_cell_volume, eps_max);  // Eq. 25
+#if CK_RETENTION
 #if CK_TWO_PHASE
-        const float ph = fminf(fmaxf(phi[image], 0.f), 1.f);
+        const float ph = coupling_water_phase(phi[image]);
 #else
         const float ph = 1.f;
 #endif
-#if CK_RETENTION
         const float R = bound_in[node];
         const float cap = r_max * (masked ? fminf(es, retentive[node]) : es);           // retention capacity
         const float free_water = free_share * (fmaxf(fminf(1.f - es - R, eps_prev[image]), 0.f) * ph);
         const float dR = fminf(free_water, fminf(absorption * cap * ph, cap - R));  // Eq. 55, rate x phi
         const float Rn = R + dR;                                                        // Eq. 56
         const float ef = 1.f - es - Rn;                                                 // Eq. 54
-        const float wet = Rn + ef * ph;                                                 // Eq. 59
 #else
         const float ef = 1.f - es;  // Eq. 33
-        const float wet = ef * ph;
 #endif
-#if !CK_TWO_PHASE && !CK_RETENTION
-        (void)image;
-#endif
-        eps_sand[cell] = es;
         eps_fluid[cell] = ef;
+#if !CK_RETENTION
+        (void)image;
+#else
         const int inside = X >= 1 && X <= nx && Y >= 1 && Y <= ny && Z >= 1 && Z <= nz;
         if (inside) {
-            water[node] = wet;
-#if CK_RETENTION
             d_bound[node] = dR;
             bound_out[node] = Rn;
-#endif
         }
+#endif
     }
 #if !CK_RETENTION
+    (void)phi;
     (void)bound_in;
     (void)eps_prev;
     (void)d_bound;

@@ -8,6 +8,9 @@
 //   thread scatters its static block of particles into a private grid (scratch: nthreads * ncell floats),
 //   summed node by node in thread order (bitwise reproducible for a fixed thread count).
 // coupling_particle_moisture:  S_p = sum_i water_i N_i(x_p)                            (Eq. 59 / text after Eq. 28)
+//   water_i = R'_i + eps_f,i phi_i (coupling_water; eps_f phi without retention) from the porosity (padded),
+//   the phase field (padded; 1 single-phase, CK_TWO_PHASE=0) and the bound water R' of this step: not a stored
+//   field (the fields it comes from are unchanged between coupling_fractions and this stage)
 //   with retention (CK_RETENTION=1) also     r_p += sum_i (dR_i / eps_i) N_i(x_p)    (Eq. 58)
 //   where eps_i = V_i / V_cell is the UNCLAMPED rasterised sand fraction (grid_vol): then
 //   sum_p r_p V_p grows by exactly V_cell sum_i dR_i (partition of unity), i.e. bound water is conserved.
@@ -19,11 +22,15 @@
 //   (coupling_bound_water_p2g with r_p = retain_p); then sum_p r_p V_p grows by V_cell sum_i dR_i again.
 //
 // The node side of retention (Eqs. 54-56, the phi-scaled uptake of Eq. 55): kernels/coupling_fractions.cu.
-// variants: CK_RETENTION=0,1
+// variants: CK_RETENTION=0,1 CK_TWO_PHASE=0,1
 #include "common.cuh"
+#include "coupling_fields.cuh"
 
 #ifndef CK_RETENTION
 #define CK_RETENTION 0
+#endif
+#ifndef CK_TWO_PHASE
+#define CK_TWO_PHASE 1
 #endif
 
 // Is the 3x3x3 stencil of a particle at grid coordinates (X, Y, Z) = x / dx - 1/2 inside the grid?  False for a
@@ -108,11 +115,13 @@ KERNEL void coupling_clear(const long long n, float* RESTRICT a /* size: n */) {
     FOR_EACH(i, n) a[i] = 0.f;
 }
 
-// n = number of particles.  Without retention r, d_bound, grid_vol, retentive, retain are not used (pass 1-element
-// arrays); retentive and retain are read only when masked.
+// n = number of particles.  Without retention r, bound, d_bound, grid_vol, retentive, retain are not used (pass
+// 1-element arrays), nor phi single-phase; retentive and retain are read only when masked.
 KERNEL void coupling_particle_moisture(const long long n, const float* RESTRICT x /* size: 3 * n */,
                                        float* RESTRICT r /* size >= 1 */, float* RESTRICT saturation /* size: n */,
-                                       const float* RESTRICT water /* size: nx * ny * nz */,
+                                       const float* RESTRICT eps_fluid /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                                       const float* RESTRICT phi /* size >= 1 */,
+                                       const float* RESTRICT bound /* size >= 1 */,
                                        const float* RESTRICT d_bound /* size >= 1 */,
                                        const float* RESTRICT grid_vol /* size >= 1 */,
                                        const float* RESTRICT retentive /* size >= 1 */,
@@ -120,6 +129,8 @@ KERNEL void coupling_particle_moisture(const long long n, const float* RESTRICT 
                                        const int nz, const float dx, const int masked) {
     const long long np = n;
     const float inv_dx = 1.f / dx;
+    const int PX = nx + 2;
+    const long long PXY = (long long)PX * (ny + 2);
 #if CK_RETENTION
     const float cell = dx * dx * dx;
 #endif
@@ -140,11 +151,22 @@ KERNEL void coupling_particle_moisture(const long long n, const float* RESTRICT 
         for (int c = 0; c < 3; ++c)
             for (int b = 0; b < 3; ++b) {
                 const long long row = (long long)nx * ((long long)(by + b) + (long long)ny * (bz + c)) + bx;
+                const long long prow = (bx + 1) + PX * (long long)(by + b + 1) + PXY * (bz + c + 1);  // padded
                 const float wyz = wy[b] * wz[c];
                 for (int a = 0; a < 3; ++a) {
                     const long long i = row + a;
                     const float w = wx[a] * wyz;
-                    s += w * water[i];  // Eq. 59
+#if CK_TWO_PHASE
+                    const float ph = coupling_water_phase(phi[prow + a]);
+#else
+                    const float ph = 1.f;
+#endif
+#if CK_RETENTION
+                    const float held = bound[i];
+#else
+                    const float held = 0.f;
+#endif
+                    s += w * coupling_water(held, eps_fluid[prow + a], ph);  // Eq. 59
 #if CK_RETENTION
                     if (masked) {
                         const float v = retentive[i];
@@ -161,8 +183,12 @@ KERNEL void coupling_particle_moisture(const long long n, const float* RESTRICT 
         r[p] += masked ? retain[p] * dr : dr;
 #endif
     }
+#if !CK_TWO_PHASE
+    (void)phi;
+#endif
 #if !CK_RETENTION
     (void)r;
+    (void)bound;
     (void)d_bound;
     (void)grid_vol;
     (void)retentive;

@@ -11,7 +11,9 @@ steps (``[scheduler] sand_every = m``), exchanging over its whole step. A block:
 * the m − 1 other fluid steps: the sand and its fraction, velocity and drag force are held; ``fluid_velocity``
   and ``retention_source`` recompute S_φ for the fluid's own motion (Eq. 45's u·∇ε̃ term: with ε̃ unchanged
   since the last step, its (ε̃ − ε̃_prev) part is zero, and the absorbed water dR was handed over in the first
-  step), then the fluid step and ``coupling_finish``.
+  step), then the fluid step and ``coupling_finish``.  Because Σ f c is computed while the sand velocity is
+  held, m > 1 gives the coupler's exchange velocity a buffer of its own (12 B per cell; lockstep and m = 1
+  keep it in the fluid's sand-velocity buffer, :class:`~couplekit.coupling.coupler.SandFluidCoupler`).
 
 Conservation: the drag force −J/m applied over the block's m fluid steps gives the fluid exactly the −J the
 sand took, so fluid + sand momentum changes by round-off only; the porosity changes once per block and the
@@ -57,6 +59,10 @@ class MultirateScheduler(Scheduler):
             raise ValueError("a sand-only multi-rate scene needs the step dt (the sand steps sand_every × dt)")
         super().__init__(fluid, sand, coupler, source_term, timing, warm_up_steps, dt)
         self.sand_every = int(sand_every)
+        if coupler is not None and self.sand_every > 1:
+            # the block's other steps compute Σ f c for S_φ while the fluid still needs the sand velocity of
+            # the block's sand step: the two cannot share a buffer (SandFluidCoupler module docstring)
+            coupler.own_fluid_velocity()
         if not math.isclose(sand.dt, self.sand_every * self.dt, rel_tol=1e-9):
             raise ValueError(f"the sand's step {sand.dt} s is not sand_every × dt = {self.sand_every} × {self.dt} s")
 

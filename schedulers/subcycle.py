@@ -207,11 +207,11 @@ class SubcycleScheduler(Scheduler):
         if c.two_phase and self.source_term:
             with stage("retention_source"):
                 c.phase_source()
-        with stage("sand_velocity"):
-            c.sand_velocity(self._grid_v_avg)
-        if self._u_prev is not None:
+        if self._u_prev is not None:  # before the sand velocity overwrites u0's buffer (SandFluidCoupler)
             self._u_prev[...] = c.fluid_u
             self._have_prev = True
+        with stage("sand_velocity"):
+            c.sand_velocity(self._grid_v_avg)
         self._fluid_step()
         with stage("coupling_finish"):
             c.finish()

@@ -45,17 +45,18 @@ MIXTURE_BYTES_PER_CELL = (1 + 3 + 3) * F32
 
 # ---------------------------------------------------------------------------------------------- coupling
 COUPLING_STAGE_BYTES_PER_CELL = {
-    "volume_fractions": 2 * F32 + F32,  # clear + write ε_sand, water; ε_prev read
+    "volume_fractions": 2 * F32,  # node volume read, ε̃ write (the sand and water fractions are not stored)
     "fluid_velocity": 3 * F32 + 3 * F32 + F32,  # u read, fluid_u write, ε
     "drag_buoyancy": 3 * F32 + 3 * F32 + F32 + F32,  # force write, sand velocity read, ε, p
     "retention_source": 4 * F32 + F32,  # ε, ε_prev, φ, source write, d_bound
     "sand_velocity": 3 * F32 + F32,  # sand velocity write, mass read
     "coupling_finish": 2 * F32,  # ε_prev ← ε
+    "moisture": 2 * F32,  # ε̃ and φ, from which the gather computes the water fraction of Eq. 59
 }
 COUPLING_STAGE_BYTES_PER_PARTICLE = {
     "volume_fractions": 3 * F32 + F32,  # x, volume (scatter into ε)
     "drag_buoyancy": 3 * F32 + 3 * F32 + F32,  # x, v read, volume (gather u, scatter force)
-    "moisture": 3 * F32 + 2 * F32,  # x read, saturation read+write
+    "moisture": 3 * F32 + 2 * F32,  # x read, saturation read+write (+ ε̃ and φ per node: the water fraction)
     "sand_velocity": 3 * F32 * 2 + F32,  # x, v, mass
 }
 

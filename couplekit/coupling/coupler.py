@@ -1,8 +1,10 @@
 """SandFluidCoupler: the coupling fields of one sand body and one fluid, and the coupling stages of paper
 Algorithm 1 between :class:`couplekit.sand.solver.SandSolver` and :class:`couplekit.fluid.solver.FluidSolver`.
 
-The coupler owns what belongs to neither solver: the padded sand fraction, last step's porosity, and with
-water retention the bound water R, its increment dR and the particles' moisture ratio r_p.  It writes the
+The coupler owns what belongs to neither solver: last step's porosity, and with water retention the bound
+water R, its increment dR and the particles' moisture ratio r_p.  The sand fraction (Eq. 25) and the water
+fraction of Eq. 59 are not stored: the drag computes the first from the sand's P2G volume, the moisture the
+second from the porosity, φ and R (kernels/coupling_fields.cuh), 8 B per cell.  It writes the
 fluid's inputs (``fluid_fraction``, ``force``, ``source_term``, ``sand_velocity``) and the sand's
 (``grid_mv``: drag and buoyancy impulses; ``saturation``).  One lockstep step, in Algorithm 1's order::
 
@@ -30,6 +32,16 @@ streaming; with it a strong drag over a sand block makes the LBM blow up within 
 Σ f c it stays stable (tests/coupling/test_coupling_coupler.py).  Σ f c is
 :meth:`couplekit.fluid.solver.FluidSolver.current_velocity`, a fluid kernel on every backend (checked
 against an independent NumPy read of the populations in tests/coupling/test_coupling_fluid_velocity.py).
+
+Where Σ f c lives (:attr:`SandFluidCoupler.fluid_u`): in the fluid's ``sand_velocity`` buffer, 12 B per cell
+that are not stored twice.  The two are never alive at once in a step: Σ f c is written by
+:meth:`fluid_velocity` and last read by :meth:`exchange` (and :meth:`phase_source`), the sand velocity is
+written after G2P by :meth:`sand_velocity` and read by the fluid step, and every scheduler's step computes
+Σ f c afresh before it reads it (so it is not in a checkpoint either).  The one order where they overlap is a
+multi-rate block of m > 1 fluid steps, whose other steps recompute Σ f c for the source term while the fluid
+still needs the sand velocity of the block's sand step: that scheduler calls :meth:`own_fluid_velocity`
+(:mod:`couplekit.schedulers.multirate`).  The sub-cycling scheduler keeps its last-step copy before the sand
+velocity is written (:mod:`couplekit.schedulers.subcycle`).
 """
 
 from __future__ import annotations
@@ -39,12 +51,15 @@ import numpy as np
 from ..units import Units
 from . import make_coupling_ops
 from .params import CouplingParams
+from .reference import sand_fraction, water_fraction
 
 __all__ = ["SandFluidCoupler"]
 
-_STATE = ("eps_sand", "fluid_u", "eps_prev", "water", "bound_in", "bound", "d_bound", "moisture_ratio", "retain")
+_STATE = ("eps_prev", "bound_in", "bound", "d_bound", "moisture_ratio", "retain")
 """Arrays of :meth:`SandFluidCoupler.state` (the retention ones only when retention is on, ``retain`` only with
-per-body retention)."""
+per-body retention).  Not ``fluid_u``, the sand fraction or the water fraction: every step recomputes them
+before reading them, and only the first is stored (checkpoints that hold the others, as ``fluid_u``,
+``eps_sand`` and ``water``, still load; those values are ignored)."""
 
 
 class SandFluidCoupler:
@@ -85,10 +100,8 @@ class SandFluidCoupler:
         xp = fluid.backend.xp
         shape = tuple(fluid.shape)
         padded = tuple(s + 2 for s in shape)
-        self.eps_sand = xp.zeros(padded, dtype=np.float32)
-        self.fluid_u = xp.zeros((3, *padded), dtype=np.float32)
+        self._fluid_u = None  # own buffer of the exchange velocity (own_fluid_velocity); else fluid.sand_velocity
         self.eps_prev = xp.ones(padded, dtype=np.float32)
-        self.water = xp.zeros(shape, dtype=np.float32)
         self.retention = bool(self.params.retention)
         if self.retention:
             self.bound_in = xp.zeros(shape, dtype=np.float32)
@@ -111,11 +124,23 @@ class SandFluidCoupler:
         self._started = False
         self._scheduler = None  # built by step()
 
+    @property
+    def fluid_u(self):
+        """The exchange velocity Σ_j f_j c_j (padded, lattice units): the fluid's ``sand_velocity`` buffer, or
+        a buffer of its own after :meth:`own_fluid_velocity` (module docstring)."""
+        return self.fluid.sand_velocity if self._fluid_u is None else self._fluid_u
+
+    def own_fluid_velocity(self) -> None:
+        """Give :attr:`fluid_u` a buffer of its own (12 B per padded cell), for a scheduler that computes
+        Σ f c while the fluid still needs the sand velocity (a multi-rate block, module docstring)."""
+        if self._fluid_u is None:
+            self._fluid_u = self.fluid.backend.xp.zeros_like(self.fluid.sand_velocity)
+
     # ------------------------------------------------------------------ stages
     def fluid_velocity(self) -> None:
-        """``fluid_u`` := Σ_j f_j c_j of the fluid's current populations on interior fluid cells (zero on
-        solid cells and ghosts, which no coupling stage reads): FluidSolver.current_velocity (module
-        docstring)."""
+        """``fluid_u`` := Σ_j f_j c_j of the fluid's current populations on interior fluid cells (solid cells
+        and ghosts keep what the buffer held, the sand velocity; no coupling stage reads them there):
+        FluidSolver.current_velocity (module docstring)."""
         self.fluid.current_velocity(out=self.fluid_u)
 
     def fractions(self, share: float = 1.0) -> None:
@@ -131,8 +156,8 @@ class SandFluidCoupler:
                     self.retain = _resized(self.fluid.backend.xp, self.retain, s.n_particles)
                 self.ops.bound_water_p2g(s.x, self.retain, s.volume, self.retentive, s.dx)
         self.ops.fractions(
-            s.grid_vol, f.phi, self.bound_in, self.eps_prev, self.eps_sand, f.fluid_fraction, self.d_bound,
-            self.bound, self.water, s.dx, self.periodic, self.retentive, share,
+            s.grid_vol, f.phi, self.bound_in, self.eps_prev, f.fluid_fraction, self.d_bound, self.bound, s.dx,
+            self.periodic, self.retentive, share,
         )  # fmt: skip
         if not self._started:
             # first step: no sand motion yet, so last step's porosity is this one (without absorption)
@@ -174,15 +199,15 @@ class SandFluidCoupler:
         prm = f.params
         self.ops.drag_buoyancy(
             s.grid_m, s.grid_mv, f.force if force is None else force, self.fluid_u if u is None else u,
-            f.phi, self.eps_sand, f.fluid_fraction, f.flags, self.units, s.gravity, prm.rho_h, prm.rho_l, s.dt,
+            f.phi, s.grid_vol, f.fluid_fraction, f.flags, self.units, s.gravity, prm.rho_h, prm.rho_l, s.dt,
         )  # fmt: skip
 
     def moisture(self) -> None:
         """Saturation of every particle (Eq. 59 or its no-retention form) and, with retention, r_p (Eq. 58)."""
         s = self.sand
         self.ops.particle_moisture(
-            s.x, self.moisture_ratio, s.saturation, self.water, self.d_bound, s.grid_vol, s.dx, self.retentive,
-            self.retain,
+            s.x, self.moisture_ratio, s.saturation, self.fluid.fluid_fraction, self.fluid.phi, self.bound,
+            self.d_bound, s.grid_vol, s.dx, self.retentive, self.retain,
         )  # fmt: skip
 
     def sand_velocity(self, grid_v=None) -> None:
@@ -234,13 +259,20 @@ class SandFluidCoupler:
 
     # ------------------------------------------------------------------ outputs
     def fields(self) -> dict[str, np.ndarray]:
-        """Host copies of the interior coupling fields: sand_fraction, fluid_fraction, water (Eq. 59 summand),
-        and with retention bound_water."""
+        """Host copies of the interior coupling fields: sand_fraction (Eq. 25, of the last P2G), fluid_fraction,
+        water (Eq. 59 summand), and with retention bound_water; the first and the third are computed here
+        (:func:`~couplekit.coupling.reference.sand_fraction`, :func:`~couplekit.coupling.reference.water_fraction`),
+        as the drag and the moisture compute them, float32 like the fields the solver holds."""
         be = self.fluid.backend
+        eps_fluid = be.to_host(self.fluid.fluid_fraction)
+        bound = be.to_host(self.bound) if self.retention else None
+        phi = be.to_host(self.fluid.phi) if self.two_phase else None
         out = {
-            "sand_fraction": be.to_host(self.eps_sand)[1:-1, 1:-1, 1:-1],
-            "fluid_fraction": be.to_host(self.fluid.fluid_fraction)[1:-1, 1:-1, 1:-1],
-            "water": be.to_host(self.water),
+            "sand_fraction": sand_fraction(be.to_host(self.sand.grid_vol), self.sand.dx, self.params.eps_max).astype(
+                np.float32
+            ),
+            "fluid_fraction": eps_fluid[1:-1, 1:-1, 1:-1],
+            "water": water_fraction(eps_fluid, phi, bound).astype(np.float32),
         }
         if self.retention:
             out["bound_water"] = be.to_host(self.bound)

@@ -53,18 +53,16 @@ class KernelOps:
         phi,
         bound_in,
         eps_prev,
-        eps_sand,
         eps_fluid,
         d_bound,
         bound_out,
-        water,
         dx: float,
         periodic: Sequence[bool] = (True, True, True),
         retentive=None,
         share: float = 1.0,
     ) -> None:
-        """Sand fraction ε and porosity (padded, ghosts filled), dR, R' and the water fraction (MPM grid):
-        one pass of ``coupling_fractions`` (Eqs. 25, 33, 54–56, 59; the φ-scaled uptake rate of Eq. 55).
+        """The porosity (padded, ghosts filled), dR and R' (MPM grid): one pass of ``coupling_fractions``
+        (Eqs. 25, 33, 54–56; the φ-scaled uptake rate of Eq. 55).
         ``retentive``: the retentive sand's fraction for per-body retention (None: all sand retains);
         ``share``: the part of a fluid step this sand step covers (reference docstring)."""
         nz, ny, nx = grid_vol.shape
@@ -73,8 +71,8 @@ class KernelOps:
         self._fn("coupling_fractions.cu", "coupling_fractions", "CK_RETENTION", "CK_TWO_PHASE")(
             (nx + 2) * (ny + 2) * (nz + 2), grid_vol, self._opt(phi, self.two_phase, "phi"),
             self._opt(bound_in, ret, "bound_in"), self._none if retentive is None else retentive,
-            self._opt(eps_prev, ret, "eps_prev"), eps_sand, eps_fluid,
-            self._opt(d_bound, ret, "d_bound"), self._opt(bound_out, ret, "bound_out"), water,
+            self._opt(eps_prev, ret, "eps_prev"), eps_fluid,
+            self._opt(d_bound, ret, "d_bound"), self._opt(bound_out, ret, "bound_out"),
             np.int32(nx), np.int32(ny), np.int32(nz), *(np.int32(bool(v)) for v in periodic),
             np.float32(1.0 / dx**3), np.float32(p.eps_max), np.float32(p.r_max),
             np.float32(p.absorption_rate * share), np.float32(min(share, 1.0)), np.int32(retentive is not None and ret),
@@ -95,7 +93,7 @@ class KernelOps:
         force,
         u,
         phi,
-        eps_sand,
+        grid_vol,
         eps_fluid,
         flags,
         units: Units,
@@ -104,16 +102,17 @@ class KernelOps:
         rho_l: float,
         dt: float | None = None,
     ) -> None:
-        """Implicit drag impulse J + Δt × buoyancy into ``grid_mv`` and −J/Δt into ``force``."""
+        """Implicit drag impulse J + Δt × buoyancy into ``grid_mv`` and −J/Δt into ``force``; the sand fraction
+        from the P2G's ``grid_vol`` (Eq. 25, as :meth:`fractions`)."""
         nz, ny, nx = grid_m.shape
         p = self.params
         mass_scale, velocity_scale, dt, dt_lattice = drag_scales(units, dt)
         self._fn("coupling_drag.cu", "coupling_drag_buoyancy", "CK_TWO_PHASE")(
-            nx * ny * nz, grid_m, grid_mv, force, u, self._opt(phi, self.two_phase, "phi"), eps_sand,
+            nx * ny * nz, grid_m, grid_mv, force, u, self._opt(phi, self.two_phase, "phi"), grid_vol,
             eps_fluid, flags, np.int32(nx), np.int32(ny), np.int32(nz), np.float32(dt), np.float32(dt_lattice),
             *(np.float32(g) for g in gravity), np.float32(mass_scale), np.float32(velocity_scale),
             np.float32(rho_h), np.float32(rho_l), np.float32(p.drag_coefficient), np.float32(p.drag_exponent),
-            np.float32(p.grain_diameter_lattice(units.dx)),
+            np.float32(p.grain_diameter_lattice(units.dx)), np.float32(1.0 / units.dx**3), np.float32(p.eps_max),
         )  # fmt: skip
 
     def fluid_view(self, u0, u_prev, impulse, phi, eps_fluid, flags, u_seen, theta: float, rho_h, rho_l) -> None:
@@ -144,7 +143,9 @@ class KernelOps:
         """R_i = (1/V_cell) Σ_p r_p V_p N_i(x_p) (Eq. 53), overwriting ``bound``."""
         nz, ny, nx = bound.shape
         ncell = nx * ny * nz
-        mod = self.backend.module("coupling_moisture.cu", {"CK_RETENTION": int(self.retention)})
+        mod = self.backend.module(
+            "coupling_moisture.cu", {k: self._defines[k] for k in ("CK_RETENTION", "CK_TWO_PHASE")}
+        )
         if self.backend.gpu_code_paths:  # the atomic scatter (cuda, cpu-device) accumulates into a cleared grid
             mod.function("coupling_clear")(ncell, bound)
             scratch, threads = self._none, 1
@@ -159,14 +160,16 @@ class KernelOps:
         )  # fmt: skip
 
     def particle_moisture(
-        self, x, r, saturation, water, d_bound, grid_vol, dx: float, retentive=None, retain=None
+        self, x, r, saturation, eps_fluid, phi, bound, d_bound, grid_vol, dx: float, retentive=None, retain=None
     ) -> None:
-        """Saturation S_p (Eq. 59) and, with retention, the moisture update r_p (Eq. 58); per-body retention
-        with ``retentive`` (retentive sand fraction) and ``retain`` (1 on retentive particles, else 0)."""
-        nz, ny, nx = water.shape
+        """Saturation S_p (Eq. 59, the water fraction R' + ε φ from ``eps_fluid``, ``phi`` and ``bound``) and,
+        with retention, the moisture update r_p (Eq. 58); per-body retention with ``retentive`` (retentive sand
+        fraction) and ``retain`` (1 on retentive particles, else 0)."""
+        nz, ny, nx = (s - 2 for s in eps_fluid.shape)
         ret = self.retention
-        self._fn("coupling_moisture.cu", "coupling_particle_moisture", "CK_RETENTION")(
-            x.shape[1], x, self._opt(r, ret, "r"), saturation, water, self._opt(d_bound, ret, "d_bound"),
+        self._fn("coupling_moisture.cu", "coupling_particle_moisture", "CK_RETENTION", "CK_TWO_PHASE")(
+            x.shape[1], x, self._opt(r, ret, "r"), saturation, eps_fluid, self._opt(phi, self.two_phase, "phi"),
+            self._opt(bound, ret, "bound"), self._opt(d_bound, ret, "d_bound"),
             self._opt(grid_vol, ret, "grid_vol"), self._none if retentive is None else retentive,
             self._none if retain is None else retain, np.int32(nx), np.int32(ny), np.int32(nz), np.float32(dx),
             np.int32(retentive is not None and ret),

@@ -109,6 +109,21 @@ def _isotropic_gradient(s: np.ndarray, flags: np.ndarray) -> np.ndarray:
     return grad
 
 
+def sand_fraction(grid_vol, dx: float, eps_max: float) -> np.ndarray:
+    """ε = min(ε_max, V_i / V_cell) (Eq. 25) of the P2G's node volume ``grid_vol`` (unpadded, float64): the
+    drag and the porosity both take it from there (kernels/coupling_fields.cuh)."""
+    return np.minimum(eps_max, np.asarray(grid_vol).astype(np.float64) / dx**3)
+
+
+def water_fraction(eps_fluid, phi=None, bound=None) -> np.ndarray:
+    """The water volume fraction of each MPM node that drives cohesion, R' + ε̃ φ (Eq. 59's summand; ε̃ φ without
+    retention, the text after Eq. 28): ``eps_fluid`` and ``phi`` padded (φ clamped to [0, 1]; None: single-phase
+    water, φ = 1), ``bound`` R' unpadded (None: no retention).  Unpadded float64."""
+    ef = _interior(eps_fluid).astype(np.float64)
+    wet = ef if phi is None else ef * np.clip(_interior(phi).astype(np.float64), 0.0, 1.0)
+    return wet if bound is None else np.asarray(bound).astype(np.float64) + wet
+
+
 class ReferenceOps:
     """The coupling stages in NumPy; same methods and arguments as :class:`~couplekit.coupling.kernel_ops.KernelOps`.
 
@@ -136,18 +151,17 @@ class ReferenceOps:
         phi,
         bound_in,
         eps_prev,
-        eps_sand,
         eps_fluid,
         d_bound,
         bound_out,
-        water,
         dx: float,
         periodic: Sequence[bool] = (True, True, True),
         retentive=None,
         share: float = 1.0,
     ) -> None:
-        """Sand fraction ε and porosity (padded, ghosts filled), and on the MPM grid: bound-water increment
-        dR, bound water R' and the water fraction that drives cohesion (Eq. 59 summand).
+        """The porosity (padded, ghosts filled) from the sand fraction ε (Eq. 25, :func:`sand_fraction`), and on
+        the MPM grid the bound-water increment dR and bound water R'.  Neither ε nor the water fraction that
+        drives cohesion (Eq. 59, :func:`water_fraction`) is stored: the drag and the moisture recompute them.
 
         ``retentive`` (per-body retention, else None): the retentive sand's fraction ε_r = Σ_p V_p N_i / V_cell
         over retentive particles (:meth:`bound_water_p2g` with r_p = 1 on them); the capacity of Eqs. 55–56
@@ -168,7 +182,7 @@ class ReferenceOps:
         iz = source_index(nz, periodic[2])[:, None, None]
         iy = source_index(ny, periodic[1])[None, :, None]
         ix = source_index(nx, periodic[0])[None, None, :]
-        eps_node = np.minimum(p.eps_max, grid_vol.astype(np.float64) / dx**3)  # Eq. 25
+        eps_node = sand_fraction(grid_vol, dx, p.eps_max)  # Eq. 25
         ph_node = self._phi_water(_interior(phi) if self.two_phase else None, grid_vol)
         if self.retention:
             R = bound_in.astype(np.float64)
@@ -180,15 +194,11 @@ class ReferenceOps:
             dR = np.minimum(min(share, 1.0) * free * ph_node, np.minimum(rate * cap * ph_node, cap - R))
             R_new = R + dR  # Eq. 56
             ef_node = 1.0 - eps_node - R_new  # Eq. 54
-            wet = R_new + ef_node * ph_node  # Eq. 59 summand
             d_bound[...] = dR
             bound_out[...] = R_new
         else:
             ef_node = 1.0 - eps_node  # Eq. 33
-            wet = ef_node * ph_node  # saturation summand of the text after Eq. 28
-        eps_sand[...] = eps_node[iz, iy, ix]
         eps_fluid[...] = ef_node[iz, iy, ix]
-        water[...] = wet
 
     def sand_velocity(self, grid_v, sand_v, units: Units, periodic: Sequence[bool] = (True, True, True)) -> None:
         """The MPM grid velocity (SI, unpadded) in lattice units on the padded layout: the ``sand_velocity``
@@ -207,7 +217,7 @@ class ReferenceOps:
         force,
         u,
         phi,
-        eps_sand,
+        grid_vol,
         eps_fluid,
         flags,
         units: Units,
@@ -222,7 +232,8 @@ class ReferenceOps:
         the last streaming, no force shift), not the post-collision velocity field of a Guo-forced step:
         with that stale value strong drag makes the LBM unstable (kernels/coupling_drag.cu).
 
-        ``units``: the lattice unit system (dx, LBM step, reference density); ``gravity`` in m/s²;
+        ``grid_vol``: the P2G's node volume V_i, the sand fraction's source (Eq. 25); ``units``: the lattice
+        unit system (dx, LBM step, reference density); ``gravity`` in m/s²;
         ``rho_h``, ``rho_l`` lattice densities; ``dt``: the MPM step in s (default: the LBM step).
         """
         p = self.params
@@ -235,7 +246,7 @@ class ReferenceOps:
             rho = rho_l + (rho_h - rho_l) * np.clip(_interior(phi).astype(np.float64), 0.0, 1.0)  # Eq. 4
         else:
             rho = np.full(m.shape, float(rho_h))
-        es = _interior(eps_sand).astype(np.float64)
+        es = sand_fraction(grid_vol, units.dx, p.eps_max)  # Eq. 25, as fractions computes it
         ef = _interior(eps_fluid).astype(np.float64)
         f_b = -es * rho * mass_scale * g  # Eq. 31: −V_cell ε ρ g  (ρ·mass_scale = ρ_SI V_cell)
         m_safe = np.where(active, m, 1.0)
@@ -319,14 +330,17 @@ class ReferenceOps:
         bound[...] = acc.reshape(bound.shape)
 
     def particle_moisture(
-        self, x, r, saturation, water, d_bound, grid_vol, dx: float, retentive=None, retain=None
+        self, x, r, saturation, eps_fluid, phi, bound, d_bound, grid_vol, dx: float, retentive=None, retain=None
     ) -> None:
-        """S_p = Σ_i water_i N_i(x_p) (Eq. 59); with retention r_p += Σ_i dR_i / ε̂_i N_i(x_p) (Eq. 58),
+        """S_p = Σ_i water_i N_i(x_p) (Eq. 59), water_i = :func:`water_fraction` of this step's porosity
+        ``eps_fluid`` (padded), ``phi`` (padded) and bound water ``bound`` (R', retention); with retention
+        r_p += Σ_i dR_i / ε̂_i N_i(x_p) (Eq. 58),
         ε̂_i = V_i / V_cell unclamped (so that bound water is conserved; see kernels/coupling_moisture.cu).
 
         Per-body retention: ``retain`` (P,) is 1 on retentive particles, 0 elsewhere, ``retentive`` their
         fraction ε_r (see :meth:`fractions`); then r_p += retain_p Σ_i dR_i / ε_r,i N_i(x_p): the bound water
         goes to the retentive particles only, and Σ_p r_p V_p still grows by V_cell Σ_i dR_i."""
+        water = water_fraction(eps_fluid, phi if self.two_phase else None, bound if self.retention else None)
         index, w = bspline_stencil(x, dx, water.shape)
         lost = ~w.any(axis=1)  # outside the grid or not finite (bspline_stencil): saturation NaN, r unchanged
         saturation[...] = np.where(lost, np.nan, (w * water.astype(np.float64).ravel()[index]).sum(axis=1))

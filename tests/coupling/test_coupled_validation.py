@@ -37,7 +37,7 @@ def test_uniform_suspension_settles_at_the_drag_gravity_buoyancy_slip(cpu1):
     slips = []
     for _ in range(6):
         sc.step(50)
-        es = cpu1.to_host(sc.coupler.eps_sand)[1:-1, 1:-1, 1:-1]
+        es = sc.coupler.fields()["sand_fraction"]
         u = cpu1.to_host(sc.fluid.current_velocity())[2, 1:-1, 1:-1, 1:-1] * scale
         v = cpu1.to_host(sc.sand.grid_v)[2]
         core = np.abs(es - eps) < 1e-3

@@ -28,20 +28,20 @@ def _grid_update(m, mv, dt, g):
     return np.where(has, mv.astype(np.float64) / np.where(has, mm, 1.0) + dt * g, 0.0)
 
 
-def _exchange(ops, st, eps_sand, eps_fluid, units=UNITS, gravity=(0.0, 0.0, 0.0)):
+def _exchange(ops, st, eps_fluid, units=UNITS, gravity=(0.0, 0.0, 0.0)):
+    """The exchange, its sand fraction from the state's node volume (Eq. 25)."""
     mv = st["grid_mv"].copy()
-    force = np.zeros((3, *eps_sand.shape), np.float32)
-    ops.drag_buoyancy(st["grid_m"], mv, force, st["u"], st["phi"], eps_sand, eps_fluid, st["flags"], units,
+    force = np.zeros((3, *eps_fluid.shape), np.float32)
+    ops.drag_buoyancy(st["grid_m"], mv, force, st["u"], st["phi"], st["grid_vol"], eps_fluid, st["flags"], units,
                       gravity, RHO_H, RHO_L)  # fmt: skip
     return mv, force
 
 
 def _fractions(ops, st, shape=SHAPE):
-    es = np.zeros(padded(shape), np.float32)
+    """The porosity ε̃ (padded)."""
     ef = np.zeros(padded(shape), np.float32)
-    water = np.zeros(shape, np.float32)
-    ops.fractions(st["grid_vol"], st["phi"], None, None, es, ef, None, None, water, UNITS.dx, (True, True, False))
-    return es, ef
+    ops.fractions(st["grid_vol"], st["phi"], None, None, ef, None, None, UNITS.dx, (True, True, False))
+    return ef
 
 
 @pytest.mark.parametrize("c_drag", [1e-3, 1e-2, 1e-1, 1.0, 1e1, 1e2, 1e3])
@@ -54,8 +54,8 @@ def test_exchange_conserves_momentum_and_never_overshoots(cpu, c_drag):
     """
     ops = KernelOps(cpu, CouplingParams(drag_coefficient=c_drag), two_phase=True)
     st = grid_state(np.random.default_rng(10), ops.params)
-    es, ef = _fractions(ops, st)
-    mv, force = _exchange(ops, st, es, ef)
+    ef = _fractions(ops, st)
+    mv, force = _exchange(ops, st, ef)
     mscale, vscale = UNITS.rho * UNITS.dx**3, UNITS.dx / UNITS.dt
     sand = (mv.astype(np.float64) - st["grid_mv"]) / (mscale * vscale)  # lattice momentum gained by the sand
     fluid = force[:, 1:-1, 1:-1, 1:-1].astype(np.float64)  # lattice momentum gained by the fluid (Δt = 1)
@@ -86,7 +86,7 @@ def test_repeated_strong_exchange_relaxes_monotonically(cpu):
     ops = KernelOps(cpu, CouplingParams(drag_coefficient=1e3), two_phase=True)
     st = grid_state(np.random.default_rng(11), ops.params)
     st["phi"][...] = 0.0  # air everywhere: m_f = ρ_l ε̃ tiny, the stiff case of notes §3.3
-    es, ef = _fractions(ops, st)
+    ef = _fractions(ops, st)
     vscale = UNITS.dx / UNITS.dt
     mscale = UNITS.rho * UNITS.dx**3
     m = st["grid_m"].astype(np.float64)
@@ -98,7 +98,7 @@ def test_repeated_strong_exchange_relaxes_monotonically(cpu):
     slip = []
     for _ in range(200):
         force = np.zeros_like(u)
-        ops.drag_buoyancy(st["grid_m"], mv, force, u, st["phi"], es, ef, st["flags"], UNITS, (0, 0, 0),
+        ops.drag_buoyancy(st["grid_m"], mv, force, u, st["phi"], st["grid_vol"], ef, st["flags"], UNITS, (0, 0, 0),
                           RHO_H, RHO_L)  # fmt: skip
         u[:, 1:-1, 1:-1, 1:-1] += np.where(active, force[:, 1:-1, 1:-1, 1:-1] / m_f, 0.0).astype(np.float32)
         v = mv / np.where(active, m, 1.0) / vscale
@@ -138,16 +138,16 @@ def test_buoyancy_balances_hydrostatics(cpu, sand_density):
     ops = KernelOps(cpu, CouplingParams(), two_phase=True)
     eps = 0.4
     st = _uniform_node_state(eps, sand_density)
-    es, ef = _fractions(ops, st, shape=(2, 2, 2))
+    ef = _fractions(ops, st, shape=(2, 2, 2))
     g = (0.0, 0.0, -9.81)
-    mv, force = _exchange(ops, st, es, ef, gravity=g)
+    mv, force = _exchange(ops, st, ef, gravity=g)
     rho_si = RHO_H * UNITS.rho
     grad_p = rho_si * np.asarray(g)  # hydrostatic pressure gradient ∇p = ρ g
     want = -(eps * UNITS.dx**3) * grad_p
     # the buoyancy alone: with a vanishing drag coefficient the exchange adds exactly Δt F_b to the momentum
     # (the state starts at rest, so mv − 0 = Δt F_b; float32 of one product)
     no_drag = KernelOps(cpu, CouplingParams(drag_coefficient=1e-30), two_phase=True)
-    mv_b, force_b = _exchange(no_drag, st, es, ef, gravity=g)
+    mv_b, force_b = _exchange(no_drag, st, ef, gravity=g)
     assert np.abs(force_b).max() < 1e-20, "buoyancy is not exchanged with the fluid (its reaction is the pressure)"
     f_b = mv_b.reshape(3, -1).T.astype(np.float64) / UNITS.dt
     np.testing.assert_allclose(f_b, np.broadcast_to(want, (8, 3)), rtol=1e-6, atol=1e-12)
@@ -164,10 +164,10 @@ def test_neutral_sand_stays_at_rest(cpu):
     """ϱ = ρ: weight and buoyancy cancel, the slip is zero, the drag does nothing (v stays 0)."""
     ops = KernelOps(cpu, CouplingParams(), two_phase=False)
     st = _uniform_node_state(0.5, 1000.0)
-    es, ef = _fractions(ops, st, shape=(2, 2, 2))
+    ef = _fractions(ops, st, shape=(2, 2, 2))
     g = (0.0, -9.81, 0.0)
     for _ in range(50):
-        mv, force = _exchange(ops, st, es, ef, gravity=g)
+        mv, force = _exchange(ops, st, ef, gravity=g)
         v = _grid_update(st["grid_m"], mv, UNITS.dt, g)
         st["grid_mv"] = (st["grid_m"] * v).astype(np.float32)
     assert np.abs(v).max() < 1e-6 * 9.81 * UNITS.dt * 50
@@ -201,10 +201,8 @@ def _settle(ops, cases, units):
         "u": np.zeros((3, *padded(shape)), np.float32),
         "flags": np.zeros(padded(shape), np.uint8),
     }
-    es = np.zeros(padded(shape), np.float32)
     ef = np.zeros(padded(shape), np.float32)
-    water = np.zeros(shape, np.float32)
-    ops.fractions(st["grid_vol"], st["phi"], None, None, es, ef, None, None, water, units.dx, (True, True, True))
+    ops.fractions(st["grid_vol"], st["phi"], None, None, ef, None, None, units.dx, (True, True, True))
     rho = RHO_H * units.rho
     g = (0.0, 0.0, -9.81)
     v_t = np.array([node_terminal_velocity(d, rho, 9.81, e, units.dx, ops.params) for d, e in cases])
@@ -212,7 +210,7 @@ def _settle(ops, cases, units):
     steps = int(25 * (v_t / (2 * g_eff)).max() / units.dt)  # relaxation time of quadratic drag: v_t / (2 g_eff)
     assert steps < 20000, steps
     for _ in range(steps):
-        mv, _ = _exchange(ops, st, es, ef, units=units, gravity=g)
+        mv, _ = _exchange(ops, st, ef, units=units, gravity=g)
         v = _grid_update(st["grid_m"], mv, units.dt, g)
         st["grid_mv"] = (st["grid_m"] * v).astype(np.float32)
     return v[2].ravel(), v_t, g_eff

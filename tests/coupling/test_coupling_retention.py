@@ -9,27 +9,37 @@ import pytest
 from coupling_states import padded
 
 from couplekit.coupling import CouplingParams, KernelOps
-from couplekit.coupling.reference import bspline_stencil
+from couplekit.coupling.reference import bspline_stencil, sand_fraction, water_fraction
 
 DX = 0.01
 
 
 def _outputs(shape):
     return {
-        "es": np.zeros(padded(shape), np.float32),
         "ef": np.zeros(padded(shape), np.float32),
         "dR": np.zeros(shape, np.float32),
         "R": np.zeros(shape, np.float32),
-        "water": np.zeros(shape, np.float32),
     }
 
 
-def _fractions(ops, grid_vol, phi, bound, periodic=(True, True, True), eps_prev=None):
+def _derived(ops, o, grid_vol, phi):
+    """The fractions the stage does not store, as the drag and the moisture compute them: the sand fraction
+    (Eq. 25; padded by edge copies, only its interior is read) and the water fraction (Eq. 59)."""
+    o["es"] = np.pad(sand_fraction(grid_vol, DX, ops.params.eps_max), 1, mode="edge")
+    o["water"] = water_fraction(o["ef"], phi, o["R"] if ops.retention else None)
+    return o
+
+
+def _run(ops, grid_vol, phi, bound, eps_prev, periodic):
     o = _outputs(grid_vol.shape)
+    ops.fractions(grid_vol, phi, bound, eps_prev, o["ef"], o["dR"], o["R"], DX, periodic)
+    return _derived(ops, o, grid_vol, phi)
+
+
+def _fractions(ops, grid_vol, phi, bound, periodic=(True, True, True), eps_prev=None):
     if eps_prev is None:
         eps_prev = np.ones(padded(grid_vol.shape), np.float32)
-    ops.fractions(grid_vol, phi, bound, eps_prev, o["es"], o["ef"], o["dR"], o["R"], o["water"], DX, periodic)
-    return o
+    return _run(ops, grid_vol, phi, bound, eps_prev, periodic)
 
 
 def test_sand_fraction_never_exceeds_eps_max_and_ghosts_follow_the_boundary(cpu):
@@ -41,15 +51,17 @@ def test_sand_fraction_never_exceeds_eps_max_and_ghosts_follow_the_boundary(cpu)
     grid_vol = (rng.uniform(0.0, 2.0, shape) * DX**3).astype(np.float32)
     phi = rng.uniform(0, 1, padded(shape)).astype(np.float32)
     o = _fractions(ops, grid_vol, phi, None, periodic=(True, False, True))
-    es, ef = o["es"], o["ef"]
-    assert es.max() == np.float32(0.64) and (es >= 0).all()
+    es, ef = o["es"][1:-1, 1:-1, 1:-1], o["ef"]
+    assert es.max() == 0.64 and (es >= 0).all()
     assert (ef >= np.float32(1 - 0.64)).all()
-    np.testing.assert_array_equal(es + ef, np.ones_like(es))  # Eq. 33 (exact in float32 for these values? see below)
-    np.testing.assert_array_equal(es[:, :, 0], es[:, :, -2])  # x periodic: ghost x=-1 is node nx-1
-    np.testing.assert_array_equal(es[:, :, -1], es[:, :, 1])
-    np.testing.assert_array_equal(es[:, 0, :], es[:, 1, :])  # y walls: nearest interior node
-    np.testing.assert_array_equal(es[:, -1, :], es[:, -2, :])
-    np.testing.assert_array_equal(es[0], es[-2])  # z periodic
+    # Eq. 33: ε̃ = 1 − ε with ε computed in float32 as the kernels do (coupling_sand_fraction)
+    es32 = np.minimum(np.float32(0.64), grid_vol * np.float32(1 / DX**3))
+    np.testing.assert_array_equal(ef[1:-1, 1:-1, 1:-1], np.float32(1) - es32)
+    np.testing.assert_array_equal(ef[:, :, 0], ef[:, :, -2])  # x periodic: ghost x=-1 is node nx-1
+    np.testing.assert_array_equal(ef[:, :, -1], ef[:, :, 1])
+    np.testing.assert_array_equal(ef[:, 0, :], ef[:, 1, :])  # y walls: nearest interior node
+    np.testing.assert_array_equal(ef[:, -1, :], ef[:, -2, :])
+    np.testing.assert_array_equal(ef[0], ef[-2])  # z periodic
 
 
 def test_absorption_follows_each_branch_of_eq55(cpu):
@@ -121,11 +133,10 @@ def _closed_box(cpu1, retention: bool, steps: int, phi0: float | None = None):
     for _ in range(steps):
         if retention:
             ops.bound_water_p2g(x, r, vol, bound, DX)
-        o = _outputs(shape)
-        ops.fractions(grid_vol, phi, bound, ef_prev, o["es"], o["ef"], o["dR"], o["R"], o["water"], DX, (False,) * 3)
+        o = _run(ops, grid_vol, phi, bound, ef_prev, (False,) * 3)
         ops.phase_source(o["ef"], ef_prev, phi, u, flags, o["dR"], source)
+        ops.particle_moisture(x, r, sat, o["ef"], phi, o["R"], o["dR"], grid_vol, DX)  # before φ moves on
         phi[1:-1, 1:-1, 1:-1] += source[1:-1, 1:-1, 1:-1]
-        ops.particle_moisture(x, r, sat, o["water"], o["dR"], grid_vol, DX)
         ef_prev = o["ef"]
         totals.append(water_total())
         history.append(o)
@@ -175,7 +186,7 @@ def test_retained_water_keeps_drained_sand_wet(cpu1):
         if retention:
             ops.bound_water_p2g(x, r, vol, bound, DX)
         o = _fractions(ops, grid_vol, phi, bound, (False,) * 3)
-        ops.particle_moisture(x, r.copy(), sat, o["water"], o["dR"], grid_vol, DX)
+        ops.particle_moisture(x, r.copy(), sat, o["ef"], phi, o["R"], o["dR"], grid_vol, DX)
         if not retention:
             assert np.abs(sat).max() == 0.0
         else:

@@ -40,9 +40,8 @@ def _run(cpu1, mode: str) -> np.ndarray:
     params = FluidParams(rho_h=1.0, rho_l=0.01, nu_h=0.1, nu_l=0.1, mobility=0.02, width=4.0, eta=eta)
     fluid = FluidSolver(cpu1, SHAPE, params, boundaries=Boundaries.channel("xyz"), phi=phi0, mixture=True)
     ops = KernelOps(cpu1, CouplingParams(), two_phase=True)
-    es, ef = np.zeros(padded, np.float32), np.ones(padded, np.float32)
+    ef = np.ones(padded, np.float32)
     ef_prev = np.ones(padded, np.float32)
-    water = np.zeros(SHAPE, np.float32)
     grid_v = np.zeros((3, *SHAPE), np.float32)
     source = np.zeros(padded, np.float32)
     inside = (slice(1, -1),) * 3
@@ -52,7 +51,7 @@ def _run(cpu1, mode: str) -> np.ndarray:
         d = np.sqrt((xx - nx / 2) ** 2 + (yy - ny / 2) ** 2 + (zz - (18.0 - SPEED * n)) ** 2)
         eps = 0.5 * np.clip(RADIUS + 0.5 - d, 0.0, 1.0)
         grid_vol = (eps * UNITS.dx**3).astype(np.float32)
-        ops.fractions(grid_vol, fluid.phi, None, None, es, ef, None, None, water, UNITS.dx, (False,) * 3)
+        ops.fractions(grid_vol, fluid.phi, None, None, ef, None, None, UNITS.dx, (False,) * 3)
         grid_v[2] = np.where(eps > 0, -SPEED * UNITS.dx / UNITS.dt, 0.0)
         ops.sand_velocity(grid_v, fluid.sand_velocity, UNITS, (False,) * 3)
         fluid.fluid_fraction[...] = ef

@@ -47,9 +47,8 @@ def test_total_momentum_is_conserved_with_the_fluid_solver(cpu1, c_drag):
     v0[0], v0[2] = 0.02 * vs, -0.01 * vs  # lattice speeds 0.02 and 0.01
     grid_mv = (grid_m * v0).astype(np.float32)
     padded = tuple(s + 2 for s in SHAPE)
-    es, ef = np.zeros(padded, np.float32), np.zeros(padded, np.float32)
-    water = np.zeros(SHAPE, np.float32)
-    ops.fractions(grid_vol, None, None, None, es, ef, None, None, water, UNITS.dx, (True, True, True))
+    ef = np.zeros(padded, np.float32)
+    ops.fractions(grid_vol, None, None, None, ef, None, None, UNITS.dx, (True, True, True))
     fluid.fluid_fraction[...] = ef
 
     u_now = np.zeros((3, *padded), np.float32)
@@ -70,7 +69,7 @@ def test_total_momentum_is_conserved_with_the_fluid_solver(cpu1, c_drag):
     impulse = np.zeros(3)
     slips = [slip()]
     for _ in range(150):
-        ops.drag_buoyancy(grid_m, grid_mv, fluid.force, u_now, None, es, ef, fluid.flags, UNITS,
+        ops.drag_buoyancy(grid_m, grid_mv, fluid.force, u_now, None, grid_vol, ef, fluid.flags, UNITS,
                           (0.0, 0.0, 0.0), 1.0, 1.0)  # fmt: skip
         impulse += -fluid.force[:, 1:-1, 1:-1, 1:-1].astype(np.float64).sum(axis=(1, 2, 3))
         fluid.step(1)

@@ -89,7 +89,8 @@ def test_coupling_particle_kernels_skip_non_finite_particles(cpu):
     params = CouplingParams(retention=True)
     kops, rops = CouplingKernelOps(cpu, params, two_phase=True), CouplingReferenceOps(params, two_phase=True)
     r0 = (0.05 * rng.random(p["x"].shape[1])).astype(np.float32)
-    water = rng.random(SHAPE).astype(np.float32)
+    eps_fluid = rng.random(tuple(n + 2 for n in SHAPE)).astype(np.float32)  # the water fraction's inputs
+    phi = rng.random(eps_fluid.shape).astype(np.float32)
     d_bound = (1e-3 * rng.random(SHAPE)).astype(np.float32)
     grid_vol = (0.3 * DX**3 * (0.5 + rng.random(SHAPE))).astype(np.float32)
     results = []
@@ -97,7 +98,7 @@ def test_coupling_particle_kernels_skip_non_finite_particles(cpu):
         bound = np.zeros(SHAPE, np.float32)
         ops.bound_water_p2g(p["x"], r0, p["volume"], bound, DX)
         r, sat = r0.copy(), np.zeros_like(r0)
-        ops.particle_moisture(p["x"], r, sat, water, d_bound, grid_vol, DX)
+        ops.particle_moisture(p["x"], r, sat, eps_fluid, phi, bound, d_bound, grid_vol, DX)
         results.append((bound, r, sat))
     (kb, kr, ks), (rb, rr, rs) = results
     bad = ~np.isfinite(p["x"]).all(axis=0)

@@ -185,6 +185,9 @@ def _variant(d: dict, **changes) -> dict:
         ("coupled", tiny_coupled(retention=False)),
         ("coupled, no source term", _variant(tiny_coupled(retention=False), **{"effects.source_term": False})),
         ("coupled, subcycle", _variant(tiny_coupled(), **{"scheduler.kind": "subcycle", "scheduler.substeps": 2})),
+        # m > 1: the exchange velocity gets its own buffer; m = 1 shares the sand velocity's, as lockstep
+        ("coupled, multirate", _variant(tiny_coupled(), **{"scheduler.kind": "multirate", "scheduler.sand_every": 2})),
+        ("coupled, multirate 1", _variant(tiny_coupled(), **{"scheduler.kind": "multirate", "scheduler.sand_every": 1})),
         ("sand", tiny_sand()),
     ],
 )  # fmt: skip

@@ -1,0 +1,89 @@
+"""The exchange velocity Σ f c shares the fluid's sand-velocity buffer (SandFluidCoupler module docstring): the
+sharing changes no result of any scheduler, and the one order where both are alive at once (a multi-rate
+block of m > 1 fluid steps) gives Σ f c a buffer of its own."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parents[1] / "scene"))
+from sim_scenes import tiny_coupled  # noqa: E402
+
+from couplekit.scene import Scene  # noqa: E402
+from couplekit.simulation import Simulation  # noqa: E402
+
+# a sand block half in the water layer and moving, so drag, the source term and the slip term all act
+_SAND = {"min": [0.006, 0.006, 0.006], "max": [0.013, 0.014, 0.013]}
+
+
+def _scene(scheduler: dict, retention: bool = False) -> dict:
+    d = tiny_coupled(retention=retention)
+    d["bodies"][-1]["geometry"].update(_SAND)
+    d["bodies"][-1]["velocity"] = [0.2, 0.0, -0.3]
+    d["scheduler"] = scheduler
+    return d
+
+
+def _sim(scheduler: dict, own: bool, retention: bool = False) -> Simulation:
+    sim = Simulation(Scene.from_dict(_scene(scheduler, retention)), backend="cpu", log=None)
+    if own:
+        sim.coupler.own_fluid_velocity()
+    return sim
+
+
+SCHEDULERS = [
+    {"kind": "lockstep"},
+    {"kind": "subcycle", "substeps": 3, "interpolation": "linear"},
+    {"kind": "subcycle", "substeps": 2, "interpolation": "hold"},
+    {"kind": "multirate", "sand_every": 1},
+]
+
+
+@pytest.mark.parametrize("retention", [False, True], ids=["dry", "retention"])
+@pytest.mark.parametrize("scheduler", SCHEDULERS, ids=lambda s: "-".join(str(v) for v in s.values()))
+def test_sharing_the_buffer_changes_nothing(scheduler, retention):
+    """Every state array after 12 steps, shared buffer against a buffer of its own: bitwise equal."""
+    shared, own = _sim(scheduler, own=False, retention=retention), _sim(scheduler, own=True, retention=retention)
+    assert shared.coupler.fluid_u is shared.fluid.sand_velocity
+    assert own.coupler.fluid_u is not own.fluid.sand_velocity
+    shared.step(12)
+    own.step(12)
+    assert float(np.abs(shared.fluid.force).max()) > 0  # the drag acted
+    a, b = shared._states(), own._states()
+    for solver in a:
+        for k in a[solver]:
+            assert np.asarray(a[solver][k]).tobytes() == np.asarray(b[solver][k]).tobytes(), (solver, k)
+
+
+def test_a_multirate_block_keeps_the_sand_velocity_of_its_sand_step():
+    """m = 3: Σ f c has its own buffer, and the fluid's sand velocity stays what the block's sand step wrote
+    while the block's other steps recompute Σ f c (sharing would overwrite it with the fluid's velocity)."""
+    sim = Simulation(Scene.from_dict(_scene({"kind": "multirate", "sand_every": 3})), backend="cpu", log=None)
+    assert sim.coupler.fluid_u is not sim.fluid.sand_velocity
+    sim.step(1)  # the block's sand step
+    held = np.array(sim.fluid.sand_velocity)
+    assert np.abs(held).max() > 0
+    for _ in range(2):  # the block's other steps
+        sim.step(1)
+        assert np.array_equal(np.array(sim.fluid.sand_velocity), held)
+    # and Σ f c is the fluid's current velocity, not the sand's
+    u = np.array(sim.coupler.fluid_u)
+    fluid = np.array(sim.fluid.flags) == 0
+    assert not np.allclose(u[:, fluid], held[:, fluid])
+
+
+def test_the_shared_buffer_holds_the_sand_velocity_when_the_fluid_steps():
+    """Lockstep: after a step (the fluid step read it) the buffer holds the sand grid velocity in lattice units,
+    ghosts included, as the sand-velocity stage writes it: Σ f c left nothing behind."""
+    sim = _sim({"kind": "lockstep"}, own=False)
+    sim.step(5)
+    c = sim.coupler
+    expect = np.zeros_like(np.array(sim.fluid.sand_velocity))
+    from couplekit.coupling.reference import ReferenceOps
+
+    ReferenceOps(c.params, c.two_phase).sand_velocity(np.array(sim.sand.grid_v), expect, c.units, c.periodic)
+    np.testing.assert_allclose(np.array(sim.fluid.sand_velocity), expect, rtol=1e-6, atol=1e-9)
