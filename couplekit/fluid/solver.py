@@ -203,16 +203,27 @@ class FluidParams:
         return self.odd_lambda > 0 and nu_ref < min(2.0 * self.odd_lambda / 3.0, self.odd_nu_max)
 
 
-PHASE_TRT_LAMBDA_INFLOW = 0.1
+PHASE_TRT_LAMBDA_INFLOW = 1.0 / 6.0
 """Λ_h of the phase field's two-relaxation-time collision in a fluid with an inflow (``FluidParams.phase_trt_lambda``
-= None): a measured window, not an optimum. On the outlet jets of tests/fluid/test_inflow_region.py (12 × 12 × 24,
-800:1, M = 0.02, ν = 0.01) with 1/12 a 6 × 6 outlet at ξ = 3, u = 0.08 still diverged (step 100); 0.1, 1/8, 1/6
-and 1/4 ran every outlet of ≥ 3 cells at ξ ≥ 3 to 0.08. But examples/fig04_colander_small.toml (a disc outlet in
-the ceiling at lattice speed 0.036, ν_h = 1e-4) diverged with 1/8 and 1/6 (steps 640, 730: φ = −0.03 in the
-ceiling's first layer beside the outlet) and ran its 12 tested frames with 0, 1/12 and 0.1. Larger values also
-make drops at ξ = 2 diverge sooner (a drop through still air at u = 0.02: step 160 with 1/4, 520 with 1/6; the
-single rate ran it 600 steps), and at Fig. 1's viscosities (ν_l = 0.1) 1/6 ran 4-cell outlets at 0.08 where 0.1
-diverges (couplekit.scene.model.water_outlet_speed_limit limits those)."""
+= None): a measured choice, not an optimum. On the outlet jets of
+tests/fluid/test_inflow_region.py (12 × 12 × 24, 800:1, M = 0.02; session 13's map, 1000-1500 steps, Λ = 0.1
+against 1/6):
+
+* ν = 0.01: with 0.1 a 5-cell outlet at ξ = 3, u = 0.08 diverged (step 100), with 1/6 it runs; every outlet of
+  3-8 cells at ξ ≥ 3 runs to 0.08 with either;
+* the scenes' ν_h = 1e-4, ν_l = 0.01 with their closures (odd-rate floor, Smagorinsky): with 0.1 outlets of 3-6
+  cells at ξ = 3 and of 3 cells at ξ = 4 diverged at 0.08 (steps 100-150), with 1/6 every outlet at ξ ≥ 4 runs
+  to 0.08, 2-cell ones included;
+* Fig. 1's ν_h = 5e-4, ν_l = 0.1: with 0.1 outlets of 4-8 cells at ξ = 3 and 4-5 cells at ξ = 4 diverged at 0.08;
+  with 1/6 every outlet of ≥ 3 cells at ξ ≥ 4 runs to 0.08.
+
+What is left is limited by scene validation (couplekit.scene.model.water_outlet_speed_limit). Λ = 1/4 gave
+nearly the same map (session 13). Before session 12, examples/fig04_colander_small.toml diverged with 1/8 and
+1/6 at its ceiling outlet (steps 640, 730: φ = −0.03 in the ceiling's first layer), which led to 0.1; since
+session 12's three-point wall rule of the pressure filter (which removed a period-2 pressure mode in that
+ceiling layer, docs/fluid-stability.md) it runs with 1/6 too: 20 frames (max lattice speed 0.098, volume drift +2.4e-4), and the other scenes with
+inflows (Figs. 1, 2, 5, 9) run as with 0.1. Larger values make drops at ξ = 2 diverge sooner (a drop through
+still air at u = 0.02: step 160 with 1/4, 520 with 1/6; the single rate ran it 600 steps); scenes refuse ξ < 3."""
 
 
 class OddFloorInactiveWarning(UserWarning):

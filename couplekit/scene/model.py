@@ -1658,49 +1658,42 @@ def _check_max_speed(time: Time, bodies, inflows, problems: list[Problem]) -> No
         )
 
 
-_FIVE_CELL_OUTLET_LIMIT = 0.07  # water_outlet_speed_limit's 5-cell case (its message names that case by this value)
-
-
 def water_outlet_speed_limit(interface_width: float, across_cells: int, air_lattice_viscosity: float = 0.01) -> float:
     """Largest lattice speed (|velocity| dt/dx) at which a water jet from an outlet (``shape`` = 'rect' or
     'disc') into air at 800:1 was measured to stay finite, by interface width ξ (cells), the outlet's narrower
     extent (cells) and the air's lattice viscosity; ``inf`` where no failure was measured up to 0.08; 0 where
     the scene is refused at any speed.
 
-    Measured on a 12 × 12 × 24 box, square outlets in the z- wall, σ = 1e-4, M = 0.02, 400 steps (many also
-    1500), since the phase field's inflow lets in exactly φ_b u_in per face cell and a fluid with an inflow
-    relaxes the phase field with two rates (``FluidParams.phase_trt_lambda``, Λ = 0.1), the cause of the former
-    failures (tests/fluid/test_inflow_region.py, ``test_narrow_outlet_jet_runs``, has the table):
+    Measured (session 13) on a 12 × 12 × 24 box, square outlets of 2-8 cells in the z- wall, σ = 1e-4, M = 0.02,
+    1000-1500 steps, with the phase field's exact inflow flux and its two-rate collision at the inflow default
+    Λ_h = 1/6 (``couplekit.fluid.solver.PHASE_TRT_LAMBDA_INFLOW``, which says what 0.1 left diverging), at three
+    viscosity sets: ν_h = ν_l = 0.01; the scenes' ν_h = 1e-4, ν_l = 0.01 with their closures (odd-rate floor,
+    Smagorinsky); Fig. 1's ν_h = 5e-4, ν_l = 0.1 with the closures (tests/fluid/test_inflow_region.py,
+    ``test_narrow_outlet_jet_runs``, has the table):
 
-    * ν_h = ν_l = 0.01, ξ ≥ 3, outlets 3-8 cells across: finite at every speed tried up to 0.08 (ξ = 3: 3, 4,
-      6, 8 cells; ξ = 4: 3, 4, 5, 6, 8; ξ = 6: 4, 6, 8; peak speed ≤ 1.33 u_in). Also ν_h = 1e-4, ν_l = 0.01
-      (the scenes' viscosities): ξ = 4, 4 and 6 cells, up to 0.08; ξ = 3, 4 cells, 0.04.
-    * a more viscous air, Fig. 1's ν_h = 5e-4, ν_l = 0.1: ξ = 3 finite at 0.04 (3, 4 cells), NaN at 0.06 (3, 4, 6
-      cells); ξ = 4 finite at 0.06 (3-6 cells), NaN at 0.08 (4, 5, 6 cells), finite at 0.08 with 8 cells and at
-      ξ = 6 with 4 cells. Not fixed: with air viscosities above 0.01, 0.04 at ξ < 4 and 0.06 at 4 ≤ ξ < 6 for
-      outlets under 8 cells across.
-    * outlets under 3 cells across (2 × 2: every cell is a rim cell of the outlet): finite at 0.02 (ξ = 3, 4),
-      NaN at 0.04 (ξ = 3 by step 130, ξ = 4 by step 150) and at 0.07-0.08 at ξ = 4 and 6. Not fixed: 0.02.
+    * ξ ≥ 4: outlets of ≥ 3 cells finite to 0.08 at every viscosity set (peak ≤ 1.8 u_in). 2-cell outlets (every
+      cell a rim cell): finite to 0.04 (ν_h = 0.01: NaN at 0.06 at ξ = 4 by step 100; with the closures finite to
+      0.08), with the more viscous air to 0.02 (NaN at 0.04 by step 150).
+    * 3 ≤ ξ < 4: outlets of ≥ 3 cells finite to 0.06 (closures at the scenes' viscosities: NaN at 0.07 with 3
+      and 7 cells, at 0.08 with 3 and 5 cells, ξ = 3.5 with 3 cells), with the more viscous air to 0.05 (NaN at
+      0.06 with 3 cells). 2-cell outlets: finite at 0.02 (NaN at 0.03 with ν_h = 0.01, ξ = 3), with the more viscous
+      air refused (NaN at 0.02 by step 200 at ξ = 3, at 0.03 at ξ = 3.5).
     * ξ < 3: refused. At ξ = 2 and 800:1 the interface is under-resolved independently of outlets: a drop
       moving at 0.04 through still air in a periodic box diverges by step 80 with the paper's collision
-      (Eq. 48), and with two rates (Λ = 1/6) a drop at 0.02 diverges by step 520. Outlets at ξ = 2 ran 100
-      steps at 0.02 but diverged later (4 and 6 cells by steps 320 and 240 with Λ = 0.1).
-
-    * a 5-cell outlet at ξ = 3 (session 12's map, 1500 steps, ν = 0.01): NaN by step 100 at 0.08, finite at 0.07
-      (peak 1.36 u_in) and at 0.02-0.06; finite at 0.08 with ξ = 3.25, and with 7 or 9 cells at ξ = 3. Not
-      understood (main before and after the filter's three-point wall rule alike): 0.07 below ξ = 3.25.
+      (Eq. 48), and with two rates (Λ = 1/6) a drop at 0.02 diverges by step 520.
 
     A whole-face inflow is not limited (an 8 × 8 duct runs at ξ = 2, u = 0.02 and at ξ = 4, u = 0.08).
     """
+    viscous = air_lattice_viscosity > 0.01 * (1.0 + 1e-9)
     if interface_width < 3.0:
         return 0.0
-    if across_cells < 3:
-        return 0.02
-    if air_lattice_viscosity > 0.01 * (1.0 + 1e-9) and interface_width < 6.0 and across_cells < 8:
-        return 0.04 if interface_width < 4.0 else 0.06
-    if across_cells == 5 and interface_width < 3.25:
-        return _FIVE_CELL_OUTLET_LIMIT
-    return math.inf
+    if interface_width >= 4.0:
+        if across_cells >= 3:
+            return math.inf
+        return 0.02 if viscous else 0.04
+    if across_cells >= 3:
+        return 0.05 if viscous else 0.06
+    return 0.0 if viscous else 0.02
 
 
 def _check_water_outlets(domain: Domain, time: Time, fluid: Fluid | None, inflows, problems: list[Problem]) -> None:
@@ -1733,25 +1726,30 @@ def _check_water_outlets(domain: Domain, time: Time, fluid: Fluid | None, inflow
                 "through still air diverges)"
             )
             fix = (
-                "set fluid.interface_width >= 3 (outlets at least 3 cells across then run at lattice speeds up to 0.08)"
+                "set fluid.interface_width >= 4 (outlets at least 3 cells across then run at lattice speeds up to 0.08)"
             )
         else:
-            slower = f"lower the speed to <= {limit * domain.dx / time.dt:.3g} m/s (lattice {limit:g})"
+            why = (
+                f"outlets {'under 3' if across < 3 else 'of 3 or more'} cells across at fluid.interface_width "
+                f"{'< 4' if xi < 4.0 else '>= 4'}"
+                + (f" with fluid.air_lattice_viscosity = {nu_air:g} > 0.01" if nu_air > 0.01 * (1.0 + 1e-9) else "")
+            )
+            options = []
+            if limit > 0.0:
+                options.append(f"lower the speed to <= {limit * domain.dx / time.dt:.3g} m/s (lattice {limit:g})")
             if across < 3:
-                why = "outlets under 3 cells across"
-                fix = f"widen the outlet to >= 3 cells ({3 * domain.dx:g} m) across, or {slower}"
-            elif limit == _FIVE_CELL_OUTLET_LIMIT:
-                why = "a 5-cell outlet at fluid.interface_width < 3.25"
-                fix = f"{slower}, set fluid.interface_width >= 3.25, or make the outlet 4 or 6 cells across"
-            else:
-                why = f"with fluid.air_lattice_viscosity = {nu_air:g} > 0.01, outlets under 8 cells across"
-                fix = (
-                    f"{slower}, widen the outlet to >= 8 cells ({8 * domain.dx:g} m) across, set "
-                    "fluid.interface_width >= 6, or fluid.air_lattice_viscosity <= 0.01"
-                )
+                options.append(f"widen the outlet to >= 3 cells ({3 * domain.dx:g} m) across")
+            if xi < 4.0:
+                options.append("set fluid.interface_width >= 4")
+            fix = ", or ".join(options)
+            measured = (
+                f"measured stable up to {limit:g}"
+                if limit > 0.0
+                else "refused at any speed: measured to diverge at 0.02"
+            )
             what = (
                 f"a water jet at lattice speed {lattice:.3g} (|velocity| dt/dx) from an outlet {across} cells across "
-                f"diverges at fluid.interface_width = {xi:g} ({why} measured stable up to {limit:g})"
+                f"diverges at fluid.interface_width = {xi:g} ({why}: {measured})"
             )
         problems.append(Problem(f"inflows[{i}].velocity", what, fix))
 
