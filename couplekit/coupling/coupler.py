@@ -57,9 +57,9 @@ __all__ = ["SandFluidCoupler"]
 
 _STATE = ("eps_prev", "bound_in", "bound", "d_bound", "moisture_ratio", "retain")
 """Arrays of :meth:`SandFluidCoupler.state` (the retention ones only when retention is on, ``retain`` only with
-per-body retention).  Not ``fluid_u``, the sand fraction or the water fraction: every step recomputes them
-before reading them, and only the first is stored (checkpoints that hold the others, as ``fluid_u``,
-``eps_sand`` and ``water``, still load; those values are ignored)."""
+per-body retention).  Not ``fluid_u`` (it shares the sand velocity's buffer), the sand fraction or the water
+fraction (neither is stored): every step recomputes them before reading them.  Checkpoints that hold them
+(``fluid_u``, ``eps_sand``, ``water``: before session 13) still load; those values are ignored."""
 
 
 class SandFluidCoupler:
@@ -262,7 +262,8 @@ class SandFluidCoupler:
         """Host copies of the interior coupling fields: sand_fraction (Eq. 25, of the last P2G), fluid_fraction,
         water (Eq. 59 summand), and with retention bound_water; the first and the third are computed here
         (:func:`~couplekit.coupling.reference.sand_fraction`, :func:`~couplekit.coupling.reference.water_fraction`),
-        as the drag and the moisture compute them, float32 like the fields the solver holds."""
+        as the drag and the moisture compute them, from the current fields (after a step: its porosity and the
+        phase field the step ended with), float32 like the fields the solver holds."""
         be = self.fluid.backend
         eps_fluid = be.to_host(self.fluid.fluid_fraction)
         bound = be.to_host(self.bound) if self.retention else None
