@@ -183,8 +183,8 @@ class ReferenceOps:
         iy = source_index(ny, periodic[1])[None, :, None]
         ix = source_index(nx, periodic[0])[None, None, :]
         eps_node = sand_fraction(grid_vol, dx, p.eps_max)  # Eq. 25
-        ph_node = self._phi_water(_interior(phi) if self.two_phase else None, grid_vol)
         if self.retention:
+            ph_node = self._phi_water(_interior(phi) if self.two_phase else None, grid_vol)
             R = bound_in.astype(np.float64)
             retaining = eps_node if retentive is None else np.minimum(eps_node, retentive.astype(np.float64))
             cap = p.r_max * retaining  # retention capacity r_max ε (of the retentive sand)

@@ -1658,6 +1658,11 @@ def _check_max_speed(time: Time, bodies, inflows, problems: list[Problem]) -> No
         )
 
 
+def _viscous_air(air_lattice_viscosity: float) -> bool:
+    """An air more viscous than the 0.01 the outlet map's first two viscosity sets used (Fig. 1's 0.1 is)."""
+    return air_lattice_viscosity > 0.01 * (1.0 + 1e-9)
+
+
 def water_outlet_speed_limit(interface_width: float, across_cells: int, air_lattice_viscosity: float = 0.01) -> float:
     """Largest lattice speed (|velocity| dt/dx) at which a water jet from an outlet (``shape`` = 'rect' or
     'disc') into air at 800:1 was measured to stay finite, by interface width ξ (cells), the outlet's narrower
@@ -1684,7 +1689,7 @@ def water_outlet_speed_limit(interface_width: float, across_cells: int, air_latt
 
     A whole-face inflow is not limited (an 8 × 8 duct runs at ξ = 2, u = 0.02 and at ξ = 4, u = 0.08).
     """
-    viscous = air_lattice_viscosity > 0.01 * (1.0 + 1e-9)
+    viscous = _viscous_air(air_lattice_viscosity)
     if interface_width < 3.0:
         return 0.0
     if interface_width >= 4.0:
@@ -1732,7 +1737,7 @@ def _check_water_outlets(domain: Domain, time: Time, fluid: Fluid | None, inflow
             why = (
                 f"outlets {'under 3' if across < 3 else 'of 3 or more'} cells across at fluid.interface_width "
                 f"{'< 4' if xi < 4.0 else '>= 4'}"
-                + (f" with fluid.air_lattice_viscosity = {nu_air:g} > 0.01" if nu_air > 0.01 * (1.0 + 1e-9) else "")
+                + (f" with fluid.air_lattice_viscosity = {nu_air:g} > 0.01" if _viscous_air(nu_air) else "")
             )
             options = []
             if limit > 0.0:
