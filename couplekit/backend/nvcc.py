@@ -32,13 +32,12 @@ REGISTER_LIMIT = 128
 REGISTER_EXCEPTIONS: dict[str, tuple[int, str]] = {
     "lbm_collide_stream": (
         4,
-        "one register (4 B spill store + load) over 128 in three variants since the shifted storage of f "
-        "(docs/precision.md): all closures (CK_TWO_PHASE CK_SURFACE_TENSION CK_MIXTURE CK_EXT_FORCE CK_LES "
-        "CK_ODD_RATE = 1) on sm_90, and the single-phase CK_EXT_FORCE=1 variants with CK_MIXTURE=0 (surface "
-        "tension 0 or 1) on sm_80; the former one (single-phase mixture on sm_90) spills nothing now; not "
-        "yet removed. With fp16 storage (CK_STORAGE_FP16=1) the all-closures variant spills the same 4 B on "
-        "sm_90 and every other fp16 variant nothing (the storage scale is taken out of the 10 raw moments, not "
-        "the 27 loads: per load it made the single-phase variants spill 12 B on sm_90)",
+        "one register (4 B spill store + load) over 128 in two variants on sm_80: the single-phase "
+        "CK_EXT_FORCE=1 builds with CK_MIXTURE=0 (surface tension 0 or 1), since the shifted storage of f "
+        "(docs/precision.md). Every sm_90 build and every fp16-storage build spills nothing since session 14 "
+        "(the all-closures variants' 4 B went when the odd-rate re-read of the populations stopped being merged "
+        "with the first loads, kernels/lbm_collide.cu); an order that removes the sm_80 spill (the pressure "
+        "gradient's loads made to wait for the raw moments) made the fp16 single-phase builds spill 28-32 B",
     )
 }
 
