@@ -315,7 +315,8 @@ class Simulation:
             out.update(f)
         if self.sand is not None:
             s = self.sand.fields()
-            out["sand_fraction"] = s["sand_fraction"]
+            if self.coupler is None:  # coupled: the coupler's ε (its eps_max), below, as the drag computes it
+                out["sand_fraction"] = s["sand_fraction"]
             out["sand_velocity"] = s["velocity"] if not lattice else s["velocity"] / u.scale("velocity")
         if self.coupler is not None:
             out.update(self.coupler.fields())
