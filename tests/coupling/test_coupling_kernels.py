@@ -122,7 +122,10 @@ def test_bound_water_p2g_matches_reference(cpu):
     assert abs(float(got.astype(np.float64).sum()) - total) <= 1e-5 * total
     again = np.zeros(SHAPE, np.float32)
     kops.bound_water_p2g(pt["x"], pt["r"], pt["vol"], again, UNITS.dx)
-    assert np.array_equal(again, got), "host scatter must be bitwise reproducible"
+    if cpu.name == "cpu":
+        assert np.array_equal(again, got), "host scatter must be bitwise reproducible"
+    else:  # the CUDA code paths (cpu-device, cuda) add with atomics: the order, so the round-off, is not fixed
+        np.testing.assert_allclose(again, got, rtol=1e-5, atol=1e-6 * float(want.max()))
 
 
 @pytest.mark.parametrize("retention, two_phase", VARIANTS, ids=IDS)
