@@ -225,18 +225,16 @@ def _water_shape(scene: Scene) -> Union | None:
     return Union(shapes) if shapes else None
 
 
-def build_fluid(scene: Scene, backend: Backend, units: Units, coupled: bool, log: Callable[[str], Any]):
-    """The :class:`~couplekit.fluid.solver.FluidSolver` of ``scene`` and its FluidParams (lattice units):
-    boundaries and outlets, obstacles as bounce-back cells, the initial φ of the water bodies and their
-    velocity, the initial pressure (module docstring), and the stirring force."""
-    from .faces import region_mask
-    from .fluid.grid import Boundaries, Face, InflowRegion
-    from .fluid.solver import FluidParams, FluidSolver, OddFloorInactiveWarning
+def fluid_params(scene: Scene, units: Units):
+    """The :class:`~couplekit.fluid.solver.FluidParams` (lattice units) of a fluid scene: the one translation of
+    ``[fluid]`` and ``[effects]`` into the solver's parameters, with the defaults FluidParams documents as a
+    scene's (:meth:`~couplekit.fluid.solver.FluidParams.scene_defaults`)."""
+    from .fluid.solver import FluidParams
 
     fl, dom, eff = scene.fluid, scene.domain, scene.effects
     two = fl.phases == 2
     gravity = dom.gravity if fl.gravity is None else fl.gravity
-    prm = FluidParams.scene_defaults(  # one path: the defaults FluidParams documents as a scene's
+    return FluidParams.scene_defaults(
         rho_h=1.0,
         rho_l=fl.air_density / fl.water_density if two else 1.0,
         nu_h=fl.water_lattice_viscosity,
@@ -249,6 +247,58 @@ def build_fluid(scene: Scene, backend: Backend, units: Units, coupled: bool, log
         odd_lambda=fl.odd_lambda,
         smagorinsky=fl.smagorinsky,
     )
+
+
+def stability_cautions(scene: Scene) -> list[str]:
+    """Set-ups a scene may ask for that were measured to diverge, one line each (empty when none): printed by
+    ``couplekit validate`` and logged when a run starts. Not refusals: the paper's own collision is one.
+
+    * The odd-moment rate floor off (``fluid.odd_lambda = 0``, or too small to act) where the fluid's lowest
+      lattice viscosity is below ``FluidParams.odd_nu_max`` (5e-4) and there are no-slip edges (walls on two
+      axes, an obstacle, or an outlet's rim): the paper's collision is linearly unstable at bounce-back edges and
+      corners there (docs/fluid-stability.md: at ν = 1e-4 the linearised step grows ×e every ~150 steps, a
+      still 800:1 tank blew up near step 2500; ν = 1e-3 is stable). Flat walls on one axis only and periodic
+      faces are stable."""
+    fl = scene.fluid
+    if fl is None:
+        return []
+    prm = fluid_params(scene, scene.units())
+    two = fl.phases == 2
+    nu_ref = prm.odd_reference_viscosity(two)
+    if prm.odd_floor_acts(two) or nu_ref >= prm.odd_nu_max:
+        return []
+    wall_axes = {face[0] for face, kind in scene.domain.boundary.items() if kind in ("wall", "inflow")}
+    obstacles = any(b.kind == "obstacle" for b in scene.bodies)
+    outlets = any(i.shape != "face" for i in scene.inflows)
+    if len(wall_axes) < 2 and not obstacles and not outlets:
+        return []
+    where = "walls on two axes" if len(wall_axes) >= 2 else ("an obstacle" if obstacles else "an outlet in a wall")
+    steps = scene.time.frames * scene.time.steps_per_frame
+    floor = (
+        "fluid.odd_lambda = 0"
+        if fl.odd_lambda == 0
+        else f"fluid.odd_lambda = {fl.odd_lambda:g} (too small to act here)"
+    )
+    return [
+        f"{floor} at lattice viscosity {nu_ref:g} (< {prm.odd_nu_max:g}) with no-slip edges ({where}): the paper's "
+        f"collision is linearly unstable at bounce-back edges and corners at this viscosity (it grows by a factor e about "
+        f"every 150 steps at 1e-4; a still tank diverged near step 2500; this scene runs {steps:,} steps); "
+        "keep fluid.odd_lambda = 0.015 with fluid.smagorinsky = 0.1 (the scene defaults) unless you mean to run "
+        "the paper's collision (docs/fluid-stability.md)"
+    ]
+
+
+def build_fluid(scene: Scene, backend: Backend, units: Units, coupled: bool, log: Callable[[str], Any]):
+    """The :class:`~couplekit.fluid.solver.FluidSolver` of ``scene`` and its FluidParams (lattice units):
+    boundaries and outlets, obstacles as bounce-back cells, the initial φ of the water bodies and their
+    velocity, the initial pressure (module docstring), and the stirring force."""
+    from .faces import region_mask
+    from .fluid.grid import Boundaries, Face, InflowRegion
+    from .fluid.solver import FluidSolver, OddFloorInactiveWarning
+
+    fl, dom = scene.fluid, scene.domain
+    two = fl.phases == 2
+    prm = fluid_params(scene, units)
     inflow = {i.face: i for i in scene.inflows if i.shape == "face"}
     faces, regions = {}, []
     for name, kind in dom.boundary.items():
@@ -305,6 +355,8 @@ def build_fluid(scene: Scene, backend: Backend, units: Units, coupled: bool, log
             source_term=coupled and scene.effects.source_term,
             storage=fl.storage,
         )
+    for line in stability_cautions(scene):
+        log(f"caution: {line}")
     if prm.odd_lambda > 0 and not fluid.odd_floor_active:
         log(
             f"note: fluid.odd_lambda = {prm.odd_lambda:g} does nothing at this viscosity (lowest "

@@ -6,7 +6,9 @@ CuPy/GPU status, kernel cache; ``--selfcheck`` also builds and runs the self-che
 ``couplekit validate SCENE``: check a scene file (nothing is allocated); exit 0 when valid, 2 when not, 3 when
 ``run`` refuses it on any machine (a memory estimate beyond 16 TiB; ``run``'s message). What ``run`` refuses on
 this machine (the estimate against the host's available memory, as ``run`` compares it on the cpu and numpy
-backends; on cuda it compares with free GPU memory) or for now (a coupling switch) is noted, exit 0.
+backends; on cuda it compares with free GPU memory) or for now (a coupling switch) is noted, exit 0; set-ups
+admitted but measured to diverge (:func:`couplekit.assembly.stability_cautions`) are printed as ``caution:`` lines,
+exit 0.
 
 ``couplekit run SCENE [--frames N] [--out DIR] [--backend B] [--resume CKPT] [--scheduler SPEC]``: run a scene
 with a progress bar, writing ParaView/PLY/PNG outputs, diagnostics and checkpoints (``--scheduler`` replaces
@@ -78,7 +80,7 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     """Exit 0 valid, 2 invalid, 3 refused with ``run``'s message and exit code: an effect the coupling cannot
     switch off yet, or a memory estimate beyond what any machine holds.  What ``run`` refuses on this machine
     only (its memory) is noted with ``run``'s message, exit 0: the same file validates alike on every host."""
-    from .assembly import CouplingUnavailableError, check_run
+    from .assembly import CouplingUnavailableError, check_run, stability_cautions
     from .scene import Scene, SceneError
     from .simulation import InsufficientMemoryError, _gib
 
@@ -117,6 +119,8 @@ def _cmd_validate(args: argparse.Namespace) -> int:
         print("effects and the memory each costs (FluidX3D's convention, per simulation cell):")
         for line in describe_effect_memory(scene, est.get("particle_count", 0.0)):
             print(line)
+    for line in stability_cautions(scene):
+        print(f"caution: {line}")
     if note is not None:
         print(note)
     return 0
