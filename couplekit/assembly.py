@@ -35,7 +35,7 @@ import math
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -45,6 +45,9 @@ from .fluid import hydrostatic
 from .scene import Scene
 from .scene.geometry import Union, sdf_on_grid
 from .units import Units
+
+if TYPE_CHECKING:
+    from .fluid.solver import FluidParams
 
 __all__ = [
     "Assembly",
@@ -225,7 +228,7 @@ def _water_shape(scene: Scene) -> Union | None:
     return Union(shapes) if shapes else None
 
 
-def fluid_params(scene: Scene, units: Units):
+def fluid_params(scene: Scene, units: Units) -> FluidParams:
     """The :class:`~couplekit.fluid.solver.FluidParams` (lattice units) of a fluid scene: the one translation of
     ``[fluid]`` and ``[effects]`` into the solver's parameters, with the defaults FluidParams documents as a
     scene's (:meth:`~couplekit.fluid.solver.FluidParams.scene_defaults`)."""
