@@ -47,7 +47,6 @@ import couplekit.fluid.reference as ref  # noqa: E402
 from couplekit.backend import get_backend  # noqa: E402
 from couplekit.fluid.grid import Boundaries  # noqa: E402
 from couplekit.fluid.solver import FluidParams, FluidSolver  # noqa: E402
-from couplekit.lattice import C27, OPP27  # noqa: E402
 
 NU = 1e-4
 LAMBDA = 0.015  # the scenes' floor
@@ -92,26 +91,12 @@ def floor_of(D: float | None) -> float:
 # ------------------------------------------------------------------------------------------------- linear
 def linear(box: tuple[int, int, int], D: float | None) -> dict:
     from scipy.sparse.linalg import LinearOperator, eigs
+    from test_wall_stability import _bounce_back_step  # the test's step: pull, half-way bounce-back
 
-    nz, ny, nx = box
-    fluid = np.ones((nz + 2, ny + 2, nx + 2), bool)
-    fluid[:, :, [0, -1]] = False
-    fluid[:, [0, -1], :] = False
     r_s = 1.0 / (3.0 * NU + 0.5)
     base_ro = float(ref.odd_rate(r_s, floor_of(D)))
     r_o = base_ro if not D else base_ro + (1.0 - base_ro) * ramp(box, "xy", D)
-    zero = np.zeros((3, *box))
-
-    def step(f):
-        u = np.einsum("jd,j...->d...", C27.astype(np.float64), f)
-        fs = ref.ReferenceOps.collide(f, u, zero, r_s, r_o)
-        fp = np.pad(fs, ((0, 0), (1, 1), (1, 1), (1, 1)), mode="wrap")
-        out = np.empty_like(f)
-        for j in range(27):
-            cx, cy, cz = C27[j]
-            src = (slice(1 - cz, nz + 1 - cz), slice(1 - cy, ny + 1 - cy), slice(1 - cx, nx + 1 - cx))
-            out[j] = np.where(fluid[src], fp[j][src], fs[OPP27[j]])
-        return out
+    step = _bounce_back_step(box, "xy", NU, floor_of(D), r_o)
 
     f0 = ref.equilibrium(np.zeros((3, *box)))
     base, h = step(f0), 1e-6

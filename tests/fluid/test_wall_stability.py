@@ -39,9 +39,10 @@ def cpu():
     return get_backend("cpu", threads=1)
 
 
-def _bounce_back_step(shape, walls: str, nu: float, odd_lambda: float):
+def _bounce_back_step(shape, walls: str, nu: float, odd_lambda: float, r_o=None):
     """One collide + stream step (two arrays, pull, half-way bounce-back on the faces of the axes in
-    ``walls``, periodic elsewhere), no forces: independent of the solver's AA streaming."""
+    ``walls``, periodic elsewhere), no forces: independent of the solver's AA streaming. ``r_o``: an odd rate
+    per cell (shape) in place of :func:`odd_rate`'s (benchmarks/odd_floor_ramp.py's ramped floor)."""
     nz, ny, nx = shape
     fluid = np.ones((nz + 2, ny + 2, nx + 2), bool)
     for axis, name in ((2, "x"), (1, "y"), (0, "z")):
@@ -50,7 +51,7 @@ def _bounce_back_step(shape, walls: str, nu: float, odd_lambda: float):
             sl[axis] = [0, -1]
             fluid[tuple(sl)] = False
     r_s = 1.0 / (3.0 * nu + 0.5)
-    r_o = odd_rate(r_s, odd_lambda)
+    r_o = odd_rate(r_s, odd_lambda) if r_o is None else r_o
     zero = np.zeros((3,) + tuple(shape))
 
     def step(f):
