@@ -20,7 +20,7 @@ One factor at a time (issue 16): ``--set KEY=VALUE ...`` changes the keys of DEF
 each record keeps what it changed, the ball's water fraction φ against the far field's at its height, and the
 pore fluid's and the sand's vertical speed per frame. ``pressure_buoyancy`` is an experiment of this script
 only (a wrapper around the coupler's exchange, NumPy gradient), not a solver option. ``--small-variant`` runs
-the example scene itself at each ``--widths`` (odd_lambda, smagorinsky from ``--set``): each ball's centre,
+the example scene itself at each ``--widths`` (odd_lambda, smagorinsky, odd_ramp from ``--set``): each ball's centre,
 the max lattice speed and where it is. What was found: docs/examples.md, the fig08_sand_densities_small bullet.
 
 Results: benchmarks/results/fig08_interface_width.json (one record per case; a case run again replaces its
@@ -64,6 +64,7 @@ DEFAULTS = {
     "eta": 2.0,  # volume controller
     "odd_lambda": None,  # None: the scene default
     "smagorinsky": None,  # None: the scene default
+    "odd_ramp": None,  # None: the scene default (the floor everywhere); D: the floor ramped to rate 1 over D cells
     "drag_coefficient": None,  # None: CouplingParams' 0.39
     "ppc": 8,  # particles per cell
     "substeps": None,  # None: lockstep; k: the subcycle scheduler with k MPM substeps per LBM step
@@ -97,7 +98,7 @@ def scene(radius_cells: float, xi: float, t_end: float, f: dict | None = None) -
         "controller_eta": f["eta"],
         "interface_width": xi,
     }
-    for key in ("odd_lambda", "smagorinsky"):
+    for key in ("odd_lambda", "smagorinsky", "odd_ramp"):
         if f[key] is not None:
             fluid[key] = f[key]
     ball = {
@@ -251,7 +252,7 @@ def run_small_variant(xi: float, backend: str, f: dict | None = None, frames: in
     path = ROOT / "examples" / "fig08_sand_densities_small.toml"
     d = tomllib.loads(path.read_text())
     d["fluid"]["interface_width"] = xi
-    for key in ("odd_lambda", "smagorinsky"):
+    for key in ("odd_lambda", "smagorinsky", "odd_ramp"):
         if f[key] is not None:
             d["fluid"][key] = f[key]
     d["outputs"] = {"preview": False}
@@ -283,7 +284,7 @@ def run_small_variant(xi: float, backend: str, f: dict | None = None, frames: in
     return {
         "case": "small_variant",
         "interface_width": xi,
-        "changed": {k: f[k] for k in ("odd_lambda", "smagorinsky") if f[k] is not None},
+        "changed": {k: f[k] for k in ("odd_lambda", "smagorinsky", "odd_ramp") if f[k] is not None},
         "time_s": frames * d["time"]["frame_duration"],
         "surface_m": surface,
         "centre_history_m": hist,
@@ -338,7 +339,7 @@ def main() -> None:
     ap.add_argument(
         "--small-variant",
         action="store_true",
-        help="run examples/fig08_sand_densities_small.toml at each --widths (with --set odd_lambda/smagorinsky) "
+        help="run examples/fig08_sand_densities_small.toml at each --widths (with --set odd_lambda/smagorinsky/odd_ramp) "
         "instead of the one-ball cases",
     )
     a = ap.parse_args()

@@ -12,8 +12,10 @@ r_o(d) = r_floor + (1 − r_floor) s(d), s = ½ − ½ cos(π t), t = clip((d �
 floor and cells D cells further in relax at 1 (with Smagorinsky, its ν_t still enters r_floor). ``D = 0`` is
 the floor everywhere (the scenes' closure), ``none`` the paper's collision (floor off).
 
-Not a solver option: the NumPy reference's :func:`couplekit.fluid.reference.odd_rates` is wrapped for the run
-(numpy backend, so the runs are slow), to decide whether the closure is worth building into the kernels.
+The session-14 prototype of what is now ``FluidParams.odd_ramp`` / ``fluid.odd_ramp`` (couplekit/fluid/odd_ramp.py,
+built into the kernels in session 15 from these measurements; tests/fluid/test_odd_ramp.py). Here the NumPy
+reference's :func:`couplekit.fluid.reference.odd_rates` is wrapped for the run (numpy backend, so the runs are
+slow) with the distance to the walls of whole faces only; the linear case is what chose the solver's gap rule.
 
 * ``linear``: spectral radius of one collide + half-way bounce-back + stream step linearised at rest (walls on
   x and y, periodic z; tests/fluid/test_wall_stability.py's step) by matrix-free Arnoldi (scipy ``eigs``).

@@ -248,8 +248,22 @@ def fluid_params(scene: Scene, units: Units) -> FluidParams:
         width=fl.interface_width,
         eta=fl.controller_eta if eff.volume_controller else 0.0,
         odd_lambda=fl.odd_lambda,
+        odd_ramp=fl.odd_ramp,
         smagorinsky=fl.smagorinsky,
     )
+
+
+def odd_ramp_applies(scene: Scene) -> bool:
+    """Whether the scene's fluid runs the ramped odd-rate floor (``fluid.odd_ramp`` > 0 where the floor acts:
+    :meth:`FluidParams.odd_floor_acts`), i.e. whether the solver holds the ramp's weights."""
+    from .fluid.solver import FluidParams
+
+    fl = scene.fluid
+    if fl is None or not fl.odd_ramp > 0:
+        return False
+    two = fl.phases == 2
+    nu_l = fl.air_lattice_viscosity if two else fl.water_lattice_viscosity
+    return FluidParams(nu_h=fl.water_lattice_viscosity, nu_l=nu_l, odd_lambda=fl.odd_lambda).odd_floor_acts(two)
 
 
 def stability_cautions(scene: Scene) -> list[str]:
@@ -291,17 +305,13 @@ def stability_cautions(scene: Scene) -> list[str]:
     ]
 
 
-def build_fluid(scene: Scene, backend: Backend, units: Units, coupled: bool, log: Callable[[str], Any]):
-    """The :class:`~couplekit.fluid.solver.FluidSolver` of ``scene`` and its FluidParams (lattice units):
-    boundaries and outlets, obstacles as bounce-back cells, the initial φ of the water bodies and their
-    velocity, the initial pressure (module docstring), and the stirring force."""
+def fluid_boundaries(scene: Scene, units: Units):
+    """The fluid's :class:`~couplekit.fluid.grid.Boundaries` (faces, and the outlets as inflow regions) and its
+    solid mask (the obstacles' cells, ``None`` without obstacles) of ``scene``."""
     from .faces import region_mask
     from .fluid.grid import Boundaries, Face, InflowRegion
-    from .fluid.solver import FluidSolver, OddFloorInactiveWarning
 
-    fl, dom = scene.fluid, scene.domain
-    two = fl.phases == 2
-    prm = fluid_params(scene, units)
+    dom = scene.domain
     inflow = {i.face: i for i in scene.inflows if i.shape == "face"}
     faces, regions = {}, []
     for name, kind in dom.boundary.items():
@@ -319,6 +329,34 @@ def build_fluid(scene: Scene, backend: Backend, units: Units, coupled: bool, log
             regions.append(InflowRegion(face, mask, vel, 1.0 if i.kind == "water" else 0.0))
     obstacles = _shapes_of(scene, "obstacle")
     solid = sdf_on_grid(obstacles, dom.resolution, dom.dx) < 0 if obstacles else None
+    return Boundaries(faces, tuple(regions)), solid
+
+
+def check_odd_ramp_gaps(scene: Scene) -> None:
+    """ValueError (:func:`couplekit.fluid.odd_ramp.check_gaps`'s message, the one ``run`` stops with) when the
+    scene ramps the odd-rate floor (:func:`odd_ramp_applies`) and its walls, obstacles or open faces leave a gap
+    narrower than the ramp accepts; ``couplekit validate`` calls it, so the file is refused before a run."""
+    if not odd_ramp_applies(scene):
+        return
+    from .fluid.grid import build_flags
+    from .fluid.odd_ramp import check_gaps
+
+    boundaries, solid = fluid_boundaries(scene, scene.units())
+    flags = build_flags(scene.domain.shape, boundaries, solid)[0]
+    periodic = tuple(boundaries.face(a + "-").kind == "periodic" for a in "xyz")
+    check_gaps(flags, periodic, scene.fluid.odd_ramp)
+
+
+def build_fluid(scene: Scene, backend: Backend, units: Units, coupled: bool, log: Callable[[str], Any]):
+    """The :class:`~couplekit.fluid.solver.FluidSolver` of ``scene`` and its FluidParams (lattice units):
+    boundaries and outlets, obstacles as bounce-back cells, the initial φ of the water bodies and their
+    velocity, the initial pressure (module docstring), and the stirring force."""
+    from .fluid.solver import FluidSolver, OddFloorInactiveWarning
+
+    fl, dom = scene.fluid, scene.domain
+    two = fl.phases == 2
+    prm = fluid_params(scene, units)
+    boundaries, solid = fluid_boundaries(scene, units)
     phi = velocity = None
     if two:
         water = _water_shape(scene)
@@ -348,7 +386,7 @@ def build_fluid(scene: Scene, backend: Backend, units: Units, coupled: bool, log
             backend,
             dom.shape,
             prm,
-            Boundaries(faces, tuple(regions)),
+            boundaries,
             solid=solid,
             phi=phi,
             velocity=velocity,
@@ -623,6 +661,7 @@ def memory_estimate(scene: Scene) -> dict[str, float]:
         if scene.fluid.phases == 2:
             source = scene.has_sand and scene.effects.source_term
             floats += _PHASE_FLOATS_PER_CELL + int(source)
+        floats += int(odd_ramp_applies(scene))  # the ramp's weights (FluidSolver.odd_ramp)
         out["fluid"] = padded * (4 * floats + 1)  # + 1 byte of flags
         if scene.fluid.storage == "fp16":  # f and h in 2 B instead of 4 (couplekit.fluid.storage)
             populations = 27 + (7 if scene.fluid.phases == 2 else 0)

@@ -80,7 +80,7 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     """Exit 0 valid, 2 invalid, 3 refused with ``run``'s message and exit code: an effect the coupling cannot
     switch off yet, or a memory estimate beyond what any machine holds.  What ``run`` refuses on this machine
     only (its memory) is noted with ``run``'s message, exit 0: the same file validates alike on every host."""
-    from .assembly import CouplingUnavailableError, check_run, stability_cautions
+    from .assembly import CouplingUnavailableError, check_odd_ramp_gaps, check_run, stability_cautions
     from .scene import Scene, SceneError
     from .simulation import InsufficientMemoryError, _gib
 
@@ -102,6 +102,11 @@ def _cmd_validate(args: argparse.Namespace) -> int:
             print(f"refused: {exc}", file=sys.stderr)
             return 3
         note = f"note: `run` refuses this scene on this machine: {exc}"
+    try:
+        check_odd_ramp_gaps(scene)  # what the fluid solver refuses (run's message and exit code 2)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     print(f"{args.scene}: valid")
     print(scene.summary())
     speed, why = scene.expected_max_speed()

@@ -33,6 +33,7 @@ EFFECT_BYTES = {
     "drag_buoyancy": (0, 0, 0),
     "retention": (0, F32 * 3, F32 * 1),  # bound_in, bound, d_bound; moisture ratio per particle
     "odd_rate_floor": (0, 0, 0),
+    "odd_rate_ramp": (F32 * 1, 0, 0),  # the weight of rate 1 per cell (fluid.odd_ramp, where the floor acts)
     "smagorinsky": (0, 0, 0),
     "cohesion": (0, 0, F32 * 1),  # saturation (sand-only scenes; coupled: the coupling's moisture, kept)
     "hardening": (0, 0, F32 * 1),  # q
@@ -84,7 +85,7 @@ def effect_memory(scene) -> dict[str, dict[str, float]]:
     fl, eff = scene.fluid, scene.effects
     two = bool(fl is not None and fl.phases == 2)
     coupled = scene.has_fluid and scene.has_sand
-    from .assembly import retention_flags
+    from .assembly import odd_ramp_applies, retention_flags
 
     retention = coupled and any(retention_flags(scene))
     on = {
@@ -96,6 +97,7 @@ def effect_memory(scene) -> dict[str, dict[str, float]]:
         "drag_buoyancy": coupled and (eff.drag or eff.buoyancy),
         "retention": retention,
         "odd_rate_floor": fl is not None and fl.odd_lambda > 0,
+        "odd_rate_ramp": fl is not None and odd_ramp_applies(scene),
         "smagorinsky": fl is not None and fl.smagorinsky > 0,
         "cohesion": scene.has_sand and eff.cohesion and scene.sand.cohesion > 0,
         "hardening": scene.has_sand and eff.hardening,

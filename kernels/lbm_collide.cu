@@ -4,7 +4,8 @@
 // grad phi, the chemical potential mu_phi of Eq. 22 computed here from phi with the coefficients beta, kappa),
 // CK_MIXTURE (fluid fraction eps), CK_EXT_FORCE (force
 // density input, e.g. drag), CK_LES (Smagorinsky subgrid viscosity, constant c_les), CK_ODD_RATE (odd-moment
-// rate floor lambda_odd, in cells with nu < odd_nu_max).  Switched-off inputs may be any float array (they are
+// rate floor lambda_odd, in cells with nu < odd_nu_max), CK_ODD_RAMP (with CK_ODD_RATE: the floor blended with
+// rate 1 by the per-cell weight odd_ramp, couplekit/fluid/odd_ramp.py).  Switched-off inputs may be any float array (they are
 // not read); the closures' scalars are not read when their define is 0.  The closures are compile-time
 // effects, not runtime branches: a branch around loads inside the host x loop stops g++ vectorising it
 // (measured 3.5x slower collide-stream at 128^3 with the branches in).
@@ -15,8 +16,10 @@
 // variants: CK_TWO_PHASE=0,1 CK_SURFACE_TENSION=0,1 CK_MIXTURE=0,1 CK_EXT_FORCE=1
 // variants: CK_LES=1 CK_ODD_RATE=1
 // variants: CK_TWO_PHASE=1 CK_SURFACE_TENSION=1 CK_MIXTURE=1 CK_EXT_FORCE=1 CK_LES=1 CK_ODD_RATE=1
+// variants: CK_TWO_PHASE=1 CK_SURFACE_TENSION=1 CK_MIXTURE=1 CK_EXT_FORCE=1 CK_LES=1 CK_ODD_RATE=1 CK_ODD_RAMP=1
 // variants: CK_STORAGE_FP16=1 CK_TWO_PHASE=0,1 CK_SURFACE_TENSION=0,1 CK_MIXTURE=0,1 CK_EXT_FORCE=1
 // variants: CK_STORAGE_FP16=1 CK_TWO_PHASE=1 CK_SURFACE_TENSION=1 CK_MIXTURE=1 CK_EXT_FORCE=1 CK_LES=1 CK_ODD_RATE=1
+// variants: CK_STORAGE_FP16=1 CK_TWO_PHASE=1 CK_SURFACE_TENSION=1 CK_MIXTURE=1 CK_EXT_FORCE=1 CK_LES=1 CK_ODD_RATE=1 CK_ODD_RAMP=1
 // (CK_EXT_FORCE=0 compiles a strict subset of the =1 code, so the GPU build checks only =1)
 // CK_STORAGE_FP16 (common.cuh): f held as binary16 (f - w) * CK_F_SCALE, float32 arithmetic; the lines with it
 // build the effect sets of the first line and the all-closures set
@@ -41,6 +44,12 @@
 #endif
 #ifndef CK_ODD_RATE
 #define CK_ODD_RATE 0
+#endif
+#ifndef CK_ODD_RAMP
+#define CK_ODD_RAMP 0
+#endif
+#if CK_ODD_RAMP && !CK_ODD_RATE
+#error "CK_ODD_RAMP ramps the odd-rate floor: it needs CK_ODD_RATE=1"
 #endif
 
 // Backward chimera step along one axis (Geier et al. 2015): central moments (k0, k1, k2) about u -> populations
@@ -216,8 +225,8 @@ template <int ODD, int MODE, int GUARD = 0>
 LBM_INLINE void lbm_collide_cell(const long long c, ck_store_t* RESTRICT f, const unsigned char* RESTRICT flags,
                                  float* RESTRICT vel, const float* RESTRICT phi, const float* RESTRICT eps,
                                  const float* RESTRICT force,
-                                 const float* RESTRICT pbar, const int px, const long long pxy, const long long N,
-                                 const float rho_h, const float rho_l, const float nu_h, const float nu_l,
+                                 const float* RESTRICT pbar, const float* RESTRICT odd_ramp, const int px,
+                                 const long long pxy, const long long N, const float rho_h, const float rho_l, const float nu_h, const float nu_l,
                                  const float gx, const float gy, const float gz, const float c_les,
                                  const float lambda_odd, const float odd_nu_max, const float beta,
                                  const float kappa, const unsigned int mask, const float mu_host = 0.f,
@@ -419,6 +428,11 @@ LBM_INLINE void lbm_collide_cell(const long long c, ck_store_t* RESTRICT f, cons
         const float odd_tau = (tau - 0.5f) - 3.f * nu + 3.f * nu_ref;  // 3 (nu_ref + nu_t)
         float ro = 1.f / (0.5f + lambda_odd / odd_tau);
         ro = ck_select((unsigned int)(ro < 1.f) & (unsigned int)(nu_ref < odd_nu_max), ro, 1.f);  // no branch
+#if CK_ODD_RAMP
+        ro += (1.f - ro) * odd_ramp[c];  // reference.ramped_odd_rates: the weight s of rate 1 (0 at the walls)
+#else
+        (void)odd_ramp;
+#endif
         const float co = 0.125f * (1.f - ro), rf = 2.f - ro;  // k* = (1 - r_o) k + (2 - r_o) k^F / 2
         // central moments of the populations: those of the stored deviations (the transform is linear) plus
         // those of the weights w about u, products of the 1D moments (1, -u, 1/3 + u^2) of (1/6, 2/3, 1/6)
@@ -460,6 +474,7 @@ LBM_INLINE void lbm_collide_cell(const long long c, ck_store_t* RESTRICT f, cons
 #else
     (void)lambda_odd;
     (void)odd_nu_max;
+    (void)odd_ramp;
     {
         K[0] = 0.f, K[9] = hax, K[18] = k200;  // bc = 00
         chimera_backward2_shift(K[0], K[9], K[18], ux, ux2, uxx, -0.125f);
@@ -529,6 +544,7 @@ KERNEL void lbm_collide_stream(const long long n, ck_store_t* RESTRICT f /* size
                                const float* RESTRICT phi, const float* RESTRICT eps,
                                const float* RESTRICT force,
                                const float* RESTRICT pbar /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                               const float* RESTRICT odd_ramp,
                                const int parity, const int nx, const int ny, const int nz, const float rho_h,
                                const float rho_l, const float nu_h, const float nu_l, const float gx,
                                const float gy, const float gz, const float c_les,
@@ -537,7 +553,7 @@ KERNEL void lbm_collide_stream(const long long n, ck_store_t* RESTRICT f /* size
     const long long pxy = (long long)px * (ny + 2);
     const long long N = pxy * (nz + 2);
 #define LBM_CELL_ARGS(px, pxy, N) \
-    f, flags, vel, phi, eps, force, pbar, px, pxy, N, rho_h, rho_l, nu_h, nu_l, gx, gy, gz, c_les, lambda_odd, odd_nu_max, \
+    f, flags, vel, phi, eps, force, pbar, odd_ramp, px, pxy, N, rho_h, rho_l, nu_h, nu_l, gx, gy, gz, c_les, lambda_odd, odd_nu_max, \
         beta, kappa
 #if CK_ON_GPU
     // one thread per cell; the flag tests of the stencils cost little next to the memory traffic.  The grid

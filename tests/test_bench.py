@@ -37,7 +37,7 @@ def test_projection_scales_with_the_bandwidth():
 @pytest.mark.parametrize(
     "name",
     ["surface_tension", "volume_controller", "source_term", "retention", "cohesion", "hardening",
-     "odd_rate_floor", "smagorinsky", "stirring", "stirring (fluid only)", "cohesion (sand only)",
+     "odd_rate_floor", "odd_rate_ramp", "smagorinsky", "stirring", "stirring (fluid only)", "cohesion (sand only)",
      "hardening (sand only)"],
 )  # fmt: skip
 def test_memory_reported_per_effect_matches_the_allocated_arrays(name):

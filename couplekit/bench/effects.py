@@ -105,6 +105,7 @@ def effect_variants(data: dict) -> dict[str, tuple[str, dict, dict]]:
     fl, sd = fluid_only(data), sand_only(data)
     eff = lambda d, k, v: _set(d, f"effects.{k}", v)  # noqa: E731
     both = lambda d, v: eff(eff(d, "drag", v), "buoyancy", v)  # noqa: E731
+    low_nu = _set(data, "fluid.water_lattice_viscosity", 1e-4)
     out = {
         "surface_tension": ("coupled", data, eff(data, "surface_tension", False)),
         "volume_controller": ("coupled", data, eff(data, "volume_controller", False)),
@@ -115,6 +116,8 @@ def effect_variants(data: dict) -> dict[str, tuple[str, dict, dict]]:
         "hardening": ("coupled", data, eff(data, "hardening", False)),
         "odd_rate_floor": ("coupled", data, _set(data, "fluid.odd_lambda", 0.0)),
         "smagorinsky": ("coupled", data, _set(data, "fluid.smagorinsky", 0.0)),
+        # the floor acts (and so its ramp) below ν = 5e-4 only: the paper's water viscosity for this pair
+        "odd_rate_ramp": ("coupled", _set(low_nu, "fluid.odd_ramp", 3.0), low_nu),
         "stirring": ("coupled", _stirring(data), data),
         "sand_emission": ("coupled", _inflow(data, 0.3), _inflow(data, 0.0)),
         "surface_tension (fluid only)": ("fluid", fl, eff(fl, "surface_tension", False)),
@@ -204,6 +207,7 @@ EFFECT_STAGES = {
     "hardening": ("mpm_g2p",),
     "odd_rate_floor": ("lbm_collide_stream",),
     "smagorinsky": ("lbm_collide_stream",),
+    "odd_rate_ramp": ("lbm_collide_stream",),
     "stirring": None,
     "sand_emission": None,
 }

@@ -1,8 +1,9 @@
 """Compiled fluid stages (cuda or cpu build of ``kernels/lbm_*.cu``), same signatures as :class:`ReferenceOps`.
 
 Effects are compile-time defines (DESIGN "Effects"): ``CK_TWO_PHASE``, ``CK_SURFACE_TENSION``,
-``CK_MIXTURE``, ``CK_EXT_FORCE``, and the fluid closures ``CK_LES`` (Smagorinsky) and ``CK_ODD_RATE``
-(odd-moment rate floor); one cached module per flag set. Inputs of switched-off effects are not read
+``CK_MIXTURE``, ``CK_EXT_FORCE``, and the fluid closures ``CK_LES`` (Smagorinsky), ``CK_ODD_RATE``
+(odd-moment rate floor) and ``CK_ODD_RAMP`` (the floor ramped to rate 1 away from the walls, per-cell weights);
+one cached module per flag set. Inputs of switched-off effects are not read
 by the kernels and may be ``None``. ``storage="fp16"`` builds every module that touches f with
 ``CK_STORAGE_FP16=1`` (f a float16 array; :mod:`couplekit.fluid.storage`).
 """
@@ -12,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..backend import Backend
-from .reference import check_chemical_potential, check_closures
+from .reference import check_chemical_potential, check_closures, check_odd_ramp, check_odd_ramp_effect
 from .storage import check_storage
 
 
@@ -29,6 +30,7 @@ class KernelOps:
         les: bool = False,
         odd_rate: bool = False,
         storage: str = "fp32",
+        odd_ramp: bool = False,
     ):
         self.backend = backend
         self.name = backend.name
@@ -38,6 +40,7 @@ class KernelOps:
         self.external_force = bool(external_force)
         self.les = bool(les)
         self.odd_rate = bool(odd_rate)
+        self.odd_ramp = check_odd_ramp_effect(odd_ramp, self.odd_rate)
         self.storage = check_storage(storage)
         defines = self.defines()
         # fp16 storage: CK_STORAGE_FP16=1 in every module that reads or writes f (absent for fp32, so the fp32
@@ -76,6 +79,8 @@ class KernelOps:
             "CK_EXT_FORCE": int(self.external_force),
             "CK_LES": int(self.les),
             "CK_ODD_RATE": int(self.odd_rate),
+            # absent without the ramp, so the modules without it are the ones built before it existed
+            **({"CK_ODD_RAMP": 1} if self.odd_ramp else {}),
             **({"CK_STORAGE_FP16": 1} if self.storage == "fp16" else {}),
         }
 
@@ -185,9 +190,11 @@ class KernelOps:
         odd_lambda: float = 0.0,
         odd_nu_max: float = 1.0,
         chemical_potential: tuple[float, float] | None = None,
+        odd_ramp=None,
     ) -> None:
         """Fused forces + NOCM-MRT collision + AA streaming (see ReferenceOps.collide_stream)."""
         check_closures(self, smagorinsky, odd_lambda)
+        check_odd_ramp(self, odd_ramp)
         beta, kappa = check_chemical_potential(self, chemical_potential)
         n, nx, ny, nz = self._interior(flags)
         if parity & 1:
@@ -201,6 +208,7 @@ class KernelOps:
             self._or_dummy(eps, self.mixture),
             self._or_dummy(force, self.external_force),
             pbar,
+            self._or_dummy(odd_ramp, self.odd_ramp),
             np.int32(parity),
             np.int32(nx),
             np.int32(ny),

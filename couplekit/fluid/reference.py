@@ -155,6 +155,23 @@ def check_closures(ops, smagorinsky: float, odd_lambda: float) -> None:
         raise ValueError(f"odd_lambda = {odd_lambda} needs ops built with odd_rate=True (FluidParams.odd_lambda > 0)")
 
 
+def check_odd_ramp_effect(odd_ramp: bool, odd_rate: bool) -> bool:
+    """The ``odd_ramp`` switch of an ops object: it ramps the floor, so it needs ``odd_rate``."""
+    if odd_ramp and not odd_rate:
+        raise ValueError("odd_ramp=True needs odd_rate=True: the ramp blends the odd-rate floor with rate 1")
+    return bool(odd_ramp)
+
+
+def check_odd_ramp(ops, odd_ramp) -> None:
+    """The ramp weights are given exactly when the ops were built for them (``odd_ramp=True``, which needs
+    ``odd_rate``): a ramp the kernels were not compiled for would be ignored silently."""
+    if (odd_ramp is not None) != ops.odd_ramp:
+        raise ValueError(
+            "odd_ramp weights must be given exactly when the ops were built with odd_ramp=True "
+            "(FluidParams.odd_ramp > 0 with the odd-rate floor acting; couplekit.fluid.odd_ramp.ramp_weights)"
+        )
+
+
 def odd_rate(r_s, odd_lambda: float):
     """Relaxation rate of the odd central moments (orders 3 and 5): r_o = min(1, 1 / (½ + Λ / (1/r_s − ½))).
 
@@ -186,6 +203,16 @@ def odd_rates(r_s, nu, nu_ref: float, odd_lambda: float, odd_nu_max: float):
         return 1.0
     odd_tau = (1.0 / np.asarray(r_s, np.float64) - 0.5) - 3.0 * np.asarray(nu, np.float64) + 3.0 * nu_ref
     return odd_rate(1.0 / (odd_tau + 0.5), odd_lambda)
+
+
+def ramped_odd_rates(r_o, ramp):
+    """The floor's rates ``r_o`` ramped to the paper's rate 1 away from the walls (``FluidParams.odd_ramp``,
+    :mod:`couplekit.fluid.odd_ramp`): r_o + (1 − r_o) s, with s = ``ramp`` the weight of rate 1 per cell
+    (0 at the walls, 1 from D + ½ cells in). ``ramp`` ``None``: ``r_o`` unchanged."""
+    if ramp is None or np.isscalar(r_o):  # no ramp, or the floor is off (rate 1 everywhere)
+        return r_o
+    s = np.asarray(ramp, np.float64)
+    return r_o + (1.0 - r_o) * s
 
 
 def equilibrium(u: np.ndarray) -> np.ndarray:
@@ -224,7 +251,8 @@ class ReferenceOps:
     ``surface_tension`` (F_s = μ_φ ∇φ from a chemical-potential field), ``mixture`` (fluid fraction ε and
     sand velocity v inputs; else ε ≡ 1), ``external_force`` (a force-density input field, e.g. drag), and the
     closures ``les`` (Smagorinsky) and ``odd_rate`` (odd-moment rate floor), which allow non-zero
-    ``smagorinsky`` / ``odd_lambda`` in :meth:`collide_stream`.
+    ``smagorinsky`` / ``odd_lambda`` in :meth:`collide_stream`; ``odd_ramp`` (the floor ramped to rate 1
+    away from the walls, :mod:`couplekit.fluid.odd_ramp`; needs ``odd_rate``) takes the ramp's weights there.
     Arrays of switched-off effects are ignored (pass ``None``).
     """
 
@@ -239,6 +267,7 @@ class ReferenceOps:
         les: bool = False,
         odd_rate: bool = False,
         storage: str = "fp32",
+        odd_ramp: bool = False,
     ):
         self.storage = check_storage(storage)  # what f arrays to allocate; the stages follow f's dtype
         self.two_phase = bool(two_phase)
@@ -247,6 +276,7 @@ class ReferenceOps:
         self.external_force = bool(external_force)
         self.les = bool(les)
         self.odd_rate = bool(odd_rate)
+        self.odd_ramp = check_odd_ramp_effect(odd_ramp, self.odd_rate)
 
     # ------------------------------------------------------------------------------------------ helpers
     @staticmethod
@@ -490,13 +520,17 @@ class ReferenceOps:
         odd_lambda: float = 0.0,
         odd_nu_max: float = 1.0,
         chemical_potential: tuple[float, float] | None = None,
+        odd_ramp=None,
     ) -> None:
         """Fused collide + stream (Eqs. 8-10): forces, NOCM-MRT collision, AA store; writes u to ``velocity``.
         ``smagorinsky``: the Smagorinsky constant C of the subgrid viscosity (0 = off, the paper's model);
         ``odd_lambda``: the floor Λ of the odd-moment rate (:func:`odd_rate`; 0 = rate 1, the paper's), applied in
         cells whose molecular viscosity is below ``odd_nu_max``; ``chemical_potential``: (β, κ) of Eq. 22, given
-        exactly when the ops have surface tension (the collide computes μ_φ from φ itself, no stored field)."""
+        exactly when the ops have surface tension (the collide computes μ_φ from φ itself, no stored field);
+        ``odd_ramp``: padded float32 weights s of rate 1 (:func:`ramped_odd_rates`), given exactly when the ops
+        were built with ``odd_ramp=True``."""
         check_closures(self, smagorinsky, odd_lambda)
+        check_odd_ramp(self, odd_ramp)
         chem = check_chemical_potential(self, chemical_potential)
         fi = self.load(f, flags, velocity, parity)
         a, u, r_s = self.forces(
@@ -504,6 +538,7 @@ class ReferenceOps:
         )
         nu = self._viscosity(phi, rho_h, rho_l, nu_h, nu_l)
         r_o = odd_rates(r_s, nu, min(nu_h, nu_l) if self.two_phase else nu_h, odd_lambda, odd_nu_max)
+        r_o = ramped_odd_rates(r_o, None if odd_ramp is None else interior(odd_ramp))
         fstar = self.collide(fi, u, a, r_s, r_o)
         self.store(f, flags, velocity, parity, fstar)
         fluid = interior(flags) == FLUID

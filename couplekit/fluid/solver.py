@@ -46,6 +46,7 @@ from .grid import (
     wall_rule_axes,
 )
 from .kernel_ops import KernelOps
+from .odd_ramp import check_gaps, ramp_weights
 from .reference import ReferenceOps, equilibrium, to_stored
 from .storage import check_storage, dtype_of
 
@@ -90,6 +91,12 @@ class FluidParams:
     that viscosity is at least ``odd_nu_max`` (default 5e-4: ν = 1e-3 is stable at rate 1, and there the floor
     was measured to disturb the coupled validations: a floating ball 0.8 cell high). 0 = the paper's collision
     exactly.
+    ``odd_ramp``: D, in cells (default 0: the floor everywhere). With D > 0 the floor acts only near the
+    boundaries: r_o = r_floor + (1 − r_floor) s with s a cosine ramp from 0 in the cells touching a wall (or a
+    solid cell, an inflow or outflow face) to 1 from D + ½ cells in (:mod:`couplekit.fluid.odd_ramp`), so that
+    the fluid away from walls relaxes its odd moments at the paper's rate 1. Measured stable at D = 3 wherever
+    boundaries are ≥ 8 cells apart; :class:`FluidSolver` refuses narrower gaps. It is what lets a 600 kg/m³
+    ball of 1.7 cells float at interface width 4 (docs/examples.md, Fig. 8). Costs one float32 per cell.
     ``smagorinsky``: Smagorinsky constant C of a subgrid viscosity ν_t = (C Δx)² |S̄| added to ν (0 = off, the
     default and the paper's model); 0.1–0.17 is usual for under-resolved turbulent flows.
     ``phase_trt_lambda``: Λ_h of a two-relaxation-time collision of the phase field (the symmetric
@@ -139,6 +146,7 @@ class FluidParams:
     odd_lambda: float = 0.0
     odd_nu_max: float = 5e-4
     phase_trt_lambda: float | None = None
+    odd_ramp: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("rho_h", "rho_l", "nu_h", "nu_l", "mobility", "width"):
@@ -152,6 +160,10 @@ class FluidParams:
             raise ValueError(f"FluidParams.odd_nu_max must be > 0, got {self.odd_nu_max}")
         if not 0.0 <= self.odd_lambda <= 1.0:
             raise ValueError(f"FluidParams.odd_lambda must be in [0, 1] (e.g. 0.25), got {self.odd_lambda}")
+        if not (0.0 <= self.odd_ramp <= 64.0):
+            raise ValueError(
+                f"FluidParams.odd_ramp must be in [0, 64] cells (0: the floor everywhere; 3 measured), got {self.odd_ramp}"
+            )
         if not 0.0 <= self.smagorinsky <= 1.0:
             raise ValueError(f"FluidParams.smagorinsky must be in [0, 1] (typical 0.1-0.2), got {self.smagorinsky}")
         if len(self.gravity) != 3:
@@ -311,6 +323,8 @@ class FluidSolver:
             les=params.smagorinsky > 0,
             odd_rate=self._odd_lambda > 0,
             storage=self.storage,
+            # the ramp only where the floor acts (without it the odd moments relax at 1 everywhere anyway)
+            odd_ramp=self._odd_lambda > 0 and params.odd_ramp > 0,
         )
         self.ops = KernelOps(backend, **effects) if backend.has_kernels else ReferenceOps(**effects)
         pshape = padded_shape(self.shape)
@@ -321,6 +335,12 @@ class FluidSolver:
         ghost, image = periodic_lists(self.shape, self.boundaries)
         out_ghost, out_src = outflow_lists(self.shape, flags)
         self.flags = backend.asarray(flags)
+        periodic_axes = tuple(self.boundaries.face(a + "-").kind == "periodic" for a in "xyz")
+        # the weights of rate 1 of the ramped odd-rate floor (FluidParams.odd_ramp), refused in narrow gaps
+        self.odd_ramp = None
+        if self.ops.odd_ramp:
+            check_gaps(flags, periodic_axes, params.odd_ramp)
+            self.odd_ramp = backend.asarray(ramp_weights(flags, periodic_axes, params.odd_ramp))
         self._ghost, self._image = backend.asarray(ghost), backend.asarray(image)
         self._out_ghost, self._out_src = backend.asarray(out_ghost), backend.asarray(out_src)
 
@@ -348,7 +368,6 @@ class FluidSolver:
         # odd-rate floor, 1 with the paper's collision (grid.slip_wall_layers)
         self._slip_cells = None
         if self.mixture:
-            periodic_axes = tuple(self.boundaries.face(a + "-").kind == "periodic" for a in "xyz")
             layers = slip_wall_layers(self.odd_floor_active)
             self._slip_cells = backend.asarray(slip_cells(flags, periodic_axes, layers))
         self.force = xp.zeros((3,) + pshape, dtype=np.float32) if self.external_force else None
@@ -500,6 +519,7 @@ class FluidSolver:
                 self.f, self.flags, self.velocity, self.phi, self.fluid_fraction, self.force, force_p,
                 parity, prm.rho_h, prm.rho_l, prm.nu_h, prm.nu_l, *prm.gravity, prm.smagorinsky, self._odd_lambda,
                 prm.odd_nu_max, chemical_potential=(self.beta, self.kappa) if self.surface_tension else None,
+                odd_ramp=self.odd_ramp,
             )  # fmt: skip
             if parity:
                 ops.fold(self.f, self._ghost, self._image)

@@ -147,6 +147,8 @@ class Fluid:
     initial_pressure: str = "resting"
     storage: str = "fp32"
     """Storage precision of the populations f and h: 'fp32' or 'fp16' (couplekit.fluid.storage)."""
+    odd_ramp: float = 0.0
+    """Cells over which the odd-rate floor is ramped to the paper's rate 1 away from the walls (0: everywhere)."""
 
 
 @dataclass(frozen=True)
@@ -909,6 +911,7 @@ def _fluid(flu: dict, raw: dict, domain: Domain | None, tim: dict, problems: lis
             "smagorinsky",
             "initial_pressure",
             "storage",
+            "odd_ramp",
         )
     ):
         return None
@@ -927,6 +930,7 @@ def _fluid(flu: dict, raw: dict, domain: Domain | None, tim: dict, problems: lis
         None if flu["gravity"] is None else tuple(flu["gravity"]),
         flu["initial_pressure"],
         flu["storage"],
+        flu["odd_ramp"],
     )
 
 

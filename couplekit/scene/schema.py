@@ -329,6 +329,17 @@ SECTIONS: dict[str, list[Key]] = {
             hi=0.1,
         ),
         Key(
+            "odd_ramp",
+            "float",
+            0.0,
+            "the odd_lambda floor near the walls only: ramped to the paper's rate 1 over this many cells from "
+            "every wall, solid cell and open face (3 measured; lets a light 1.7-cell sand ball float at interface "
+            "width 4, docs/examples.md Fig. 8); needs every gap between them >= 8 cells; 0 = the floor everywhere",
+            "cells",
+            lo=0.0,
+            hi=16.0,
+        ),
+        Key(
             "gravity",
             "vec3",
             None,

@@ -110,8 +110,10 @@ def test_noise_in_walled_box_grows_without_floor_and_decays_with_it(cpu):
     assert np.all(np.isfinite(with_floor)) and np.all(np.diff(with_floor) < 0), f"with the floor: {with_floor}"
 
 
-def test_still_water_tank_at_paper_viscosity_stays_at_rest(cpu):
-    n, g = 24, 2e-5
+def still_tank(cpu, n: int, **params) -> FluidSolver:
+    """A closed n³ 800:1 tank half full of still water at rest (ν_h = 1e-4, ν_l = 1e-2, g = 2e-5, hydrostatic
+    start) with the scenes' closures (floor 0.015, Smagorinsky 0.1); ``params``: more FluidParams fields."""
+    g = 2e-5
     z = np.arange(n) + 0.5
     phi1 = 0.5 * (1.0 - np.tanh(2.0 * (z - 0.5 * n) / 4.0))
     rho_h, rho_l = 1.0, 1.0 / 800.0
@@ -119,7 +121,7 @@ def test_still_water_tank_at_paper_viscosity_stays_at_rest(cpu):
     p1 = np.cumsum((rho * g)[::-1])[::-1] - 0.5 * rho * g  # hydrostatic: the weight of the column above
     phi = np.broadcast_to(phi1[:, None, None], (n, n, n)).astype(np.float32).copy()
     p = np.broadcast_to(p1[:, None, None], (n, n, n)).astype(np.float32).copy()
-    params = FluidParams(
+    prm = FluidParams(
         rho_h=rho_h,
         rho_l=rho_l,
         nu_h=1e-4,
@@ -127,8 +129,13 @@ def test_still_water_tank_at_paper_viscosity_stays_at_rest(cpu):
         gravity=(0.0, 0.0, -g),
         odd_lambda=DEFAULT_LAMBDA,
         smagorinsky=0.1,
+        **params,
     )  # the scenes' closures
-    solver = FluidSolver(cpu, (n, n, n), params, boundaries=Boundaries.channel("xyz"), phi=phi, pressure=p)
+    return FluidSolver(cpu, (n, n, n), prm, boundaries=Boundaries.channel("xyz"), phi=phi, pressure=p)
+
+
+def test_still_water_tank_at_paper_viscosity_stays_at_rest(cpu):
+    solver = still_tank(cpu, 24)
     top = 0.0
     for _ in range(8):
         solver.step(500)
