@@ -155,7 +155,15 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from .io.checkpoint import CheckpointError
     from .io.outputs import OutputFolderError, default_output, prepare_output
     from .scene import Scene, SceneError
-    from .simulation import CouplingUnavailableError, InsufficientMemoryError, Simulation, with_scheduler
+    from .simulation import (
+        CouplingUnavailableError,
+        InsufficientMemoryError,
+        Simulation,
+        parse_setting,
+        with_scheduler,
+        with_settings,
+    )
+    from .sweep.keys import KeyPathError
 
     for name in ("frames", "threads"):
         if getattr(args, name) is not None and getattr(args, name) < 1:
@@ -169,6 +177,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
                       file=sys.stderr)  # fmt: skip
                 return 2
             scene = with_scheduler(scene, args.scheduler)
+        if args.set:
+            if args.resume:
+                print("error: --set cannot change a resumed run (the checkpoint keeps its scene)", file=sys.stderr)
+                return 2
+            scene = with_settings(scene, dict(parse_setting(s) for s in args.set))
         # the output folder before anything is allocated: a used one is refused unless resumed or overwritten
         out = prepare_output(
             args.out or scene.outputs.directory or default_output(scene.name),
@@ -184,6 +197,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
             sim = Simulation(scene, backend=args.backend, threads=args.threads)
     except SceneError as exc:
         print(exc, file=sys.stderr)
+        return 2
+    except KeyPathError as exc:
+        print(f"error: --set: {exc}", file=sys.stderr)
         return 2
     except (CouplingUnavailableError, InsufficientMemoryError) as exc:
         print(f"refused: {exc}", file=sys.stderr)
@@ -353,6 +369,14 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         metavar="SPEC",
         help="replace the scene's [scheduler]: lockstep, subcycle[:K|auto][:hold|linear] or multirate:M",
+    )
+    run.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="set a scene key for this run (repeatable; dotted keys as in sweeps, VALUE a TOML value): "
+        "--set outputs.preview=false --set bodies[2].density=900",
     )
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
     run.add_argument(

@@ -102,6 +102,10 @@ EXAMPLES: dict[str, list[tuple[str, str]]] = {
             "continue after Ctrl-C",
         ),
         ("couplekit run examples/fig16_dam_break_sand_small.toml --scheduler subcycle:4", "sand sub-cycled"),
+        (
+            "couplekit run examples/fig08_sand_densities_small.toml --set fluid.interface_width=8 --set outputs.preview=false",
+            "one run with scene keys changed (dotted keys as in sweeps)",
+        ),
     ],
     "sweep": [
         ("couplekit sweep examples/sweeps/tiny_substeps.toml", "runs/sweeps/tiny_substeps/results.parquet"),
@@ -137,7 +141,8 @@ DESCRIPTIONS: dict[str, str] = {
     "noted, exit 0, so a file validates alike on every host.",
     "run": "Run a scene: a progress bar (frames, steps/s and ETA, without the kernels' compilation), ParaView\n"
     "VTK, PLY and PNG outputs, diagnostics.jsonl and HDF5 checkpoints. --scheduler replaces the scene's\n"
-    "[scheduler] table (e.g. subcycle:8). Ctrl-C stops between steps and writes interrupted.h5.",
+    "[scheduler] table (e.g. subcycle:8); --set KEY=VALUE changes one scene key for the run (validated again,\n"
+    "as the file is). Ctrl-C stops between steps and writes interrupted.h5.",
     "sweep": "Run a sweep file (a base scene and a grid of dotted-key values, docs/sweeps.md) on Dask: one row\n"
     "per point in results.parquet. Finished points are kept: the same command resumes an interrupted sweep.",
     "plot": "Draw the diagnostics of a run folder into summary.png: fluid volume drift, lattice speed and Mach,\n"

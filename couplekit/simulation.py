@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import math
 import signal
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -59,6 +59,8 @@ __all__ = [
     "hydrostatic_pressure",
     "RunResult",
     "with_scheduler",
+    "with_settings",
+    "parse_setting",
 ]
 
 _refuse_unsupported = refuse_unsupported  # the name the CLI used before couplekit.assembly
@@ -75,6 +77,37 @@ def with_scheduler(scene: Scene, scheduler: str | dict) -> Scene:
     data = scene.to_dict()
     data["scheduler"] = table
     return Scene.from_dict(data, source_name=f"scene {scene.name!r} with [scheduler] {table}")
+
+
+def parse_setting(text: str) -> tuple[str, Any]:
+    """``"KEY=VALUE"`` (``couplekit run --set``) -> (dotted key, value): VALUE is read as a TOML value (``3``,
+    ``0.5``, ``true``, ``[1, 2]``, ``"text"``), or taken as a plain string where it is not one
+    (``fluid.storage=fp16``). ValueError, naming the fix, without an ``=`` or a key."""
+    import tomllib
+
+    key, sep, value = text.partition("=")
+    key, value = key.strip(), value.strip()
+    if not sep or not key:
+        raise ValueError(f"--set {text!r}: write KEY=VALUE, e.g. --set outputs.preview=false or --set time.frames=5")
+    try:
+        return key, tomllib.loads(f"v = {value}")["v"]
+    except tomllib.TOMLDecodeError:
+        return key, value
+
+
+def with_settings(scene: Scene, settings: Mapping[str, Any]) -> Scene:
+    """``scene`` with the dotted keys of ``settings`` (``{"outputs.preview": False, "bodies[1].density": 900}``,
+    the keys of a sweep: docs/sweeps.md) set, and validated again. A key the scene format does not have raises
+    :class:`~couplekit.sweep.KeyPathError` (a ValueError) naming the nearest key; a value it refuses raises
+    :class:`~couplekit.scene.SceneError`."""
+    from .sweep.keys import check_key, set_key
+
+    data = scene.to_dict()
+    for key, value in settings.items():
+        check_key(key, data)
+        set_key(data, key, value)
+    shown = ", ".join(f"{k} = {v!r}" for k, v in settings.items())
+    return Scene.from_dict(data, source_name=f"scene {scene.name!r} with {shown}")
 
 
 class InsufficientMemoryError(MemoryError):

@@ -79,6 +79,55 @@ def test_run_writes_frames(tmp_path, capsys):
     assert len(read_diagnostics(out / "diagnostics.jsonl")) == 2
 
 
+def test_run_set_changes_scene_keys_for_the_run(tmp_path, capsys):
+    """--set KEY=VALUE (repeatable): dotted keys as in sweeps, TOML values (a bare word is a string); the
+    changed scene is validated again and the run follows it (here: no VTK, a sand body twice as dense)."""
+    out = tmp_path / "out"
+    args = ["run", str(_scene(tmp_path)), "--frames", "1", "--out", str(out), "--backend", "numpy", "--no-progress"]
+    rc = main([*args, "--set", "outputs.vtk=false", "--set", "sand.density=3000", "--set", "scene.name=renamed"])
+    assert rc == 0, capsys.readouterr().err
+    assert not list(out.glob("*.vtp")) and (out / "checkpoint.h5").exists()
+    from couplekit.simulation import Simulation
+
+    sim = Simulation.load(out / "checkpoint.h5", backend="numpy")
+    assert sim.scene.sand.density == 3000.0 and sim.scene.name == "renamed" and sim.scene.outputs.vtk is False
+
+
+@pytest.mark.parametrize(
+    "setting, code, message",
+    [
+        ("outputs.vtkk=false", 2, "did you mean 'vtk'"),  # an unknown key: the nearest one named
+        ("outputs.vtk", 2, "write KEY=VALUE"),  # no value
+        ("=3", 2, "write KEY=VALUE"),  # no key
+        ("outputs.vtk=3", 2, "outputs.vtk: must be true or false"),  # the scene's own validation
+        ("bodies[5].density=900", 2, "beyond it"),  # an index past the list
+        ("sand.density=-1", 2, "sand.density"),
+    ],
+)
+def test_run_set_refuses_bad_settings_before_running(tmp_path, capsys, setting, code, message):
+    out = tmp_path / "out"
+    rc = main(["run", str(_scene(tmp_path)), "--out", str(out), "--backend", "numpy", "--set", setting])
+    assert rc == code
+    assert message in capsys.readouterr().err
+    assert not out.exists()  # refused before the output folder was made
+
+
+def test_run_set_cannot_change_a_resumed_run(tmp_path, capsys):
+    rc = main(["run", str(_scene(tmp_path)), "--resume", str(tmp_path / "x.h5"), "--set", "time.frames=3"])
+    assert rc == 2
+    assert "--set cannot change a resumed run" in capsys.readouterr().err
+
+
+def test_parse_setting_reads_toml_values_and_bare_words():
+    from couplekit.simulation import parse_setting
+
+    assert parse_setting("time.frames=5") == ("time.frames", 5)
+    assert parse_setting(" bodies[0].velocity = [0, 0, -1.5] ") == ("bodies[0].velocity", [0, 0, -1.5])
+    assert parse_setting("fluid.storage=fp16") == ("fluid.storage", "fp16")
+    assert parse_setting('scene.name="a b"') == ("scene.name", "a b")
+    assert parse_setting("outputs.preview=false") == ("outputs.preview", False)
+
+
 def test_run_refuses_what_the_coupler_cannot_do(tmp_path, capsys):
     text = _scene(tmp_path).read_text() + "\n[effects]\ndrag = false\n\n[fluid]\nphases = 2\n"
     p = tmp_path / "coupled.toml"
