@@ -26,26 +26,26 @@ def _fluid(backend, two_phase: bool) -> FluidSolver:
 
 
 @pytest.mark.parametrize("two_phase", [False, True], ids=["single", "two_phase"])
-def test_fluid_solver_matches_reference(kernel_backend, two_phase):
+def test_fluid_solver_matches_reference(solver_backend, two_phase):
     """9 steps (both parities, inflow, outflow, moving wall) agree with the float64 reference to the float32
     round-off growth tests/fluid/test_fluid_solver.py allows (5e-6 single phase, 5e-5 two-phase)."""
     tol = 5e-5 if two_phase else 5e-6
-    a, b = _fluid(get_backend("numpy"), two_phase), _fluid(kernel_backend, two_phase)
+    a, b = _fluid(get_backend("numpy"), two_phase), _fluid(solver_backend, two_phase)
     a.step(9)
     b.step(9)
     fa, fb = a.fields(), b.fields()
     for key in ("velocity", "pressure") + (("phi",) if two_phase else ()):
-        np.testing.assert_allclose(fb[key], fa[key], rtol=0, atol=tol, err_msg=f"{key} on {kernel_backend.name}")
+        np.testing.assert_allclose(fb[key], fa[key], rtol=0, atol=tol, err_msg=f"{key} on {solver_backend.name}")
     assert np.abs(fa["velocity"]).max() > 1e-3  # the flow moved: the comparison is not of two resting states
 
 
-def test_sand_solver_matches_reference(kernel_backend):
+def test_sand_solver_matches_reference(solver_backend):
     """10 steps of a falling block hitting the floor (most of it yields) agree with the reference solver as in
     tests/sand/test_solver.py: 1e-6 m in x, 1e-4 m/s in v, 1e-4 in F."""
     dx = 0.01
     body = seed_box((0.04, 0.04, 0.025), (0.10, 0.08, 0.09), dx, ppc=2, jitter=0.5, seed=5)
     kw = dict(velocities=(0.3, 0.0, -1.0), walls=DomainWalls.uniform("separate", 0.5))
-    a = SandSolver(kernel_backend, (12, 12, 16), dx, 1e-4, SandParams(), body.x, body.volume, **kw)
+    a = SandSolver(solver_backend, (12, 12, 16), dx, 1e-4, SandParams(), body.x, body.volume, **kw)
     b = SandSolver("numpy", (12, 12, 16), dx, 1e-4, SandParams(), body.x, body.volume, **kw)
     a.step(10)
     b.step(10)

@@ -270,7 +270,12 @@ class PhaseFieldRunner:
         self.ops, self.mobility, self.width, self.eta = ops, float(mobility), float(width), float(eta)
         self.beta, self.kappa = chemical_potential_coefficients(sigma, width)
         self.flags = xp.asarray(np.ascontiguousarray(flags, dtype=np.uint8))
-        self.u = xp.zeros((3, *shape), dtype=np.float32) if u is None else xp.ascontiguousarray(u, dtype=np.float32)
+        # u may be a host array on a device backend (xp.asarray copies it over; a device array stays)
+        self.u = (
+            xp.zeros((3, *shape), dtype=np.float32)
+            if u is None
+            else xp.ascontiguousarray(xp.asarray(u, dtype=np.float32))
+        )
         self.source = xp.zeros(shape, dtype=np.float32)
         self.phi = xp.zeros(shape, dtype=np.float32)
         self.phi[1:-1, 1:-1, 1:-1] = xp.asarray(np.asarray(phi0, dtype=np.float32))

@@ -24,6 +24,11 @@ def kops(kernel_backend):
     return KernelOps(kernel_backend)
 
 
+def _svd3(kops, flat):
+    """kops.svd3 with its results on the host (on cuda they are device arrays)."""
+    return tuple(kops.backend.to_host(a) for a in kops.svd3(flat))
+
+
 def _as_mats(a):
     return a.T.reshape(-1, 3, 3).astype(np.float64)
 
@@ -57,7 +62,7 @@ def test_svd_kernel_reconstructs_and_matches_lapack(kops, rops):
     rng = np.random.default_rng(1)
     A = _cases(rng, 4000)
     flat = np.ascontiguousarray(A.reshape(-1, 9).T)
-    U, s, V = kops.svd3(flat)
+    U, s, V = _svd3(kops, flat)
     assert np.all(np.isfinite(U)) and np.all(np.isfinite(s)) and np.all(np.isfinite(V))
     Um, Vm, sv = _as_mats(U), _as_mats(V), s.T.astype(np.float64)
     M = A.astype(np.float64)
@@ -132,7 +137,7 @@ def test_svd_never_nan_for_degenerate_or_inverted(kops):
     A = np.concatenate([bad, rng.normal(size=(333, 3, 3))])
     A = A[rng.permutation(len(A))].astype(np.float32)
     flat = np.ascontiguousarray(A.reshape(-1, 9).T)
-    U, s, V = kops.svd3(flat)
+    U, s, V = _svd3(kops, flat)
     assert np.all(np.isfinite(U)) and np.all(np.isfinite(s)) and np.all(np.isfinite(V))
     Um, Vm, sv = _as_mats(U), _as_mats(V), s.T.astype(np.float64)
     M = A.astype(np.float64)
@@ -169,7 +174,7 @@ def test_svd_result_does_not_depend_on_batch_position(kops):
     outs = []
     for order in (np.arange(len(A)), perm):
         flat = np.ascontiguousarray(A[order].reshape(-1, 9).T)
-        U, s, V = kops.svd3(flat)
+        U, s, V = _svd3(kops, flat)
         inv = np.argsort(order)
         outs.append((U[:, inv], s[:, inv], V[:, inv]))
     for a, b in zip(*outs, strict=True):
@@ -240,7 +245,7 @@ def test_svd_of_rotations_is_accurate_to_a_few_ulp(kops):
     q *= np.sign(np.linalg.det(q))[:, None, None]
     A = np.concatenate([q, np.eye(3)[None]]).astype(np.float32)
     flat = np.ascontiguousarray(A.reshape(-1, 9).T)
-    U, s, V = kops.svd3(flat)
+    U, s, V = _svd3(kops, flat)
     Um, Vm, sv = _as_mats(U), _as_mats(V), s.T.astype(np.float64)
     err = np.abs(np.einsum("pab,pb,pcb->pac", Um, sv, Vm) - A.astype(np.float64)).max(axis=(1, 2))
     assert err.max() <= 8e-7
