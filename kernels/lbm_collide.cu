@@ -596,8 +596,10 @@ KERNEL void lbm_collide_stream(const long long n, ck_store_t* RESTRICT f /* size
             LBM_CHUNK_BUFFERS                                                                          \
             unsigned int masks[LBM_ROW_CHUNK], scratch[10 * (LBM_ROW_CHUNK + 2)];                      \
             const bool bulk = lbm_rows_all_fluid(flags, row, 0, nx + 1, px, pxy);                      \
-            for (int x0 = 1; x0 <= nx; x0 += LBM_ROW_CHUNK) {                                          \
-                const int len = nx + 1 - x0 < LBM_ROW_CHUNK ? nx + 1 - x0 : LBM_ROW_CHUNK;             \
+            int lo = 1, hi = nx;                                                                       \
+            if (!bulk) lbm_row_fluid_span(flags, row, nx, lo, hi);                                     \
+            for (int x0 = lo; x0 <= hi; x0 += LBM_ROW_CHUNK) {                                         \
+                const int len = hi + 1 - x0 < LBM_ROW_CHUNK ? hi + 1 - x0 : LBM_ROW_CHUNK;             \
                 const long long c0 = row + x0;                                                         \
                 if (bulk) {                                                                            \
                     LBM_PHI_CHUNK(LBM_NB_BULK, c0, len, masks)                                          \

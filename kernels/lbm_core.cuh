@@ -299,6 +299,19 @@ LBM_INLINE bool lbm_rows_all_fluid(const unsigned char* RESTRICT flags, const lo
     return any == 0;  // FLAG_FLUID == 0
 }
 
+// Host: the first (lo) and last (hi) interior x (1..nx) of padded row `row` whose cell is FLUID; lo > hi when
+// the row has none.  The stages' masked rows loop over lo..hi only: every stage leaves a non-fluid cell as it is
+// (the GPU path skips it; the host's GUARD writes its values back), so the cells outside the span need no
+// work, and obstacles (Fig. 13's beaker: a third of its cells) and walls cost nothing there.
+LBM_INLINE void lbm_row_fluid_span(const unsigned char* RESTRICT flags, const long long row, const int nx, int& lo,
+                                   int& hi) {
+    const unsigned char* r = flags + row;
+    lo = 1;
+    while (lo <= nx && r[lo] != FLAG_FLUID) ++lo;
+    hi = nx;
+    while (hi >= lo && r[hi] != FLAG_FLUID) --hi;
+}
+
 // Host: true when the cells xa..xb of padded row `row` (index of x = 0) are all FLUID (xb - xa + 1 byte reads)
 LBM_INLINE bool lbm_row_fluid(const unsigned char* RESTRICT flags, const long long row, const int xa, const int xb) {
     unsigned int any = 0;

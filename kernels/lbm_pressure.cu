@@ -140,8 +140,10 @@ KERNEL void lbm_macro_pressure(const long long n, const ck_store_t* RESTRICT f /
             const bool bulk = LBM_P_ROWS(row);                                                            \
             unsigned int masks[LBM_P_CHUNK], scratch[10 * (LBM_P_CHUNK + 2)], slipw[LBM_P_CHUNK];         \
             (void)slipw;                                                                                  \
-            for (int x0 = 1; x0 <= nx; x0 += LBM_P_CHUNK) {                                               \
-                const int len = nx + 1 - x0 < LBM_P_CHUNK ? nx + 1 - x0 : LBM_P_CHUNK;                    \
+            int lo = 1, hi = nx;                                                                          \
+            if (!bulk) lbm_row_fluid_span(flags, row, nx, lo, hi);                                        \
+            for (int x0 = lo; x0 <= hi; x0 += LBM_P_CHUNK) {                                              \
+                const int len = hi + 1 - x0 < LBM_P_CHUNK ? hi + 1 - x0 : LBM_P_CHUNK;                    \
                 const long long c0 = row + x0;                                                            \
                 if (CK_MIXTURE) {                                                                         \
                     CK_PRAGMA(omp simd)                                                                   \
@@ -245,8 +247,10 @@ KERNEL void lbm_pressure_filter(const long long n, const float* RESTRICT p /* si
                 continue;
             }
             unsigned int masks[LBM_P_CHUNK], scratch[10 * (LBM_P_CHUNK + 2)];
-            for (int x0 = 1; x0 <= nx; x0 += LBM_P_CHUNK) {
-                const int len = nx + 1 - x0 < LBM_P_CHUNK ? nx + 1 - x0 : LBM_P_CHUNK;
+            int lo, hi;
+            lbm_row_fluid_span(flags, row, nx, lo, hi);
+            for (int x0 = lo; x0 <= hi; x0 += LBM_P_CHUNK) {
+                const int len = hi + 1 - x0 < LBM_P_CHUNK ? hi + 1 - x0 : LBM_P_CHUNK;
                 const long long c0 = row + x0;
                 lbm_link_masks(flags, c0, len, px, pxy, masks, scratch);
                 CK_PRAGMA(omp simd)
@@ -336,8 +340,10 @@ KERNEL void lbm_momentum(const long long n, const ck_store_t* RESTRICT f /* size
         for (int y = 0; y < ny; ++y) {                                                             \
             const long long row = px * (long long)(y + 1) + pxy * (z + 1);                         \
             unsigned int live[LBM_P_CHUNK];                                                        \
-            for (int x0 = 1; x0 <= nx; x0 += LBM_P_CHUNK) {                                        \
-                const int len = nx + 1 - x0 < LBM_P_CHUNK ? nx + 1 - x0 : LBM_P_CHUNK;             \
+            int lo, hi;                                                                            \
+            lbm_row_fluid_span(flags, row, nx, lo, hi);                                            \
+            for (int x0 = lo; x0 <= hi; x0 += LBM_P_CHUNK) {                                       \
+                const int len = hi + 1 - x0 < LBM_P_CHUNK ? hi + 1 - x0 : LBM_P_CHUNK;             \
                 const long long c0 = row + x0;                                                     \
                 CK_PRAGMA(omp simd)                                                                \
                 for (int i = 0; i < len; ++i) live[i] = flags[c0 + i] == FLAG_FLUID ? 1u : 0u;     \

@@ -22,8 +22,11 @@ BOUNDARY_SETS = {
 }
 
 
-def random_state(seed: int, boundaries: Boundaries, shape=SHAPE, obstacle: bool = True) -> dict[str, np.ndarray]:
-    """Every array a fluid stage reads, float32 and padded, drawn from ``seed``.
+def random_state(
+    seed: int, boundaries: Boundaries, shape=SHAPE, obstacle: bool = True, solid: np.ndarray | None = None
+) -> dict[str, np.ndarray]:
+    """Every array a fluid stage reads, float32 and padded, drawn from ``seed``; ``solid`` (interior shape)
+    replaces the default obstacle (a small box, ``obstacle=True``).
 
     f (stored as f − w) is an equilibrium at a random velocity (|u| ≲ 0.05) plus 1e-3 noise; φ a diffuse sphere (width 4) with
     1e-2 noise, so a little outside [0, 1] as happens near interfaces; ε in [0.6, 1]; small pressure,
@@ -31,8 +34,7 @@ def random_state(seed: int, boundaries: Boundaries, shape=SHAPE, obstacle: bool 
     """
     rng = np.random.default_rng(seed)
     pshape = padded_shape(shape)
-    solid = None
-    if obstacle:
+    if solid is None and obstacle:
         solid = np.zeros(shape, bool)
         solid[2:4, 3, 4:6] = True
     flags, wall_u, _ = build_flags(shape, boundaries, solid)

@@ -255,3 +255,56 @@ def test_pressure_and_filter_match_reference_on_rows_wider_than_a_vector(cpu, ef
     np.testing.assert_allclose(sk["p"], sr["p"], rtol=0, atol=5e-7)
     np.testing.assert_allclose(sk["pbar"], sr["pbar"], rtol=0, atol=5e-7)
     assert np.abs(sk["p"] - p0).max() > 1e-5
+
+
+def _span_solid(shape=(6, 7, 40)) -> np.ndarray:
+    """Rows whose fluid is one span inside solid ends (as a round obstacle cuts them), none, one cell, two runs
+    around a solid middle, and a solid end on one side: the host stages loop over each masked row's fluid span
+    only (lbm_row_fluid_span), so these are its edge cases."""
+    solid = np.zeros(shape, bool)
+    solid[1, 2, :] = True  # no fluid at all
+    solid[2, 3, :15] = solid[2, 3, 30:] = True  # a span 15..29
+    solid[3, 4, :] = True
+    solid[3, 4, 20] = False  # one fluid cell
+    solid[4, 1, 10:30] = True  # two runs: the span covers the solid middle
+    solid[2, 5, :5] = True  # solid at one end only
+    solid[1, 5, 35:] = True  # ... and at the other
+    return solid
+
+
+@pytest.mark.parametrize("effects", ["single", "all"])
+@pytest.mark.parametrize("parity", [0, 1])
+def test_stages_on_rows_with_solid_ends_match_reference_and_keep_non_fluid_cells(cpu, effects, parity):
+    """Collide-stream, pressure update, filter and momentum on rows cut by solids (_span_solid), against the
+    reference (tolerances as above); every non-fluid cell's velocity, p, p-bar and momentum output comes back
+    exactly as it was given."""
+    ko, ro = KernelOps(cpu, **EFFECTS[effects]), ReferenceOps(**EFFECTS[effects])
+    sk = random_state(71 + parity, WIDE_X_WALLS, shape=(6, 7, 40), solid=_span_solid())
+    sr = {k: v.copy() for k, v in sk.items()}
+    fluid = sk["flags"] == 0
+    before = {k: sk[k].copy() for k in ("velocity", "p", "pbar")}
+    rng = np.random.default_rng(3)
+    out = {"k": rng.uniform(-1, 1, sk["velocity"].shape).astype(np.float32)}
+    out["r"] = out["k"].copy()
+    out0 = out["k"].copy()
+    for ops, s, o in ((ko, sk, out["k"]), (ro, sr, out["r"])):
+        ops.macro_pressure(
+            s["f"], s["flags"], s["velocity"], s["phi"], s["eps"], s["sand_v"], s["slip"], s["p"], parity, *PARAMS[:2]
+        )
+        ops.pressure_filter(s["p"], s["flags"], s["pbar"])
+        ops.collide_stream(
+            s["f"], s["flags"], s["velocity"], s["phi"], s["eps"], s["force"], s["pbar"], parity,
+            *PARAMS, *GRAVITY, chemical_potential=chem_of(ops, s),
+        )  # fmt: skip
+        ops.momentum(s["f"], s["flags"], s["velocity"], o, parity)
+    np.testing.assert_allclose(sk["p"], sr["p"], rtol=0, atol=5e-7)
+    np.testing.assert_allclose(sk["pbar"], sr["pbar"], rtol=0, atol=5e-7)
+    state = fluid | (sk["flags"] == 3)
+    np.testing.assert_allclose(sk["f"][:, state], sr["f"][:, state], rtol=0, atol=ATOL)
+    np.testing.assert_allclose(sk["velocity"], sr["velocity"], rtol=0, atol=ATOL)
+    np.testing.assert_allclose(out["k"], out["r"], rtol=0, atol=1e-6)
+    for key in ("p", "pbar"):
+        assert np.array_equal(sk[key][~fluid], before[key][~fluid]), key
+    assert np.array_equal(sk["velocity"][:, ~fluid], before["velocity"][:, ~fluid])
+    assert np.array_equal(out["k"][:, ~fluid], out0[:, ~fluid])
+    assert np.abs(sk["velocity"][:, fluid] - before["velocity"][:, fluid]).max() > 1e-3  # the fluid moved
