@@ -41,9 +41,10 @@ print(json.dumps({k: 1e3 * v["mean"] for k, v in rep.items()}))
 """
 
 
-def _checkout(rev: str | None, tmp: Path) -> Path:
+def _checkout(rev: str | None, tmp: Path, links: list[Path]) -> Path:
     """A checkout of ``rev`` (None: the working tree itself), with the package's two top-level folders
-    reachable as couplekit.kernels and couplekit.schedulers (as the editable install maps them)."""
+    reachable as couplekit.kernels and couplekit.schedulers (as the editable install maps them); the links it
+    makes are appended to ``links``, for the caller to remove (the working tree keeps none)."""
     if rev is None:
         path = ROOT
     else:
@@ -51,8 +52,9 @@ def _checkout(rev: str | None, tmp: Path) -> Path:
         subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "-q", "--detach", str(path), rev], check=True)
     for name in ("kernels", "schedulers"):
         link = path / "couplekit" / name
-        if not link.exists():
+        if not link.exists() and not link.is_symlink():
             link.symlink_to(Path("..") / name)
+            links.append(link)
     return path
 
 
@@ -85,11 +87,11 @@ def main() -> None:
         parser.error(f"no scene file {scene}")
 
     with tempfile.TemporaryDirectory(prefix="couplekit-compare-") as tmp:
-        made = []
+        made, links = [], []
         try:
             paths = {}
             for label, rev in (("old", args.old), ("new", args.new)):
-                paths[label] = _checkout(rev, Path(tmp))
+                paths[label] = _checkout(rev, Path(tmp), links)
                 if rev is not None:
                     made.append(paths[label])
             best: dict[str, dict[str, float]] = {"old": {}, "new": {}}
@@ -101,6 +103,8 @@ def main() -> None:
                         best[label][k] = min(best[label].get(k, float("inf")), v)
                     print(f"repeat {r + 1}/{args.repeats} {label}: {ms['total']:.1f} ms/step", flush=True)
         finally:
+            for link in links:
+                link.unlink(missing_ok=True)
             for p in made:
                 subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(p)], check=False)
 
