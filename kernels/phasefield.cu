@@ -312,6 +312,42 @@ static inline __attribute__((always_inline)) bool pf_bulk_row(const unsigned cha
         for (int q = 3; q < 7; ++q) bulk = bulk && lbm_row_fluid(flags, row + off[q], 2, nx - 1);
     return bulk;
 }
+
+// Host: whether the odd step of cell X (2 .. nx - 1) of padded row `row` may take the bulk run's loop: the cell
+// and its six neighbours (x +- 1 in the row, the four y / z rows by pf_bulk_row's offsets `off`) are FLUID, so
+// none of its links meets a boundary.  A bulk row's cells 2 .. nx - 1 all are.
+static inline bool pf_odd_run_cell(const unsigned char* RESTRICT flags, const long long row, const int X,
+                                   const int nx, const long long off[7]) {
+    if (X < 2 || X > nx - 1) return false;
+    const long long c = row + X;
+    unsigned int any = flags[c] | flags[c - 1] | flags[c + 1];
+    for (int q = 3; q < 7; ++q) any |= flags[c + off[q]];
+    return any == 0;  // FLAG_FLUID == 0
+}
+#endif
+
+#if !CK_ON_GPU
+// Host: phi = sum_k h_k of the cells X = xa .. xb of padded row `row` whose links all meet fluid (a bulk run:
+// pf_bulk_row, pf_odd_run_cell), by one `omp simd` loop with the row's constant neighbour offsets `off`; the
+// same sums in the same order as pf_macro_cell.
+template <int ODD>
+static inline __attribute__((always_inline)) void pf_macro_run(const ck_store_t* RESTRICT h, float* RESTRICT phi,
+                                                              const long long row, const int xa, const int xb,
+                                                              const long long ncell, const long long off[7]) {
+    const long long o1 = off[1], o2 = off[2], o3 = off[3], o4 = off[4], o5 = off[5], o6 = off[6];
+    CK_PRAGMA(omp simd)
+    for (int X = xa; X <= xb; ++X) {
+        const long long c = row + X;
+        const float f0 = PF_LD(h, 0, c);
+        const float f1 = ODD ? PF_LD(h, 1, 2 * ncell + c + o2) : PF_LD(h, 1, ncell + c);
+        const float f2 = ODD ? PF_LD(h, 2, ncell + c + o1) : PF_LD(h, 2, 2 * ncell + c);
+        const float f3 = ODD ? PF_LD(h, 3, 4 * ncell + c + o4) : PF_LD(h, 3, 3 * ncell + c);
+        const float f4 = ODD ? PF_LD(h, 4, 3 * ncell + c + o3) : PF_LD(h, 4, 4 * ncell + c);
+        const float f5 = ODD ? PF_LD(h, 5, 6 * ncell + c + o6) : PF_LD(h, 5, 5 * ncell + c);
+        const float f6 = ODD ? PF_LD(h, 6, 5 * ncell + c + o5) : PF_LD(h, 6, 6 * ncell + c);
+        phi[c] = (float)((double)f0 + (double)f1 + (double)f2 + (double)f3 + (double)f4 + (double)f5 + (double)f6);
+    }
+}
 #endif
 
 // phi = sum_k h_k (Eq. 47) at parity t, on every padded cell.  A ghost cell takes the value of its image
@@ -371,21 +407,24 @@ KERNEL void phase_macroscopic(const long long n,
                 pf_macro_cell(nx + 1, Y, Z, h, phi, u, flags, nx, ny, nz, px, py, pz, parity, ncell);        \
                 continue;                                                                                    \
             }                                                                                                \
-            const int xa = bulk ? (ODD ? 2 : 1) : nx + 1, xb = bulk ? (ODD ? nx - 1 : nx) : nx;               \
-            const long long o1 = off[1], o2 = off[2], o3 = off[3], o4 = off[4], o5 = off[5], o6 = off[6];     \
-            CK_PRAGMA(omp simd)                                                                              \
-            for (int X = xa; X <= xb; ++X) {                                                                 \
-                const long long c = row + X;                                                                 \
-                const float f0 = PF_LD(h, 0, c);                                                             \
-                const float f1 = ODD ? PF_LD(h, 1, 2 * ncell + c + o2) : PF_LD(h, 1, ncell + c);             \
-                const float f2 = ODD ? PF_LD(h, 2, ncell + c + o1) : PF_LD(h, 2, 2 * ncell + c);             \
-                const float f3 = ODD ? PF_LD(h, 3, 4 * ncell + c + o4) : PF_LD(h, 3, 3 * ncell + c);         \
-                const float f4 = ODD ? PF_LD(h, 4, 3 * ncell + c + o3) : PF_LD(h, 4, 4 * ncell + c);         \
-                const float f5 = ODD ? PF_LD(h, 5, 6 * ncell + c + o6) : PF_LD(h, 5, 5 * ncell + c);         \
-                const float f6 = ODD ? PF_LD(h, 6, 5 * ncell + c + o5) : PF_LD(h, 6, 6 * ncell + c);         \
-                phi[c] = (float)((double)f0 + (double)f1 + (double)f2 + (double)f3 + (double)f4 + (double)f5 + \
-                                 (double)f6);                                                                \
+            if (ODD && !bulk) {                                                                              \
+                /* odd step, a row with non-fluid cells: the runs of cells whose six neighbours are fluid     */ \
+                /* (pf_odd_run_cell) by the bulk run's vector loop, every other cell by pf_macro_cell         */ \
+                for (int xs = 0; xs <= nx + 1;) {                                                            \
+                    if (!pf_odd_run_cell(flags, row, xs, nx, off)) {                                         \
+                        pf_macro_cell(xs, Y, Z, h, phi, u, flags, nx, ny, nz, px, py, pz, parity, ncell);    \
+                        ++xs;                                                                                \
+                        continue;                                                                            \
+                    }                                                                                        \
+                    int xe = xs;                                                                             \
+                    while (pf_odd_run_cell(flags, row, xe + 1, nx, off)) ++xe;                               \
+                    pf_macro_run<ODD>(h, phi, row, xs, xe, ncell, off);                                      \
+                    xs = xe + 1;                                                                             \
+                }                                                                                            \
+                continue;                                                                                    \
             }                                                                                                \
+            const int xa = bulk ? (ODD ? 2 : 1) : nx + 1, xb = bulk ? (ODD ? nx - 1 : nx) : nx;               \
+            pf_macro_run<ODD>(h, phi, row, xa, xb, ncell, off);                                              \
             for (int X = 0; X <= nx + 1; ++X)                                                                \
                 if (X < xa || X > xb) pf_macro_cell(X, Y, Z, h, phi, u, flags, nx, ny, nz, px, py, pz, parity, ncell); \
         }
@@ -788,8 +827,11 @@ KERNEL void phase_collide_stream(const long long n, ck_store_t* RESTRICT h /* si
                 const bool bulk9 = lbm_rows_all_fluid(flags, row, 0, nx + 1, (int)sy, sz);
                 unsigned int masks[PF_ROW_CHUNK], scratch[9 * (PF_ROW_CHUNK + 2)];
                 float gbx[PF_ROW_CHUNK], gby[PF_ROW_CHUNK], gbz[PF_ROW_CHUNK];
-                for (int x0 = 1; x0 <= nx; x0 += PF_ROW_CHUNK) {
-                    const int len = nx + 1 - x0 < PF_ROW_CHUNK ? nx + 1 - x0 : PF_ROW_CHUNK;
+                // a masked row from its first to its last fluid cell (the others are left as they are)
+                int lo = 1, hi = nx;
+                if (!bulk9) lbm_row_fluid_span(flags, row, nx, lo, hi);
+                for (int x0 = lo; x0 <= hi; x0 += PF_ROW_CHUNK) {
+                    const int len = hi + 1 - x0 < PF_ROW_CHUNK ? hi + 1 - x0 : PF_ROW_CHUNK;
                     const long long c0 = row + x0;
                     if (bulk9) {
                         pf_gradient_chunk<PF_NB_BULK>(c0, len, phi, flags, sy, sz, masks, gbx, gby, gbz);
@@ -848,18 +890,37 @@ KERNEL void phase_collide_stream(const long long n, ck_store_t* RESTRICT h /* si
                 const bool bulk9 = bulk && lbm_rows_all_fluid(flags, row, 0, nx + 1, (int)sy, sz);
                 unsigned int masks[PF_ROW_CHUNK], scratch[9 * (PF_ROW_CHUNK + 2)];
                 float gbx[PF_ROW_CHUNK], gby[PF_ROW_CHUNK], gbz[PF_ROW_CHUNK];
-                for (int x0 = 1; x0 <= nx; x0 += PF_ROW_CHUNK) {
-                    const int len = nx + 1 - x0 < PF_ROW_CHUNK ? nx + 1 - x0 : PF_ROW_CHUNK;
+                // a row with non-fluid cells: from its first to its last fluid cell only (PF_ODD_CELL does
+                // nothing in the others), and within that span the runs of cells whose six neighbours are fluid
+                // (no link meets a boundary) by the bulk run's vector loop, the others per cell
+                int lo = 1, hi = nx;
+                if (!bulk) lbm_row_fluid_span(flags, row, nx, lo, hi);
+                for (int x0 = lo; x0 <= hi; x0 += PF_ROW_CHUNK) {
+                    const int len = hi + 1 - x0 < PF_ROW_CHUNK ? hi + 1 - x0 : PF_ROW_CHUNK;
                     if (bulk9) {
                         pf_gradient_chunk<PF_NB_BULK>(row + x0, len, phi, flags, sy, sz, masks, gbx, gby, gbz);
                     } else {
                         pf_fluid_masks(flags, row + x0, len, sy, sz, masks, scratch);
                         pf_gradient_chunk<PF_NB_MASK>(row + x0, len, phi, flags, sy, sz, masks, gbx, gby, gbz);
                     }
-                    const int ra = xa > x0 ? xa : x0, rb = xb < x0 + len - 1 ? xb : x0 + len - 1;
-                    if (ra <= rb) PF_ODD_RUN(ra, rb, PF_GRAD_BUF(X - x0))
-                    for (int X = x0; X < x0 + len; ++X)
-                        if (X < xa || X > xb) PF_ODD_CELL(X, Y, Z, PF_GRAD_BUF(X - x0))
+                    if (bulk) {
+                        const int ra = xa > x0 ? xa : x0, rb = xb < x0 + len - 1 ? xb : x0 + len - 1;
+                        if (ra <= rb) PF_ODD_RUN(ra, rb, PF_GRAD_BUF(X - x0))
+                        for (int X = x0; X < x0 + len; ++X)
+                            if (X < xa || X > xb) PF_ODD_CELL(X, Y, Z, PF_GRAD_BUF(X - x0))
+                        continue;
+                    }
+                    for (int xs = x0; xs < x0 + len;) {
+                        if (!pf_odd_run_cell(flags, row, xs, nx, off)) {
+                            PF_ODD_CELL(xs, Y, Z, PF_GRAD_BUF(xs - x0))
+                            ++xs;
+                            continue;
+                        }
+                        int xe = xs;
+                        while (xe + 1 < x0 + len && pf_odd_run_cell(flags, row, xe + 1, nx, off)) ++xe;
+                        PF_ODD_RUN(xs, xe, PF_GRAD_BUF(X - x0))
+                        xs = xe + 1;
+                    }
                 }
             }
 #undef PF_ODD_RUN
