@@ -82,13 +82,19 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     only (its memory) is noted with ``run``'s message, exit 0: the same file validates alike on every host."""
     from .assembly import CouplingUnavailableError, check_odd_ramp_gaps, check_run, stability_cautions
     from .scene import Scene, SceneError
-    from .simulation import InsufficientMemoryError, _gib
+    from .simulation import InsufficientMemoryError, _gib, parse_setting, with_settings
+    from .sweep.keys import KeyPathError
 
     any_machine = 2.0**44  # 16 TiB: more than the memory of any single host or device couplekit runs on
     try:
         scene = Scene.load(args.scene)
+        if args.set:
+            scene = with_settings(scene, dict(parse_setting(s) for s in args.set))
     except SceneError as exc:
         print(exc, file=sys.stderr)
+        return 2
+    except (KeyPathError, ValueError) as exc:  # --set: an unknown key, or not KEY=VALUE
+        print(f"error: --set: {exc}", file=sys.stderr)
         return 2
     est, note = None, None
     try:
@@ -343,6 +349,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     validate = sub.add_parser("validate", help="check a scene file (names every bad key and the fix)")
     validate.add_argument("scene", help="scene file (TOML)")
+    validate.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="check the scene with this key changed, as `run --set` would run it (repeatable)",
+    )
     validate.set_defaults(func=_cmd_validate)
 
     bench = sub.add_parser(

@@ -93,6 +93,10 @@ EXAMPLES: dict[str, list[tuple[str, str]]] = {
     "validate": [
         ("couplekit validate examples/fig06_raindrop_small.toml", "valid: a summary, expected Mach, memory"),
         ("couplekit validate my_scene.toml || echo refused", "exit 2 lists every problem with its fix"),
+        (
+            "couplekit validate examples/fig13_sand_drop_beaker.toml --set fluid.storage=fp16",
+            "memory with fp16 storage",
+        ),
     ],
     "run": [
         ("couplekit run examples/sand_drop_small.toml", "run time.frames frames into runs/sand_drop_small"),

@@ -118,6 +118,16 @@ def test_run_set_cannot_change_a_resumed_run(tmp_path, capsys):
     assert "--set cannot change a resumed run" in capsys.readouterr().err
 
 
+def test_validate_set_checks_the_changed_scene(tmp_path, capsys):
+    """validate --set: the scene as run --set would run it (a bad value refused with its key, exit 2)."""
+    scene = str(_scene(tmp_path))
+    assert main(["validate", scene, "--set", "sand.particles_per_cell=27"]) == 0
+    assert main(["validate", scene, "--set", "sand.density=-3"]) == 2
+    assert "sand.density" in capsys.readouterr().err
+    assert main(["validate", scene, "--set", "sand.densty=3"]) == 2
+    assert "did you mean 'density'" in capsys.readouterr().err
+
+
 def test_parse_setting_reads_toml_values_and_bare_words():
     from couplekit.simulation import parse_setting
 
