@@ -354,7 +354,7 @@ def build_parser() -> argparse.ArgumentParser:
         action="append",
         default=[],
         metavar="KEY=VALUE",
-        help="check the scene with this key changed, as `run --set` would run it (repeatable)",
+        help="check the scene with this key changed, as run --set would run it (repeatable)",
     )
     validate.set_defaults(func=_cmd_validate)
 
