@@ -267,8 +267,10 @@ def odd_ramp_applies(scene: Scene) -> bool:
 
 
 def stability_cautions(scene: Scene) -> list[str]:
-    """Set-ups a scene may ask for that were measured to diverge, one line each (empty when none): printed by
-    ``couplekit validate`` and logged when a run starts. Not refusals: the paper's own collision is one.
+    """Set-ups a scene may ask for that were measured to diverge, or lie beyond what was measured, one line each
+    (empty when none): printed by ``couplekit validate`` and logged when a run starts. Not refusals: the paper's
+    own collision is one. Besides :func:`_input_cautions` (a density ratio beyond the measured one, a liquid let
+    into a box with no outflow):
 
     * The odd-moment rate floor off (``fluid.odd_lambda = 0``, or too small to act) where the fluid's lowest
       lattice viscosity is below ``FluidParams.odd_nu_max`` (5e-4) and there are no-slip edges (walls on two
@@ -279,16 +281,17 @@ def stability_cautions(scene: Scene) -> list[str]:
     fl = scene.fluid
     if fl is None:
         return []
+    out = _input_cautions(scene)
     prm = fluid_params(scene, scene.units())
     two = fl.phases == 2
     nu_ref = prm.odd_reference_viscosity(two)
     if prm.odd_floor_acts(two) or nu_ref >= prm.odd_nu_max:
-        return []
+        return out
     wall_axes = {face[0] for face, kind in scene.domain.boundary.items() if kind in ("wall", "inflow")}
     obstacles = any(b.kind == "obstacle" for b in scene.bodies)
     outlets = any(i.shape != "face" for i in scene.inflows)
     if len(wall_axes) < 2 and not obstacles and not outlets:
-        return []
+        return out
     where = "walls on two axes" if len(wall_axes) >= 2 else ("an obstacle" if obstacles else "an outlet in a wall")
     steps = scene.time.frames * scene.time.steps_per_frame
     floor = (
@@ -296,13 +299,38 @@ def stability_cautions(scene: Scene) -> list[str]:
         if fl.odd_lambda == 0
         else f"fluid.odd_lambda = {fl.odd_lambda:g} (too small to act here)"
     )
-    return [
+    return out + [
         f"{floor} at lattice viscosity {nu_ref:g} (< {prm.odd_nu_max:g}) with no-slip edges ({where}): the paper's "
         f"collision is linearly unstable at bounce-back edges and corners at this viscosity (it grows by a factor e about "
         f"every 150 steps at 1e-4; a still tank diverged near step 2500; this scene runs {steps:,} steps); "
         "keep fluid.odd_lambda = 0.015 with fluid.smagorinsky = 0.1 (the scene defaults) unless you mean to run "
         "the paper's collision (docs/fluid-stability.md)"
     ]
+
+
+MEASURED_DENSITY_RATIO = 1000.0
+"""The largest density ratio the two-phase validations ran at (the static drop of
+tests/fluid/test_two_phase_validation.py, 1000:1; the paper's scenes are 800:1)."""
+
+
+def _input_cautions(scene: Scene) -> list[str]:
+    """Cautions about what a scene asks of the fluid beyond what was measured or what can have a steady state:
+    a density ratio beyond :data:`MEASURED_DENSITY_RATIO`; a single-phase fluid let in through an inflow with no
+    outflow face (the liquid has nowhere to go: its pressure rises for as long as the inflow runs)."""
+    fl, out = scene.fluid, []
+    if fl.phases == 2 and fl.water_density / fl.air_density > MEASURED_DENSITY_RATIO:
+        out.append(
+            f"fluid.water_density / fluid.air_density = {fl.water_density / fl.air_density:.3g} is beyond the "
+            f"{MEASURED_DENSITY_RATIO:g}:1 the two-phase validations ran at (the paper's scenes: 800:1): the "
+            "interface may not hold; check it on a small variant first"
+        )
+    if fl.phases == 1 and scene.inflows and "outflow" not in scene.domain.boundary.values():
+        out.append(
+            "a single-phase fluid enters through inflows[0] but no face is an outflow: the liquid has nowhere to "
+            "go, so its pressure and density rise for as long as the inflow runs (weakly compressible LBM); make "
+            'a face an outflow (domain.boundary.<face> = "outflow") unless the run is short'
+        )
+    return out
 
 
 def fluid_boundaries(scene: Scene, units: Units):

@@ -36,6 +36,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from pathlib import Path
 
 from . import __version__
 from .backend import BackendUnavailableError, KernelBuildError, cuda_status, get_backend, host_tools
@@ -89,12 +90,15 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     try:
         scene = Scene.load(args.scene)
         if args.set:
-            scene = with_settings(scene, dict(parse_setting(s) for s in args.set))
+            scene = with_settings(scene, dict(parse_setting(s) for s in args.set), base_dir=Path(args.scene).parent)
     except SceneError as exc:
         print(exc, file=sys.stderr)
         return 2
-    except (KeyPathError, ValueError) as exc:  # --set: an unknown key, or not KEY=VALUE
+    except KeyPathError as exc:  # --set: an unknown key
         print(f"error: --set: {exc}", file=sys.stderr)
+        return 2
+    except ValueError as exc:  # --set: not KEY=VALUE (parse_setting's message names the option)
+        print(f"error: {exc}", file=sys.stderr)
         return 2
     est, note = None, None
     try:
@@ -187,7 +191,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
             if args.resume:
                 print("error: --set cannot change a resumed run (the checkpoint keeps its scene)", file=sys.stderr)
                 return 2
-            scene = with_settings(scene, dict(parse_setting(s) for s in args.set))
+            scene = with_settings(scene, dict(parse_setting(s) for s in args.set), base_dir=Path(args.scene).parent)
         # the output folder before anything is allocated: a used one is refused unless resumed or overwritten
         out = prepare_output(
             args.out or scene.outputs.directory or default_output(scene.name),
@@ -216,12 +220,24 @@ def _cmd_run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         print("interrupted before the run started; nothing to save", file=sys.stderr)
         return 130
-    result = sim.run(frames=args.frames, out=out, progress=not args.no_progress)
+    try:
+        result = sim.run(frames=args.frames, out=out, progress=not args.no_progress)
+    except OutputFolderError as exc:  # e.g. --resume into another run's folder (Simulation.run checks the scene)
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # a full disk, a folder removed during the run: what was written stays
+        print(
+            f"error: writing the run's outputs into {out} failed ({exc.strerror or exc}); the frames and checkpoints "
+            "written before are kept; free space or choose another --out, then --resume from the last checkpoint",
+            file=sys.stderr,
+        )
+        return 2
     if result.status == "interrupted":
         print(f"interrupted: checkpoint {result['checkpoint']}; continue with --resume {result['checkpoint']}")
         return 130
     if result.status == "diverged":
-        print(f"diverged: {result['error']}; last good state in {result['checkpoint']}", file=sys.stderr)
+        kept = f"last good state in {result['checkpoint']}" if result["checkpoint"] else "no good state to keep"
+        print(f"diverged: {result['error']}; {kept}", file=sys.stderr)
         return 1
     print(f"done: {result['frames']} frames in {result['out']} (checkpoint {result['checkpoint']})")
     return 0

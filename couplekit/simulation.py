@@ -93,21 +93,26 @@ def parse_setting(text: str) -> tuple[str, Any]:
         return key, tomllib.loads(f"v = {value}")["v"]
     except tomllib.TOMLDecodeError:
         return key, value
+    except RecursionError:  # nested beyond the parser's stack (thousands of brackets)
+        raise ValueError(f"--set {key}: the value is nested too deeply to be a scene value") from None
 
 
-def with_settings(scene: Scene, settings: Mapping[str, Any]) -> Scene:
+def with_settings(scene: Scene, settings: Mapping[str, Any], base_dir: str | Path = ".") -> Scene:
     """``scene`` with the dotted keys of ``settings`` (``{"outputs.preview": False, "bodies[1].density": 900}``,
-    the keys of a sweep: docs/sweeps.md) set, and validated again. A key the scene format does not have raises
-    :class:`~couplekit.sweep.KeyPathError` (a ValueError) naming the nearest key; a value it refuses raises
-    :class:`~couplekit.scene.SceneError`."""
+    the keys of a sweep: docs/sweeps.md) set, and validated again; a relative mesh or height file among the
+    values resolves against ``base_dir`` (``couplekit run --set`` gives the scene file's folder). A key the
+    scene format does not have raises :class:`~couplekit.sweep.KeyPathError` (a ValueError) naming the nearest
+    key; a value it refuses raises :class:`~couplekit.scene.SceneError`."""
     from .sweep.keys import check_key, set_key
 
+    if not isinstance(settings, Mapping):
+        raise TypeError(f"settings must be a mapping of dotted keys to values, got {type(settings).__name__}")
     data = scene.to_dict()
     for key, value in settings.items():
         check_key(key, data)
         set_key(data, key, value)
     shown = ", ".join(f"{k} = {v!r}" for k, v in settings.items())
-    return Scene.from_dict(data, source_name=f"scene {scene.name!r} with {shown}")
+    return Scene.from_dict(data, base_dir=base_dir, source_name=f"scene {scene.name!r} with {shown}")
 
 
 class InsufficientMemoryError(MemoryError):
@@ -735,15 +740,22 @@ class Simulation:
         outputs is refused unless this run resumes from a checkpoint (it appends) or ``overwrite`` deletes them.
         """
         from .io import DiagnosticsLog, PvdIndex
-        from .io.outputs import default_output, prepare_output
+        from .io.outputs import default_output, prepare_output, write_run_marker
         from .io.progress import ProgressBar
 
         sc = self.scene
         total = int(frames if frames is not None else sc.time.frames)
+        if total < 1:
+            raise ValueError(f"frames must be 1 or more, got {frames!r}")
         resumed = self.step_count > 0 or self._resumed
+        scene_dict = sc.to_dict()
         out = prepare_output(
-            out or sc.outputs.directory or default_output(sc.name), resume=resumed, overwrite=overwrite
+            out or sc.outputs.directory or default_output(sc.name),
+            resume=resumed,
+            overwrite=overwrite,
+            scene=scene_dict,
         )
+        write_run_marker(out, scene_dict)
         indexes = {"fields": PvdIndex(out / "fields.pvd"), "particles": PvdIndex(out / "particles.pvd")}
         log_file = DiagnosticsLog(out / "diagnostics.jsonl", append=resumed) if sc.outputs.diagnostics else None
         self._log(f"effects on: {', '.join(k for k, v in self.effects.items() if v)}")
@@ -761,7 +773,17 @@ class Simulation:
         steps_done = 0
         chunk = max(1, min(self.steps_per_frame, 10))
         try:
-            self.check_finite()  # a state from a checkpoint too: the last good state must be a checked one
+            try:
+                self.check_finite()  # a state from a checkpoint too: the last good state must be a checked one
+            except SimulationDiverged as exc:  # nothing good to keep: the scene's numbers overflow float32, say
+                report = (
+                    f"{exc}\nthe initial state is not finite, so nothing was run: a scene value too large or too "
+                    "small for float32 arithmetic (a density, size or time step), or a damaged checkpoint\n"
+                )
+                (out / "diverged.txt").write_text(report)
+                self._log(report.strip())
+                result.update(status="diverged", checkpoint=None, error=str(exc))
+                return result
             if self.step_count == 0:
                 self.write_frame(out, indexes, log_file)
             good, good_step = self._states(), self.step_count

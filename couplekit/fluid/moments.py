@@ -118,6 +118,10 @@ def from_central(kappa: np.ndarray, u: np.ndarray) -> np.ndarray:
     inv = []
     for d in range(3):
         a = np.moveaxis(axis_matrices(u[d]), (0, 1), (-2, -1))  # (..., 3, 3)
-        inv.append(np.moveaxis(np.linalg.inv(a), (-2, -1), (0, 1)))  # (3 velocities, 3 orders, ...)
+        try:
+            ainv = np.linalg.inv(a)
+        except np.linalg.LinAlgError:  # a non-finite velocity (a diverged state): NaN populations, which the
+            ainv = np.full_like(a, np.nan)  # divergence check then reports, instead of a traceback mid-step
+        inv.append(np.moveaxis(ainv, (-2, -1), (0, 1)))  # (3 velocities, 3 orders, ...)
     cube = np.einsum("ia...,jb...,kc...,abc...->ijk...", inv[0], inv[1], inv[2], kappa.reshape((3, 3, 3) + shape))
     return cube.reshape((27,) + shape)[CUBE_INDEX]

@@ -81,22 +81,28 @@ def save_checkpoint(
     """Write ``states`` ({solver: {name: array}}), the scene dict and ``meta`` to ``path`` atomically."""
     import h5py
 
-    path = Path(path)
+    path = Path(path).expanduser()
+    if path.is_dir():
+        raise CheckpointError(f"{path} is a folder: give the checkpoint a file name, e.g. {path / 'state.h5'}")
     tmp = path.with_name(path.name + ".tmp")
     scene_text, meta_text = json.dumps(scene), json.dumps(dict(meta))
-    with h5py.File(tmp, "w") as f:
-        f.attrs["format"] = FORMAT
-        f.attrs["version"] = VERSION
-        f.attrs["scene"] = scene_text
-        f.attrs["meta"] = meta_text
-        f.attrs["checksum"] = _text_checksum(scene_text, meta_text)
-        for solver, state in states.items():
-            g = f.create_group(solver)
-            for name, arr in state.items():
-                a = np.asarray(arr)
-                ds = g.create_dataset(name, data=a)
-                ds.attrs["sha256"] = dataset_checksum(a)
-    os.replace(tmp, path)
+    try:
+        with h5py.File(tmp, "w") as f:
+            f.attrs["format"] = FORMAT
+            f.attrs["version"] = VERSION
+            f.attrs["scene"] = scene_text
+            f.attrs["meta"] = meta_text
+            f.attrs["checksum"] = _text_checksum(scene_text, meta_text)
+            for solver, state in states.items():
+                g = f.create_group(solver)
+                for name, arr in state.items():
+                    a = np.asarray(arr)
+                    ds = g.create_dataset(name, data=a)
+                    ds.attrs["sha256"] = dataset_checksum(a)
+        os.replace(tmp, path)
+    except BaseException:  # a full disk, Ctrl-C: no half-written file is left, and the previous checkpoint stays
+        tmp.unlink(missing_ok=True)
+        raise
     return path
 
 

@@ -9,9 +9,23 @@ files are left alone).
 
 from __future__ import annotations
 
+import hashlib
+import json
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
-__all__ = ["OutputFolderError", "prepare_output", "run_files", "RUN_FILES", "RUN_PATTERNS", "default_output"]
+__all__ = [
+    "OutputFolderError",
+    "prepare_output",
+    "run_files",
+    "RUN_FILES",
+    "RUN_PATTERNS",
+    "RUN_MARKER",
+    "default_output",
+    "scene_fingerprint",
+    "write_run_marker",
+]
 
 RUN_FILES = (
     "diagnostics.jsonl",
@@ -35,7 +49,12 @@ RUN_PATTERNS = (
     "surface_*.vtp",
     "preview_*.png",
 )
-"""The per-frame files a run writes."""
+"""The per-frame files a run writes: the pattern's ``*`` is the frame number, digits only (``surface_0007.obj``;
+``surface_scan.obj``, a user's mesh beside the run, is not one)."""
+
+RUN_MARKER = ".couplekit-run.json"
+"""Written into the output folder when a run starts: the scene's name and fingerprint, so that a resumed run
+can tell its own folder from another run's (:func:`prepare_output`)."""
 
 
 class OutputFolderError(ValueError):
@@ -59,10 +78,50 @@ def run_files(out: str | Path) -> list[Path]:
     out = Path(out)
     if not out.is_dir():
         return []
-    found = [out / n for n in RUN_FILES if (out / n).is_file()]
+    found = [out / n for n in RUN_FILES + (RUN_MARKER,) if (out / n).is_file()]
     for pattern in RUN_PATTERNS:
-        found += sorted(p for p in out.glob(pattern) if p.is_file())
+        head, _, tail = pattern.partition("*")
+        found += sorted(
+            p for p in out.glob(pattern) if p.is_file() and p.name[len(head) : len(p.name) - len(tail)].isdigit()
+        )
     return found
+
+
+def scene_fingerprint(scene: Mapping[str, Any]) -> str:
+    """A short hash of a scene dict (``Scene.to_dict()``): equal for the same scene, run or resumed."""
+    text = json.dumps(scene, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def write_run_marker(out: str | Path, scene: Mapping[str, Any]) -> None:
+    """Record in ``out`` which scene its run files belong to (:data:`RUN_MARKER`)."""
+    name = scene.get("scene", {}).get("name") if isinstance(scene.get("scene"), Mapping) else None
+    marker = {"scene": name, "fingerprint": scene_fingerprint(scene)}
+    (Path(out) / RUN_MARKER).write_text(json.dumps(marker) + "\n")
+
+
+def _folder_run(out: Path) -> tuple[str | None, str | None]:
+    """(scene name, fingerprint) of the run whose files are in ``out``: from its marker, else from the scene
+    stored in its checkpoint (runs written before the marker existed); (None, None) when neither tells."""
+    try:
+        marker = json.loads((out / RUN_MARKER).read_text())
+        return marker.get("scene"), marker.get("fingerprint")
+    except (OSError, ValueError, AttributeError):
+        pass
+    for name in ("checkpoint.h5", "interrupted.h5", "last_good.h5"):
+        path = out / name
+        if not path.is_file():
+            continue
+        try:
+            import h5py
+
+            with h5py.File(path, "r") as f:
+                text = f.attrs["scene"]
+            scene = json.loads(text.decode() if isinstance(text, bytes) else str(text))
+            return scene.get("scene", {}).get("name"), scene_fingerprint(scene)
+        except Exception:  # a damaged or foreign file: it tells nothing
+            continue
+    return None, None
 
 
 def _describe(files: list[Path]) -> str:
@@ -74,14 +133,19 @@ def _describe(files: list[Path]) -> str:
     return ", ".join(parts) or f"{len(files)} files"
 
 
-def prepare_output(out: str | Path, *, resume: bool = False, overwrite: bool = False) -> Path:
-    """Create and check the output folder ``out`` before a run (module docstring); returns it.
+def prepare_output(
+    out: str | Path, *, resume: bool = False, overwrite: bool = False, scene: Mapping[str, Any] | None = None
+) -> Path:
+    """Create and check the output folder ``out`` before a run (module docstring); returns it. A leading ``~``
+    is the home folder, as in a shell.
 
     ``resume``: the run continues from a checkpoint, so an earlier run's files in the folder are its own (new
-    frames are appended). ``overwrite``: delete an earlier run's files first. Raises
-    :class:`OutputFolderError` when a path component is a file, the folder cannot be created or written, or
-    it holds an earlier run's outputs without ``resume`` or ``overwrite``."""
-    out = Path(out)
+    frames are appended); with the run's ``scene`` (``Scene.to_dict()``) given, a folder whose files belong to
+    another scene is refused (resuming there would mix two runs' frames). ``overwrite``: delete an earlier
+    run's files first. Raises :class:`OutputFolderError` when a path component is a file, the folder cannot be
+    created or written, or it holds an earlier run's outputs without ``resume`` or ``overwrite``, or another
+    scene's outputs with ``resume``."""
+    out = Path(out).expanduser()
     for parent in reversed(out.parents):
         if parent.exists() and not parent.is_dir():
             raise OutputFolderError(f"output folder {out}: {parent} is a file, not a folder; choose another --out")
@@ -102,6 +166,15 @@ def prepare_output(out: str | Path, *, resume: bool = False, overwrite: bool = F
             f"cannot write into the output folder {out}: {exc.strerror}; choose another --out"
         ) from None
     earlier = run_files(out)
+    if earlier and resume and scene is not None:
+        name, fingerprint = _folder_run(out)
+        if fingerprint is not None and fingerprint != scene_fingerprint(scene):
+            this = scene.get("scene", {}).get("name") if isinstance(scene.get("scene"), Mapping) else None
+            raise OutputFolderError(
+                f"output folder {out} holds the outputs of another run (scene {name!r}) than the one resumed "
+                f"(scene {this!r}): resuming there would mix the two runs' frames; resume into the run's own "
+                "folder, or write elsewhere with --out DIR"
+            )
     if earlier and not resume:
         if not overwrite:
             ckpt = next((p for p in earlier if p.name in ("interrupted.h5", "checkpoint.h5")), None)

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -305,6 +306,18 @@ def _png_path(out: str | Path, default_name: str) -> Path:
     return out / default_name
 
 
+def _save_png(fig, path: Path) -> None:
+    """``fig`` as the PNG ``path``, written to a temporary file first: a full disk leaves no truncated image."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".tmp.png")
+    try:
+        fig.savefig(tmp, dpi=100)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
 def plot_run(run_dir: str | Path, out: str | Path | None = None) -> list[Path]:
     """Draw the diagnostics of the run in ``run_dir`` into ``summary.png`` (in ``out``: a folder, default the
     run folder, or a ``.png`` path). Returns the PNG files written. Panels: :data:`PANELS` that the run logged,
@@ -325,7 +338,7 @@ def plot_run(run_dir: str | Path, out: str | Path | None = None) -> list[Path]:
     if costs:
         _stage_panel_single(axes[-1], run)
     path = _png_path(out if out is not None else run.folder, "summary.png")
-    fig.savefig(path, dpi=100)
+    _save_png(fig, path)
     return [path]
 
 
@@ -369,7 +382,7 @@ def compare_runs(run_dirs: Sequence[str | Path], out: str | Path, labels: Sequen
                 ax.plot(t, v, color=f"C{j % 10}", marker=".", ms=3, label=lab)
         _style(ax, "Cost per time step (all stages)", "ms per step")
     main = _png_path(out, "compare.png")
-    fig.savefig(main, dpi=100)
+    _save_png(fig, main)
     written = [main]
     if any(r.stage_names() for r in runs):
         stages_path = (
@@ -417,5 +430,5 @@ def _stage_bars(runs: Sequence[RunLog], labels: Sequence[str], path: Path) -> Pa
     ax.set_title("Stage costs" + (f" (no stage costs logged: {', '.join(without)})" if without else ""), fontsize=10)
     ax.grid(True, axis="x", alpha=0.3)
     ax.legend(fontsize=8, loc="lower right")
-    fig.savefig(path, dpi=100)
+    _save_png(fig, path)
     return path

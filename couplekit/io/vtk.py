@@ -78,8 +78,12 @@ class PvdIndex:
         for t, f in self.entries:
             ET.SubElement(coll, "DataSet", timestep=repr(t), group="", part="0", file=f)
         tmp = self.path.with_suffix(".pvd.tmp")
-        ET.ElementTree(root).write(tmp, xml_declaration=True, encoding="utf-8")
-        os.replace(tmp, self.path)
+        try:
+            ET.ElementTree(root).write(tmp, xml_declaration=True, encoding="utf-8")
+            os.replace(tmp, self.path)
+        except BaseException:  # a full disk: the index written before stays, no half-written one beside it
+            tmp.unlink(missing_ok=True)
+            raise
 
 
 def read_pvd(path: str | Path) -> list[tuple[float, str]]:

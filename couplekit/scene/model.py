@@ -29,7 +29,7 @@ before anything is allocated:
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -127,6 +127,13 @@ class Time:
     def steps_per_frame(self) -> int:
         """Whole steps per output frame (at least 1)."""
         return max(1, int(round(self.frame_duration / self.dt)))
+
+
+MAX_STEPS_PER_FRAME = 10**8
+"""Most steps per output frame a scene may ask for: at a billion cell-steps per second (a fast GPU) a 100³ grid
+takes 10 days for that many steps; more is a unit mistake (a frame_duration in ms given as s, say)."""
+MAX_TOTAL_STEPS = 10**10
+"""Most steps in all (frames × steps per frame)."""
 
 
 @dataclass(frozen=True)
@@ -479,7 +486,10 @@ class Scene:
 
     def expected_max_speed(self) -> tuple[float, str]:
         """(speed m/s, what it comes from) used by the Mach and particle-CFL checks."""
-        return _speed_estimate(self.domain, self.time, self.bodies, self.inflows, {})
+        domain = self.domain
+        if self.fluid is not None and self.fluid.gravity is not None:
+            domain = replace(domain, gravity=tuple(float(v) for v in self.fluid.gravity))
+        return _speed_estimate(domain, self.time, self.bodies, self.inflows, {})
 
     def summary(self) -> str:
         """A few lines: grid, time, physics present."""
@@ -697,17 +707,17 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
         )
     wall_cells = sand.wall_layers if sand is not None else LIMITS["sand_wall_cells"]
     if not failed_inflows:
-        _check_inflows(inflows, bnd, fluid, problems, domain, wall_cells)
+        _check_inflows(inflows, bnd, fluid, problems, domain, wall_cells, fluid_given=flu is not None)
 
     # ---- stirring
     stirring = None
     if "stirring" in data:
         st = read_table(data["stirring"], "stirring", SECTIONS["stirring"], problems)
-        stirring = _stirring(st, domain, fluid, problems)
+        stirring = _stirring(st, domain, fluid, problems, fluid_given=flu is not None)
 
     # ---- what each body needs
     for i, b in zip(body_ids, bodies, strict=True):
-        if b.kind == "water" and fluid is None:
+        if b.kind == "water" and fluid is None and flu is None:  # (an invalid [fluid] table is reported itself)
             problems.append(
                 Problem(
                     f"bodies[{i}].kind",
@@ -812,6 +822,19 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
                     "time.frame_duration",
                     f"{time.frame_duration:g} s is shorter than one step dt = {time.dt:g} s",
                     "make frame_duration >= dt",
+                )
+            )
+        elif time.frame_duration / time.dt > MAX_STEPS_PER_FRAME or time.frames * (
+            time.frame_duration / time.dt
+        ) > float(MAX_TOTAL_STEPS):
+            per_frame = time.frame_duration / time.dt
+            problems.append(
+                Problem(
+                    "time.frame_duration",
+                    f"{time.frame_duration:g} s is {per_frame:.3g} steps of dt = {time.dt:g} s per frame, "
+                    f"{time.frames * per_frame:.3g} steps in all: beyond what any run finishes (at most "
+                    f"{MAX_STEPS_PER_FRAME:.0e} per frame and {MAX_TOTAL_STEPS:.0e} in all)",
+                    "shorten time.frame_duration or time.frames, or take a larger time.dt",
                 )
             )
 
@@ -960,6 +983,26 @@ def _sand(snd: dict, problems: list[Problem]) -> Sand | None:
     h = snd["hardening"]
     if h[2] < 0:
         problems.append(Problem("sand.hardening[2]", f"h2 must be >= 0, got {h[2]:g}", "the paper uses h2 = 0.2"))
+    else:
+        # the friction angle phi_F(q) = h0 + (h1 q - h3) exp(-h2 q) of Klar et al. over q >= 0 (couplekit.sand):
+        # phi_F(0) = h0 - h3, and with h1, h2 > 0 its largest value at q* = 1/h2 + h3/h1
+        lo_angle = h[0] - h[3]
+        hi_angle = max(lo_angle, h[0])
+        if h[1] > 0 and h[2] > 0:
+            q = 1.0 / h[2] + max(h[3], 0.0) / h[1]
+            hi_angle = max(hi_angle, h[0] + (h[1] * q - h[3]) * math.exp(-h[2] * q))
+        elif h[1] > 0:  # h2 = 0: the angle grows without bound with the plastic strain
+            hi_angle = math.inf
+        if not (0.0 < lo_angle and hi_angle < 90.0):
+            problems.append(
+                Problem(
+                    "sand.hardening",
+                    f"[h0, h1, h2, h3] = {list(h)} makes the friction angle h0 + (h1 q - h3) exp(-h2 q) range over "
+                    f"[{lo_angle:.3g}, {hi_angle:.3g}] degrees as the plastic strain q grows; it must stay within "
+                    "(0, 90) degrees",
+                    "the paper's sand: [35, 9, 0.2, 10] (25 to 48 degrees)",
+                )
+            )
     return Sand(
         snd["density"],
         snd["youngs_modulus"],
@@ -1228,7 +1271,10 @@ def _check_inflows(
     problems: list[Problem],
     domain: Domain | None = None,
     wall_cells: int = 2,
+    fluid_given: bool = False,
 ) -> None:
+    """Inflows against the faces and the fluid; ``fluid_given``: a [fluid] table was written (when it failed its
+    own checks, ``fluid`` is None and its problems are reported already: no "needs a [fluid] table" here)."""
     faces_used: dict[str, int] = {}
     for i, inf in enumerate(inflows):
         key = f"inflows[{i}]"
@@ -1293,7 +1339,8 @@ def _check_inflows(
                 Problem(f"{key}.sand_fraction", "wind carries no sand", "set sand_fraction = 0 or kind = 'water'")
             )
         if fluid is None:
-            problems.append(Problem(f"{key}", "an inflow needs a [fluid] table", "add [fluid]"))
+            if not fluid_given:
+                problems.append(Problem(f"{key}", "an inflow needs a [fluid] table", "add [fluid]"))
         elif fluid.phases == 1 and inf.kind == "wind":
             problems.append(Problem(f"{key}.kind", "wind needs two fluid phases", "set fluid.phases = 2"))
     for face in FACES:
@@ -1461,10 +1508,13 @@ def _scheduler(sch: dict, raw: dict, fluid: Fluid | None, has_sand: bool, proble
     return Scheduler(kind, sch["substeps"], sch["max_substeps"], sch["interpolation"], sch["sand_every"] or 1)
 
 
-def _stirring(st: dict, domain: Domain | None, fluid: Fluid | None, problems: list[Problem]) -> Stirring | None:
-    """The [stirring] table checked across keys (it needs a fluid, a non-zero axis, a centre in the domain)."""
+def _stirring(
+    st: dict, domain: Domain | None, fluid: Fluid | None, problems: list[Problem], fluid_given: bool = False
+) -> Stirring | None:
+    """The [stirring] table checked across keys (it needs a fluid, a non-zero axis, a centre in the domain);
+    ``fluid_given`` as in :func:`_check_inflows`."""
     n = len(problems)
-    if fluid is None:
+    if fluid is None and not fluid_given:
         problems.append(Problem("stirring", "stirring acts on the water: it needs a [fluid] table", "add [fluid]"))
     if st["axis"] is not None and not any(st["axis"]):
         problems.append(Problem("stirring.axis", "is the zero vector", "give the axis direction, e.g. [0.0, 0.0, 1.0]"))
@@ -1816,6 +1866,8 @@ def _check_time_step(
     checked with the viscosities) and the sand's (elastic, particle CFL) for the sand step the ``scheduler``
     makes of it (:func:`_sand_step_problem` names the key to change)."""
     dt, dx = time.dt, domain.dx
+    if fluid is not None and fluid.gravity is not None:  # the fluid's own acceleration replaces domain.gravity
+        domain = replace(domain, gravity=tuple(float(v) for v in fluid.gravity))
     try:
         speed, why = _speed_estimate(domain, time, bodies, inflows, {})
     except Exception:

@@ -110,7 +110,20 @@ class Problem:
     fix: str
 
     def __str__(self) -> str:
-        return f"{self.key}: {self.message}. Fix: {self.fix}"
+        return f"{_clip(self.key)}: {_clip(self.message)}. Fix: {_clip(self.fix)}"
+
+
+MESSAGE_CLIP = 400
+"""Longest key, message or fix a problem line shows (a 200 kB key name in a hostile file is cut, not echoed)."""
+MESSAGE_PROBLEMS = 50
+"""Most problems a refusal lists; the rest are counted (``ProblemError.problems`` keeps them all)."""
+
+
+def _clip(text: str) -> str:
+    text = str(text)
+    if len(text) <= MESSAGE_CLIP:
+        return text
+    return f"{text[: MESSAGE_CLIP - 40]}... ({len(text) - MESSAGE_CLIP + 40:,} characters more)"
 
 
 class ProblemError(ValueError):
@@ -119,8 +132,10 @@ class ProblemError(ValueError):
     def __init__(self, problems: list[Problem], source: str = "input"):
         self.problems = list(problems)
         self.source = source
-        lines = [f"{source} is invalid ({len(problems)} problem{'s' if len(problems) != 1 else ''}):"]
-        lines += [f"  - {p}" for p in problems]
+        lines = [f"{_clip(source)} is invalid ({len(problems)} problem{'s' if len(problems) != 1 else ''}):"]
+        lines += [f"  - {p}" for p in problems[:MESSAGE_PROBLEMS]]
+        if len(problems) > MESSAGE_PROBLEMS:
+            lines.append(f"  ... and {len(problems) - MESSAGE_PROBLEMS:,} more problems (fix these first)")
         super().__init__("\n".join(lines))
 
     @property
@@ -136,6 +151,10 @@ class SceneError(ProblemError):
         super().__init__(problems, source)
 
 
+MAX_FILE_BYTES = 16 << 20
+"""Largest scene (or sweep) file read: far beyond any hand-written TOML, small enough to read at once."""
+
+
 def read_toml(path, error: type[ProblemError] = SceneError) -> dict:
     """The TOML file at ``path`` as a dict; a file that cannot be read or is not TOML raises ``error`` with one
     :class:`Problem` (key ``(file)`` or ``(syntax)``) naming the file and the fix."""
@@ -143,6 +162,22 @@ def read_toml(path, error: type[ProblemError] = SceneError) -> dict:
 
     path = Path(path)
     try:
+        if path.exists() and not path.is_file():  # a folder, a device (/dev/zero), a pipe: refused before reading
+            kind = "a folder" if path.is_dir() else "not a regular file"
+            raise error([Problem("(file)", f"{path} is {kind}", "give the path of a TOML scene file")], str(path))
+        size = path.stat().st_size
+        if size > MAX_FILE_BYTES:
+            raise error(
+                [
+                    Problem(
+                        "(file)",
+                        f"{path} holds {size:,} bytes; a scene file holds at most {MAX_FILE_BYTES:,} "
+                        "(geometry goes in mesh or height files)",
+                        "give the scene's TOML file; put large data in mesh / height files it names",
+                    )
+                ],
+                str(path),
+            )
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise error([Problem("(file)", f"cannot read {path}: {exc.strerror}", "check the path")], str(path)) from None
@@ -164,6 +199,8 @@ def parse_toml(text: str, source: str = "<string>", error: type[ProblemError] = 
             [Problem("(file)", f"TOML text must be a str, got {type(text).__name__}", "decode bytes as UTF-8 first")],
             source,
         )
+    if text.startswith("\ufeff"):  # a UTF-8 byte-order mark, as some Windows editors save: not part of the TOML
+        text = text[1:]
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -483,9 +520,11 @@ SECTIONS: dict[str, list[Key]] = {
             "absorption_rate",
             "float",
             0.003,
-            "absorption coefficient R_a of Eq. 55 (Table 1, lattice units)",
+            "absorption coefficient R_a of Eq. 55 (Table 1, lattice units): the share of the free water a particle's "
+            "pores can still take that it absorbs per lattice step",
             "lattice",
             lo=0.0,
+            hi=1.0,
         ),
         Key(
             "max_moisture",

@@ -137,8 +137,9 @@ def _describe(value: Any) -> str:
     return names.get(type(value), type(value).__name__)
 
 
-def _step_into(container: Any, part: str | int, done: str, create: bool) -> Any:
-    """The child ``part`` of ``container`` (the path so far is ``done``); a missing table is created."""
+def _step_into(container: Any, part: str | int, done: str, create: bool, new: Any = None) -> Any:
+    """The child ``part`` of ``container`` (the path so far is ``done``); a missing one is created as ``new``
+    (a table by default; a list when the key indexes into it next)."""
     if isinstance(part, int):
         if not isinstance(container, list):
             raise KeyPathError(f"{done} is {_describe(container)}, not a list", f"drop the index [{part}]")
@@ -153,7 +154,7 @@ def _step_into(container: Any, part: str | int, done: str, create: bool) -> Any:
     if not isinstance(container, dict):
         raise KeyPathError(f"{done} is {_describe(container)}, not a table", f"end the key at {done}")
     if part not in container and create:
-        container[part] = {}
+        container[part] = {} if new is None else new
     return container[part]
 
 
@@ -170,8 +171,9 @@ def set_key(scene: dict, key: str, value: Any) -> None:
     parts = parse_key(key)
     container: Any = scene
     done = ""
-    for part in parts[:-1]:
-        container = _step_into(container, part, done, create=True)
+    for i, part in enumerate(parts[:-1]):
+        # a missing key that the next part indexes is a list (empty: the index is then reported beyond it)
+        container = _step_into(container, part, done, create=True, new=[] if isinstance(parts[i + 1], int) else {})
         done = _join(done, part)
     last = parts[-1]
     if isinstance(last, int):
