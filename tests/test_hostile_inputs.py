@@ -285,3 +285,41 @@ def test_a_liquid_let_into_a_closed_box_and_an_extreme_density_ratio_are_caution
     ratio["fluid"]["air_density"] = 0.1
     assert any("beyond the 1000:1" in c for c in stability_cautions(Scene.from_dict(ratio)))
     assert stability_cautions(Scene.from_dict(tiny_fluid())) == []
+
+
+def test_overlapping_sand_bodies_are_refused_and_touching_ones_accepted():
+    """Fuzz finding: the same sand box given twice doubled the sand's mass in its volume (packing 1.2)."""
+    d = tiny_sand()
+    box = d["bodies"][0]
+    d["bodies"].append({**box, "geometry": dict(box["geometry"])})
+    with pytest.raises(SceneError) as err:
+        Scene.from_dict(d)
+    assert "bodies[2].geometry" in err.value.keys and "packed twice as densely" in str(err.value)
+    lo, hi = box["geometry"]["min"], box["geometry"]["max"]
+    d["bodies"][2]["geometry"] = {"type": "box", "min": [hi[0], lo[1], lo[2]], "max": [hi[0] + 0.01, hi[1], hi[2]]}
+    assert len(Scene.from_dict(d).bodies) == 3  # side by side, sharing a face: no seeding point in both
+
+
+def test_water_inside_an_obstacle_and_obstacles_filling_the_domain_are_refused():
+    """Fuzz findings: a water body wholly inside an obstacle, and an obstacle filling the whole domain, were
+    accepted silently (the sand equivalents were refused)."""
+    d = tiny_fluid()
+    d["bodies"].append(
+        {"kind": "obstacle", "geometry": {"type": "sphere", "center": [0.015, 0.01, 0.02], "radius": 0.009}}
+    )
+    with pytest.raises(SceneError) as err:
+        Scene.from_dict(d)  # the falling drop (bodies[1], radius 5 mm) lies inside the new sphere
+    assert err.value.keys == ["bodies[1].geometry"] and "wholly inside obstacles (bodies[3])" in str(err.value)
+    d = tiny_fluid()
+    d["bodies"].append({"kind": "obstacle", "geometry": {"type": "box", "min": [0, 0, 0], "max": [0.03, 0.02, 0.03]}})
+    with pytest.raises(SceneError) as err:
+        Scene.from_dict(d)
+    assert "no fluid cell is left" in str(err.value)
+
+
+def test_set_reaches_the_sand_walls_table(tmp_path, capsys):
+    """Fuzz finding: --set sand.walls.z_min.friction said "[sand] has no key 'walls'" (a documented table)."""
+    scene = str(_toml(tmp_path))
+    assert main(["validate", scene, "--set", "sand.walls.z_min.friction=0.3"]) == 0
+    assert main(["validate", scene, "--set", "sand.walls.z_mn.friction=0.3"]) == 2
+    assert "did you mean 'z_min'" in capsys.readouterr().err

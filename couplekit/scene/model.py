@@ -793,6 +793,9 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
             _check_inside(b, i, domain, problems, wall_cells)
         if sand is not None and len(problems) == n_geometry:  # every shape built and in place
             _check_seeding(list(zip(body_ids, bodies, strict=True)), domain, sand, problems)
+            _check_sand_overlaps(list(zip(body_ids, bodies, strict=True)), domain, sand, problems)
+        if fluid is not None and len(problems) == n_geometry:
+            _check_fluid_room(list(zip(body_ids, bodies, strict=True)), domain, problems)
         allowed = sand is not None and sand.periodic_walls
         for name, kind in domain.boundary.items():
             if kind == "periodic" and any(b.kind == "sand" for b in bodies) and not allowed:
@@ -1688,6 +1691,92 @@ def _check_seeding(built: list[tuple[int, Body]], domain: Domain, sand: Sand, pr
                     "lower domain.dx)",
                 )
             )
+
+
+def _check_fluid_room(built: list[tuple[int, Body]], domain: Domain, problems: list[Problem]) -> None:
+    """The obstacles leave some fluid cell (a cell centre outside every obstacle), and no water body lies wholly
+    inside obstacles (its water would be in solid cells: nothing of it would move). Searched on the cell centres
+    as :func:`_check_seeding` searches the seeding lattice (:func:`_seeds_any` with one point per cell)."""
+    from .geometry import Difference, overlapping
+
+    size = np.asarray(domain.size, np.float64)
+    obstacles = [(i, b.geometry.solver_shape(domain)) for i, b in built if b.kind == "obstacle"]
+    if not obstacles:
+        return
+    cutters = [s for _, s in obstacles]
+    try:
+        room = _seeds_any(Difference(Box(np.zeros(3), size), cutters).sdf, np.zeros(3), size, domain.dx, 1)
+    except Exception:  # an SDF that fails on the cell centres: the shape's own problem
+        return
+    if room is False:
+        problems.append(
+            Problem(
+                "bodies",
+                f"the obstacles ({', '.join(f'bodies[{i}]' for i, _ in obstacles)}) fill every cell of the domain: "
+                "no fluid cell is left",
+                "shrink or remove an obstacle (an inverted shape, invert = true, keeps what lies inside it)",
+            )
+        )
+        return
+    for i, b in built:
+        if b.kind != "water":
+            continue
+        shape = b.geometry.solver_shape(domain)
+        lo, hi = shape.bounds()
+        lo, hi = np.maximum(lo, 0.0), np.minimum(hi, size)
+        hits = overlapping(shape, cutters)
+        if not hits:
+            continue
+        try:
+            inside_only = _seeds_any(shape.sdf, lo, hi, domain.dx, 1) and (
+                _seeds_any(Difference(shape, hits).sdf, lo, hi, domain.dx, 1) is False
+            )
+        except Exception:
+            continue
+        if inside_only:
+            names = ", ".join(f"bodies[{j}]" for j, s in obstacles if s in hits)
+            problems.append(
+                Problem(
+                    f"bodies[{i}].geometry",
+                    f"the water body {b.name!r} lies wholly inside obstacles ({names}): its water would be in solid "
+                    "cells",
+                    "move the water body out of the obstacle, or the obstacle away",
+                )
+            )
+
+
+def _check_sand_overlaps(built: list[tuple[int, Body]], domain: Domain, sand: Sand, problems: list[Problem]) -> None:
+    """No two sand bodies seed particles at the same points: each body is seeded on its own (the seeding lattice
+    over its box), so where two overlap the sand would be packed twice as densely (twice sand.packing_fraction,
+    beyond ε_max). Searched as :func:`_check_seeding` searches, on the intersection of each pair whose boxes meet."""
+    size = np.asarray(domain.size, np.float64)
+    k = sand.particles_per_axis
+    shapes = []
+    for i, b in built:
+        if b.kind == "sand":
+            shape = b.geometry.solver_shape(domain)
+            lo, hi = shape.bounds()
+            shapes.append((i, b, shape, np.maximum(lo, 0.0), np.minimum(hi, size)))
+    for n, (i, bi, si, loi, hii) in enumerate(shapes):
+        for j, bj, sj, loj, hij in shapes[n + 1 :]:
+            lo, hi = np.maximum(loi, loj), np.minimum(hii, hij)
+            if np.any(hi <= lo):
+                continue
+            try:
+                both = _seeds_any(lambda p, a=si, b=sj: np.maximum(a.sdf(p), b.sdf(p)), lo, hi, domain.dx, k)
+            except Exception:  # an SDF that fails on the lattice points: reported by _check_seeding
+                continue
+            if both:
+                problems.append(
+                    Problem(
+                        f"bodies[{j}].geometry",
+                        f"the sand bodies {bi.name!r} (bodies[{i}]) and {bj.name!r} (bodies[{j}]) overlap: each is "
+                        "seeded on its own, so the sand there would be packed twice as densely (2 × "
+                        f"sand.packing_fraction = {2 * sand.packing_fraction:g}, beyond ε_max = 0.64)",
+                        "make them disjoint (e.g. subtract one from the other: geometry.subtract), or merge them into "
+                        "one body",
+                    )
+                )
 
 
 def _check_max_speed(time: Time, bodies, inflows, problems: list[Problem]) -> None:

@@ -13,7 +13,16 @@ import difflib
 import re
 from typing import Any
 
-from ..scene.schema import BODY_KEYS, GEOMETRY_COMMON_KEYS, GEOMETRY_KEYS, INFLOW_KEYS, SECTIONS, TOP_LEVEL
+from ..faces import SCENE_FACES
+from ..scene.schema import (
+    BODY_KEYS,
+    GEOMETRY_COMMON_KEYS,
+    GEOMETRY_KEYS,
+    INFLOW_KEYS,
+    SAND_WALL_KEYS,
+    SECTIONS,
+    TOP_LEVEL,
+)
 
 __all__ = ["KeyPathError", "parse_key", "check_key", "set_key", "flatten_keys"]
 
@@ -85,6 +94,8 @@ def check_key(key: str, scene: dict) -> tuple[str | int, ...]:
     if len(parts) > 1 and isinstance(parts[1], int):
         raise KeyPathError(f"[{top}] is a table, not a list", f'write "{top}.<key>" without an index')
     section = names[0]
+    if names[:2] == ["sand", "walls"]:  # [sand.walls]: a table of faces, each a table of SAND_WALL_KEYS
+        return _check_sand_wall_key(parts, names)
     for name in names[1:]:
         if section in SECTIONS and any(k.name == name for k in SECTIONS[section]):
             _only_indexes_after(parts, parts.index(name))
@@ -97,6 +108,18 @@ def check_key(key: str, scene: dict) -> tuple[str | int, ...]:
         ]
         raise _unknown(name, known, f"[{section}]")
     return parts  # the whole table
+
+
+def _check_sand_wall_key(parts: tuple[str | int, ...], names: list[str]) -> tuple[str | int, ...]:
+    """``sand.walls``, ``sand.walls.<face>`` or ``sand.walls.<face>.<key>`` (docs/scene-reference.md)."""
+    if len(names) >= 3 and names[2] not in SCENE_FACES:
+        raise _unknown(names[2], list(SCENE_FACES), "[sand.walls]", "face")
+    if len(names) >= 4:
+        known = [k.name for k in SAND_WALL_KEYS]
+        if names[3] not in known:
+            raise _unknown(names[3], known, f"[sand.walls.{names[2]}]")
+        _only_indexes_after(parts, parts.index(names[3]))
+    return parts
 
 
 def _only_indexes_after(parts: tuple[str | int, ...], at: int) -> None:
