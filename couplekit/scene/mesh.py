@@ -13,7 +13,10 @@
   ``k`` samples nearest to each point, and the exact point–triangle distance (Ericson, *Real-Time Collision
   Detection* §5.1.5) is taken over the triangles those samples lie on. The result is never below the true
   distance and never above the distance to the nearest sample, so its error is at most the sampling
-  spacing, and zero whenever the closest triangle is among the candidates (the usual case).
+  spacing, and zero whenever the closest triangle is among the candidates (the usual case). A mesh whose
+  whole surface would take more than :data:`EAGER_SURFACE_SAMPLES` samples (one far larger than the domain)
+  is sampled lazily, near the box of the points asked for only (:meth:`TriangleMesh.distance`): the cost is
+  the surface near the domain, not the whole mesh's.
 
 :func:`load_mesh` reads OBJ, STL, PLY (anything meshio reads; quads are split into triangles).
 :class:`HeightField` is the solid below a surface z = h(x, y) down to a base, built as a closed triangle mesh.
@@ -32,9 +35,24 @@ from .geometry import Shape
 
 __all__ = ["TriangleMesh", "HeightField", "load_mesh", "point_triangle_distance", "load_heights", "open_edges"]
 
-MAX_SURFACE_SAMPLES = 2**31
-"""Most surface samples a mesh SDF may take (48 bytes each with the KD-tree: ~100 GiB); a mesh that would need
-more at its sample spacing (a coarse triangle far larger than the spacing) is refused before allocation."""
+MAX_SURFACE_SAMPLES = 2**24
+"""Most surface samples a mesh SDF keeps (about 130 bytes each at the peak of building them and their KD-tree: ~2 GiB).
+The count is worked out before anything is allocated; a mesh that needs more where its SDF is asked for is refused
+with what to change (a coarser dx, or the mesh clipped to the domain)."""
+
+EAGER_SURFACE_SAMPLES = 2**21
+"""A mesh whose whole surface takes at most this many samples (~250 MB at peak) is sampled when it is built, all of
+it. A larger one (a mesh far larger than the domain, or a fine dx) is sampled where its SDF is asked for only:
+finely near the box of the points queried, ever more coarsely away from it (:meth:`TriangleMesh.distance`)."""
+
+MAX_EDGE_SPACINGS = 2**24
+"""Longest triangle edge, in sample spacings, a mesh may have (4 million cells at the solvers' spacing dx / 4, more
+than any domain holds): a longer one is refused when the mesh is built, as far larger than any domain it could
+serve (heights of 1e6 m, a mesh in millimetres read as metres)."""
+
+REGION_MARGIN = 16
+"""Margin, in sample spacings (4 cells at the solvers' spacing dx / 4), around the box of the points queried, within
+which a lazily sampled mesh is sampled exactly as the whole mesh would be."""
 
 _RAY_SHIFT = (0.7548776662466927e-7, 0.5698402909980532e-7)  # irrational fractions of the mesh size
 
@@ -78,35 +96,129 @@ def point_triangle_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.n
     return np.linalg.norm(p - closest, axis=1)
 
 
-def _surface_samples(v: np.ndarray, f: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:
-    """Points on every triangle on a barycentric grid finer than ``spacing``; returns (points, triangle ids)."""
-    tri = v[f]  # (T, 3, 3)
+def _steps(tri: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """Per triangle (T, 3, 3): longest edge, lattice steps (float, >= 1) finer than ``spacing``, and the total
+    number of lattice points (inf or NaN where they overflow)."""
     edge = np.max(np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2), axis=1)
     with np.errstate(over="ignore", invalid="ignore"):
         steps = np.maximum(1.0, np.ceil(edge / spacing))
         total = float(np.sum((steps + 1.0) * (steps + 2.0) / 2.0))
-    if not total <= MAX_SURFACE_SAMPLES:  # also catches inf and NaN
-        raise ValueError(
-            f"sampling the surface every {spacing:.3g} m would take {total:.3g} points (at most "
-            f"{MAX_SURFACE_SAMPLES:.3g}): its longest edge is {float(np.max(edge)):.3g} m; use a finer mesh or a "
-            "smaller shape"
-        )
-    nsub = steps.astype(np.int64)
-    pts, ids = [], []
-    for n in np.unique(nsub):
-        sel = np.nonzero(nsub == n)[0]
+    return edge, steps, total
+
+
+def _lattice(tri: np.ndarray, nsub: np.ndarray, sel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Every point of the barycentric lattice (``nsub`` steps) of the triangles ``sel``: (points, triangle ids)."""
+    pts, ids = [np.zeros((0, 3))], [np.zeros(0, np.int64)]
+    for n in np.unique(nsub[sel]):
+        s = sel[nsub[sel] == n]
         i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
         keep = (i + j) <= n
         u, w = i[keep] / n, j[keep] / n  # barycentric weights of b and c
-        t = tri[sel]
+        t = tri[s]
         p = (
             t[:, None, 0]
             + u[None, :, None] * (t[:, None, 1] - t[:, None, 0])
             + w[None, :, None] * (t[:, None, 2] - t[:, None, 0])
         )
         pts.append(p.reshape(-1, 3))
-        ids.append(np.repeat(sel, u.size))
+        ids.append(np.repeat(s, u.size))
     return np.concatenate(pts), np.concatenate(ids)
+
+
+def _in_box(p: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    return np.all((p >= lo) & (p <= hi), axis=1)
+
+
+def _u_range(a: np.ndarray, e1: np.ndarray, e2: np.ndarray, lo, hi, chunk: int = 4096) -> tuple[np.ndarray, np.ndarray]:
+    """Least and greatest u over the points a + u e1 + w e2 (u, w >= 0, u + w <= 1) of each triangle that lie in
+    the box [lo, hi] (least > greatest where none does). The extremes of u over that convex polygon lie at its
+    vertices, which are pairwise intersections of its 9 constraint lines; each is checked against all 9 with a
+    relative slack of 1e-9 (the lattice rows are padded and their points filtered exactly afterwards)."""
+    c1, c2 = np.triu_indices(9, 1)
+    umin, umax = np.empty(a.shape[0]), np.empty(a.shape[0])
+    for s in range(0, a.shape[0], chunk):
+        sa, s1, s2 = a[s : s + chunk], e1[s : s + chunk], e2[s : s + chunk]
+        g = np.zeros((sa.shape[0], 9, 2))
+        h = np.zeros((sa.shape[0], 9))
+        g[:, 0, 0] = g[:, 1, 1] = -1.0  # u >= 0, w >= 0
+        g[:, 2] = h[:, 2] = 1.0  # u + w <= 1
+        g[:, 3:6, 0], g[:, 3:6, 1], h[:, 3:6] = s1, s2, hi - sa  # a + u e1 + w e2 <= hi
+        g[:, 6:9], h[:, 6:9] = -g[:, 3:6], sa - lo  # ... >= lo
+        g1, g2, h1, h2 = g[:, c1], g[:, c2], h[:, c1], h[:, c2]
+        det = g1[..., 0] * g2[..., 1] - g1[..., 1] * g2[..., 0]
+        ok = np.abs(det) > 1e-12 * np.linalg.norm(g1, axis=-1) * np.linalg.norm(g2, axis=-1)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            u = (h1 * g2[..., 1] - h2 * g1[..., 1]) / det
+            w = (g1[..., 0] * h2 - g2[..., 0] * h1) / det
+            resid = g[:, None, :, 0] * u[..., None] + g[:, None, :, 1] * w[..., None] - h[:, None, :]
+        slack = 1e-9 * (np.abs(g).sum(axis=-1) + np.abs(h))
+        ok &= np.all(resid <= slack[:, None, :], axis=-1)
+        umin[s : s + chunk] = np.where(ok, u, np.inf).min(axis=1)
+        umax[s : s + chunk] = np.where(ok, u, -np.inf).max(axis=1)
+    return umin, umax
+
+
+class _TooMany(Exception):
+    """More surface samples than MAX_SURFACE_SAMPLES (args: the count reached)."""
+
+
+def _box_rows(tri: np.ndarray, sel: np.ndarray, nsub: np.ndarray, lo, hi, budget: float):
+    """The rows (constant i) of the lattices (``nsub`` steps) of triangles ``sel`` that may hold points in the box
+    [lo, hi], each row's j range padded by one: (triangle ids, i, first j, count), int64. Raises _TooMany before
+    allocating more than ``budget`` rows or points."""
+    a = tri[sel, 0]
+    e1, e2 = tri[sel, 1] - a, tri[sel, 2] - a
+    nf = nsub[sel]
+    umin, umax = _u_range(a, e1, e2, lo, hi)
+    with np.errstate(invalid="ignore", over="ignore"):
+        i0 = np.clip(np.floor(umin * nf) - 1.0, 0.0, nf + 1.0)
+        i1 = np.clip(np.ceil(umax * nf) + 1.0, -1.0, nf)
+    nrows = np.where(umin <= umax, np.maximum(i1 - i0 + 1.0, 0.0), 0.0)
+    if float(nrows.sum()) > budget:
+        raise _TooMany(float(nrows.sum()))
+    nrows = nrows.astype(np.int64)
+    r = np.repeat(np.arange(sel.size), nrows)
+    i = i0.astype(np.int64)[r] + (np.arange(r.size) - np.repeat(np.cumsum(nrows) - nrows, nrows))
+    n = nsub[sel].astype(np.int64)[r]
+    u = i / n
+    # each row's w range: lo <= a + u e1 + w e2 <= hi on every axis, 0 <= w <= 1 - u
+    blo = lo - a[r] - u[:, None] * e1[r]
+    bhi = hi - a[r] - u[:, None] * e1[r]
+    d = e2[r]
+    slack = 1e-9 * (np.abs(lo) + np.abs(hi) + np.abs(a[r]) + np.abs(e1[r]))
+    flat_ok = (blo <= slack) & (bhi >= -slack)  # rows along which an axis does not change (e2 = 0 there)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        q1, q2 = blo / d, bhi / d
+        wlo = np.where(d > 0, q1, np.where(d < 0, q2, np.where(flat_ok, -np.inf, np.inf))).max(axis=1)
+        whi = np.where(d > 0, q2, np.where(d < 0, q1, np.where(flat_ok, np.inf, -np.inf))).min(axis=1)
+        j0 = np.clip(np.floor(np.maximum(wlo, 0.0) * n) - 1.0, 0.0, n + 1.0)
+        j1 = np.clip(np.ceil(np.minimum(whi, 1.0 - u) * n) + 1.0, -1.0, n - i)
+    count = np.maximum(j1 - j0 + 1.0, 0.0)
+    if float(count.sum()) > budget:
+        raise _TooMany(float(count.sum()))
+    keep = count > 0
+    return sel[r[keep]], i[keep], j0[keep].astype(np.int64), count[keep].astype(np.int64)
+
+
+def _row_points(tri: np.ndarray, nsub: np.ndarray, rows, chunk: int = 1 << 20):
+    """The lattice points of ``rows`` (:func:`_box_rows`), in blocks of about ``chunk``: (points, triangle ids),
+    computed as :func:`_lattice` computes them (the same floating-point operations, so the same points)."""
+    tid, i, j0, count = rows
+    ends = np.cumsum(count)
+    cuts = np.concatenate(
+        [[0], np.searchsorted(ends, np.arange(chunk, int(ends[-1]) if ends.size else 0, chunk)), [tid.size]]
+    )
+    for b0, b1 in zip(cuts[:-1], cuts[1:], strict=True):
+        if b1 <= b0:
+            continue
+        c = count[b0:b1]
+        r = np.repeat(np.arange(b1 - b0), c)
+        t = tid[b0:b1][r]
+        j = j0[b0:b1][r] + (np.arange(r.size) - np.repeat(np.cumsum(c) - c, c))
+        n = nsub[t].astype(np.int64)
+        u, w = i[b0:b1][r] / n, j / n
+        a = tri[t, 0]
+        yield a + u[:, None] * (tri[t, 1] - a) + w[:, None] * (tri[t, 2] - a), t
 
 
 class TriangleMesh(Shape):
@@ -133,12 +245,26 @@ class TriangleMesh(Shape):
         if not math.isfinite(self.size):
             raise ValueError(f"the mesh's extent {lo.tolist()} .. {hi.tolist()} is too large to measure")
         self.sample_spacing = float(sample_spacing) if sample_spacing else self.size / 100.0
+        if not self.sample_spacing > 0:
+            raise ValueError(f"the mesh's sample spacing must be > 0, got {sample_spacing}")
         self.candidates = int(candidates)
-        self._samples, self._sample_tri = _surface_samples(self.vertices, self.faces, self.sample_spacing)
-        self._tree = cKDTree(self._samples)
-        # inside test: triangles projected on (y, z)
+        self.source = None
+        """The file the mesh was read from (:func:`load_mesh`), named in messages."""
         tri = self.vertices[self.faces]
         self._tri = tri
+        edge, self._nsub, total = _steps(tri, self.sample_spacing)
+        if not float(np.max(self._nsub)) <= MAX_EDGE_SPACINGS:  # also catches inf and NaN
+            raise ValueError(
+                f"sampling the surface every {self.sample_spacing:.3g} m (dx/4 in a scene): its longest edge, "
+                f"{float(np.max(edge)):.3g} m, is more than {MAX_EDGE_SPACINGS:.3g} spacings, far larger than any "
+                "domain at this dx (a mistake of units?); use a coarser dx, or a mesh clipped to the domain"
+            )
+        self._lazy = None  # (lo, hi, KD-tree, triangle of each sample): the samples for the box lo..hi
+        self._samples = self._sample_tri = self._tree = None
+        if total <= EAGER_SURFACE_SAMPLES:  # the whole surface, now
+            self._samples, self._sample_tri = _lattice(tri, self._nsub.astype(np.int64), np.arange(len(tri)))
+            self._tree = cKDTree(self._samples)
+        # inside test: triangles projected on (y, z)
         self._yz_lo, self._yz_hi = tri[:, :, 1:].min(axis=1), tri[:, :, 1:].max(axis=1)
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
@@ -193,15 +319,28 @@ class TriangleMesh(Shape):
 
     # -------------------------------------------------------------------------------------- distance
     def distance(self, points: np.ndarray, chunk: int = 200_000) -> np.ndarray:
-        """Unsigned distance (N,) to the surface."""
+        """Unsigned distance (N,) to the surface.
+
+        A mesh sampled lazily (more than :data:`EAGER_SURFACE_SAMPLES` samples in all) is sampled here, for the
+        box of the points (kept, and grown by half its size along an axis the points leave it by): within
+        :data:`REGION_MARGIN` spacings of the box at the sample spacing, exactly as the whole surface would be,
+        then in shells of twice the margin and twice the spacing each. So a point whose candidate samples lie
+        within the margin (one within about 4 cells of the surface in a scene) gets what the whole surface
+        would give, and any other, at a distance d > m·2**(k-1) with its closest point in shell k, a distance
+        too large by at most a sample lattice's covering radius there and the finer ones', 1.16 spacings·2**k
+        < 0.15 d (zero when the closest triangle is a candidate, as usual); the samples cost the surface near
+        the box, not the whole mesh."""
         p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         out = np.empty(p.shape[0])
-        k = min(self.candidates, len(self._samples))
+        if p.shape[0] == 0:
+            return out
+        tree, sample_tri = self._search(p)
+        k = min(self.candidates, tree.n)
         for s in range(0, p.shape[0], chunk):
             q = p[s : s + chunk]
-            _, idx = self._tree.query(q, k=k)
+            _, idx = tree.query(q, k=k)
             idx = idx.reshape(q.shape[0], -1)
-            tri = self._sample_tri[idx]  # (n, k) candidate triangles (with repeats)
+            tri = sample_tri[idx]  # (n, k) candidate triangles (with repeats)
             best = np.full(q.shape[0], np.inf)
             for j in range(tri.shape[1]):
                 t = self._tri[tri[:, j]]
@@ -213,6 +352,96 @@ class TriangleMesh(Shape):
         p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         d = self.distance(p)
         return np.where(self.inside(p), -d, d)
+
+    # -------------------------------------------------------------------------------------- lazy sampling
+    def _search(self, p: np.ndarray) -> tuple[cKDTree, np.ndarray]:
+        """The KD-tree of samples (and their triangles) that serves the points p: the whole surface's, or the
+        samples for a box holding p's finite points (built, or rebuilt grown, when p leaves the last one)."""
+        if self._tree is not None:
+            return self._tree, self._sample_tri
+        state = self._lazy
+        q = p[np.isfinite(p).all(axis=1)]
+        if q.shape[0] == 0:
+            if state is not None:
+                return state[2], state[3]
+            qlo = qhi = 0.5 * (self._lo + self._hi)
+        else:
+            qlo, qhi = q.min(axis=0), q.max(axis=0)
+        if state is not None:
+            lo, hi = state[0], state[1]
+            if np.all(qlo >= lo) and np.all(qhi <= hi):
+                return state[2], state[3]
+            ulo, uhi = np.minimum(lo, qlo), np.maximum(hi, qhi)
+            grow = np.maximum(0.5 * (uhi - ulo), REGION_MARGIN * self.sample_spacing)
+            qlo, qhi = np.where(qlo < lo, ulo - grow, ulo), np.where(qhi > hi, uhi + grow, uhi)
+        points, ids = self._region_samples(qlo, qhi)
+        tree = cKDTree(points)
+        self._lazy = (qlo, qhi, tree, ids)
+        return tree, ids
+
+    def _region_samples(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Samples for points in the box [lo, hi]: level 0 covers the box grown by the margin m (REGION_MARGIN
+        spacings) with the whole surface's lattice (the same points); level k >= 1 covers the box grown by
+        m 2**k less level k-1's box, on lattices of spacing 2**k times the sample spacing; the last level holds
+        the whole mesh. Every count is summed before any point is made; more than MAX_SURFACE_SAMPLES is refused
+        (ValueError saying what to change)."""
+        tri, s = self._tri, self.sample_spacing
+        margin = REGION_MARGIN * s
+        tlo, thi = tri.min(axis=1), tri.max(axis=1)
+        pending = np.arange(len(tri))  # triangles not yet sampled to their last point
+        plan, total, k = [], 0.0, 0
+        inner = None
+        try:
+            while pending.size:
+                blo, bhi = lo - margin * 2.0**k, hi + margin * 2.0**k
+                meets = np.all((thi[pending] >= blo) & (tlo[pending] <= bhi), axis=1)
+                if not meets.any():  # no surface in this shell
+                    inner, k = (blo, bhi), k + 1
+                    continue
+                whole = np.all((tlo[pending] >= blo) & (thi[pending] <= bhi), axis=1)
+                nsub = self._nsub if k == 0 else _steps(tri, s * 2.0**k)[1]
+                if k == 0:  # the triangles within the box: all their lattice, as the whole surface has it
+                    inside = pending[whole]
+                    total += float(np.sum((nsub[inside] + 1.0) * (nsub[inside] + 2.0) / 2.0))
+                    cut = pending[meets & ~whole]
+                else:
+                    inside, cut = pending[:0], pending[meets]
+                if total > MAX_SURFACE_SAMPLES:
+                    raise _TooMany(total)
+                rows = _box_rows(tri, cut, nsub, blo, bhi, MAX_SURFACE_SAMPLES - total)
+                total += float(np.sum(rows[3]))
+                if total > MAX_SURFACE_SAMPLES:
+                    raise _TooMany(total)
+                done = np.zeros(len(tri), bool)  # triangles whose last points this level holds
+                done[pending[whole]] = True
+                plan.append((nsub, inside, rows, blo, bhi, inner, done))
+                inner = (blo, bhi)
+                pending = pending[~whole]
+                k += 1
+        except _TooMany as exc:
+            name = f"{Path(self.source).name}: " if self.source else ""
+            raise ValueError(
+                f"{name}the mesh needs about {exc.args[0]:.3g} surface samples (at most {MAX_SURFACE_SAMPLES:.3g}) "
+                f"every {s:.3g} m (dx/4 in a scene) near the points asked for: use a coarser dx, or a mesh clipped to "
+                f"the domain (points in {np.round(lo, 4).tolist()} .. {np.round(hi, 4).tolist()} m)"
+            ) from None
+        points, ids = [np.zeros((0, 3))], [np.zeros(0, np.int64)]
+        for nsub, inside, rows, blo, bhi, prev, done in plan:
+            if inside.size:
+                p, t = _lattice(tri, nsub.astype(np.int64), inside)
+                points.append(p)
+                ids.append(t)
+            for p, t in _row_points(tri, nsub, rows):
+                # a triangle's points in this box (all of them on its last level); not those a finer level holds
+                keep = _in_box(p, blo, bhi) | done[t]
+                if prev is not None:
+                    keep &= ~_in_box(p, *prev)
+                points.append(p[keep])
+                ids.append(t[keep])
+        points, ids = np.concatenate(points), np.concatenate(ids)
+        if points.shape[0] == 0:  # not expected (every vertex is a lattice point); the centroids then
+            points, ids = tri.mean(axis=1), np.arange(len(tri))
+        return points, ids
 
 
 def open_edges(vertices: np.ndarray, faces: np.ndarray) -> int:
@@ -271,7 +500,9 @@ def load_mesh(path: str | Path, sample_spacing: float | None = None) -> Triangle
             "number), so its inside is undefined; close the holes (e.g. Blender's 'Fill Holes' or MeshLab's "
             "'Close Holes')"
         )
-    return TriangleMesh(points, faces, sample_spacing)
+    mesh = TriangleMesh(points, faces, sample_spacing)
+    mesh.source = str(path)
+    return mesh
 
 
 def load_heights(path: str | Path) -> np.ndarray:
