@@ -757,7 +757,11 @@ class Simulation:
         )
         write_run_marker(out, scene_dict)
         indexes = {"fields": PvdIndex(out / "fields.pvd"), "particles": PvdIndex(out / "particles.pvd")}
-        log_file = DiagnosticsLog(out / "diagnostics.jsonl", append=resumed) if sc.outputs.diagnostics else None
+        log_file = (
+            DiagnosticsLog(out / "diagnostics.jsonl", append=resumed, until_step=self.step_count)
+            if sc.outputs.diagnostics
+            else None
+        )
         self._log(f"effects on: {', '.join(k for k, v in self.effects.items() if v)}")
         self._log(f"writing to {out}")
         bar = ProgressBar(total, self.frame, stream=stream) if progress else None

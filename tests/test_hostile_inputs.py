@@ -323,3 +323,16 @@ def test_set_reaches_the_sand_walls_table(tmp_path, capsys):
     assert main(["validate", scene, "--set", "sand.walls.z_min.friction=0.3"]) == 0
     assert main(["validate", scene, "--set", "sand.walls.z_mn.friction=0.3"]) == 2
     assert "did you mean 'z_min'" in capsys.readouterr().err
+
+
+def test_resuming_from_an_earlier_checkpoint_does_not_log_frames_twice(tmp_path):
+    """Fuzz finding: resuming from an earlier checkpoint in the same folder logged frames [0, 1, 2, 3, 4, 3, 4]."""
+    out = tmp_path / "out"
+    scene = _toml(tmp_path, TINY_SAND_TOML.replace("frames = 2", "frames = 4"))
+    common = ["--backend", "numpy", "--no-progress", "--out", str(out)]
+    assert main(["run", str(scene), "--frames", "2", *common]) == 0
+    early = out / "early.h5"
+    early.write_bytes((out / "checkpoint.h5").read_bytes())
+    assert main(["run", str(scene), "--resume", str(out / "checkpoint.h5"), "--frames", "4", *common]) == 0
+    assert main(["run", str(scene), "--resume", str(early), "--frames", "4", *common]) == 0
+    assert [r["frame"] for r in read_diagnostics(out / "diagnostics.jsonl")] == [0, 1, 2, 3, 4]

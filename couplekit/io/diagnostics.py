@@ -24,10 +24,24 @@ def _clean(v: Any) -> Any:
 
 
 class DiagnosticsLog:
-    """Append-only JSON-lines log; ``append=True`` continues an existing file (a resumed run)."""
+    """Append-only JSON-lines log; ``append=True`` continues an existing file (a resumed run). ``until_step``
+    (with ``append``): the records of later steps are dropped first, so a run resumed from an earlier checkpoint
+    of its folder does not log those frames twice (as :class:`~couplekit.io.vtk.PvdIndex` drops later entries)."""
 
-    def __init__(self, path: str | Path, append: bool = False):
+    def __init__(self, path: str | Path, append: bool = False, until_step: int | None = None):
         self.path = Path(path)
+        if append and until_step is not None and self.path.is_file():
+            kept = []
+            for line in self.path.read_text(encoding="utf-8").splitlines():
+                try:
+                    step = json.loads(line).get("step")
+                except (ValueError, AttributeError):  # a truncated last line of an interrupted write
+                    continue
+                if not isinstance(step, (int, float)) or step <= until_step:
+                    kept.append(line)
+            tmp = self.path.with_name(self.path.name + ".tmp")
+            tmp.write_text("".join(line + "\n" for line in kept), encoding="utf-8")
+            tmp.replace(self.path)
         self._fh = open(self.path, "a" if append else "w", encoding="utf-8")
 
     def write(self, record: Mapping[str, Any]) -> None:
