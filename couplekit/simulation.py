@@ -178,7 +178,7 @@ class Simulation:
 
     def __init__(
         self,
-        scene: Scene | str | Path,
+        scene: Scene | str | Path | Mapping[str, Any],
         backend: str | Backend | None = "auto",
         threads: int | None = None,
         log: Callable[[str], Any] | None = print,
@@ -186,7 +186,15 @@ class Simulation:
         timing: bool = True,
         scheduler: str | dict | None = None,
     ):
+        if isinstance(scene, Mapping):  # a scene dict, as Scene.from_dict takes it
+            scene = Scene.from_dict(dict(scene))
+        elif not isinstance(scene, (Scene, str, Path)):
+            raise TypeError(f"scene must be a Scene, a scene file's path or a scene dict, got {type(scene).__name__}")
         self.scene = scene if isinstance(scene, Scene) else Scene.load(scene)
+        if scheduler is not None and not isinstance(scheduler, (str, Mapping)):
+            raise TypeError(
+                f"scheduler must be a spec string ('subcycle:4') or a [scheduler] table (dict), got {type(scheduler).__name__}"
+            )
         if scheduler is not None:
             self.scene = with_scheduler(self.scene, scheduler)
         sc = self.scene

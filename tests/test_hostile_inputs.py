@@ -336,3 +336,37 @@ def test_resuming_from_an_earlier_checkpoint_does_not_log_frames_twice(tmp_path)
     assert main(["run", str(scene), "--resume", str(out / "checkpoint.h5"), "--frames", "4", *common]) == 0
     assert main(["run", str(scene), "--resume", str(early), "--frames", "4", *common]) == 0
     assert [r["frame"] for r in read_diagnostics(out / "diagnostics.jsonl")] == [0, 1, 2, 3, 4]
+
+
+def test_the_api_names_the_wrong_type_and_takes_a_scene_dict():
+    """Fuzz findings: Simulation(dict) raised a TypeError from deep inside, scheduler=3 "'int' object is not
+    iterable"; a dict is now taken as a scene (Scene.from_dict) and other types are named."""
+    assert Simulation(tiny_sand(), backend="numpy", log=None).scene.name == "tiny_sand"
+    with pytest.raises(TypeError, match="scene must be a Scene"):
+        Simulation(3, backend="numpy", log=None)
+    with pytest.raises(TypeError, match="scheduler must be a spec string"):
+        Simulation(tiny_sand(), backend="numpy", log=None, scheduler=3)
+    with pytest.raises(TypeError, match="Scene.load takes a file path"):
+        Scene.load(123)
+
+
+def test_a_multirate_sand_step_longer_than_a_frame_is_refused():
+    """Fuzz finding: sand_every 7 with 5 steps per frame showed the sand ahead of the clock in the frames."""
+    from couplekit.simulation import with_scheduler
+
+    scene = Scene.from_dict({**tiny_fluid(), "sand": {"density": 1500.0}, "bodies": tiny_fluid()["bodies"] + [
+        {"kind": "sand", "geometry": {"type": "box", "min": [0.005, 0.006, 0.012], "max": [0.011, 0.014, 0.016]}}]})  # fmt: skip
+    with pytest.raises(SceneError) as err:
+        with_scheduler(scene, "multirate:7")
+    assert "scheduler.sand_every" in err.value.keys and "ahead of the fluid's clock" in str(err.value)
+
+
+def test_complex_heights_are_refused(tmp_path):
+    """Fuzz finding: a .npy height grid of complex numbers was taken with its imaginary parts dropped."""
+    import numpy as np
+
+    from couplekit.scene.mesh import load_heights
+
+    np.save(tmp_path / "h.npy", np.full((3, 3), 0.01 + 5j))
+    with pytest.raises(ValueError, match="complex numbers"):
+        load_heights(tmp_path / "h.npy")

@@ -511,6 +511,8 @@ def load_heights(path: str | Path) -> np.ndarray:
     try:
         if path.suffix == ".npy":
             h = np.load(path)  # allow_pickle is off: a pickled object is refused, not run
+            if np.iscomplexobj(h):  # the cast below would drop the imaginary parts silently
+                raise ValueError(f"complex numbers ({h.dtype}); heights are real")
         else:
             h = np.loadtxt(path, delimiter="," if path.suffix == ".csv" else None)
         h = np.asarray(h, dtype=np.float64)

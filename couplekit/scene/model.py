@@ -436,6 +436,8 @@ class Scene:
     @classmethod
     def load(cls, path: str | Path) -> Scene:
         """Read and validate a TOML scene file; raises :class:`SceneError` naming every problem."""
+        if not isinstance(path, (str, Path)):
+            raise TypeError(f"Scene.load takes a file path, got {type(path).__name__} (a dict: Scene.from_dict)")
         path = Path(path)
         return cls.from_dict(read_toml(path, SceneError), base_dir=path.parent, source_name=str(path))
 
@@ -838,6 +840,21 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
                     f"{time.frames * per_frame:.3g} steps in all: beyond what any run finishes (at most "
                     f"{MAX_STEPS_PER_FRAME:.0e} per frame and {MAX_TOTAL_STEPS:.0e} in all)",
                     "shorten time.frame_duration or time.frames, or take a larger time.dt",
+                )
+            )
+
+        if (
+            scheduler is not None
+            and scheduler.kind == "multirate"
+            and scheduler.sand_every > time.steps_per_frame
+            and time.frame_duration >= time.dt
+        ):
+            problems.append(
+                Problem(
+                    "scheduler.sand_every",
+                    f"one sand step of sand_every = {scheduler.sand_every} fluid steps spans more than a frame "
+                    f"({time.steps_per_frame} steps): the frames would show the sand ahead of the fluid's clock",
+                    f"use sand_every <= {time.steps_per_frame}, or a longer time.frame_duration",
                 )
             )
 
