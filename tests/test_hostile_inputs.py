@@ -370,3 +370,11 @@ def test_complex_heights_are_refused(tmp_path):
     np.save(tmp_path / "h.npy", np.full((3, 3), 0.01 + 5j))
     with pytest.raises(ValueError, match="complex numbers"):
         load_heights(tmp_path / "h.npy")
+
+
+def test_a_stirring_beyond_the_lattice_mach_limit_is_refused(tmp_path, capsys):
+    """Fuzz finding: stirring.acceleration = 1e30 validated (the speed estimate left the stirring out), then NaN."""
+    scene = str(Path(__file__).parents[1] / "examples" / "fig11_stirring_small.toml")
+    assert main(["validate", scene]) == 0
+    assert main(["validate", scene, "--set", "stirring.acceleration=1e30"]) == 2
+    assert "stirring.acceleration" in capsys.readouterr().err

@@ -858,6 +858,26 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
                 )
             )
 
+    # ---- the stirring's speed: its rim acceleration for as long as it acts bounds the speed it gives the water
+    if stirring is not None and time is not None and fluid is not None and domain is not None:
+        total = time.frames * time.steps_per_frame * time.dt
+        acts = max(0.0, total - stirring.start)
+        if stirring.duration is not None:
+            acts = min(acts, stirring.duration)
+        speed = stirring.acceleration * acts
+        units = Units(dx=domain.dx, dt=time.dt, rho=fluid.water_density)
+        if speed > 0 and time.max_speed is None and units.mach(speed) > time.mach_limit:
+            problems.append(
+                Problem(
+                    "stirring.acceleration",
+                    f"{stirring.acceleration:g} m/s² at the rim for {acts:.3g} s can spin the water up to "
+                    f"{speed:.3g} m/s: lattice Mach {units.mach(speed):.3g} at dt = {time.dt:g} s (limit "
+                    f"time.mach_limit = {time.mach_limit:g})",
+                    f"lower the acceleration or stirring.duration, use dt <= {units.max_dt(speed, time.mach_limit):.3g} s, "
+                    "or set time.max_speed if the water will turn slower (friction, the sand)",
+                )
+            )
+
     # ---- time-step limits
     if domain is not None and time is not None:
         _check_max_speed(time, zip(body_ids, bodies, strict=True), inflows, problems)
