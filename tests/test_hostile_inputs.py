@@ -378,3 +378,12 @@ def test_a_stirring_beyond_the_lattice_mach_limit_is_refused(tmp_path, capsys):
     assert main(["validate", scene]) == 0
     assert main(["validate", scene, "--set", "stirring.acceleration=1e30"]) == 2
     assert "stirring.acceleration" in capsys.readouterr().err
+
+
+def test_a_domain_that_is_no_table_is_said_to_be_no_table():
+    """Fuzz finding: [[domain]] or domain = 1 reported only 'domain.size: is required'."""
+    d = tiny_sand()
+    d["domain"] = [d["domain"]]
+    with pytest.raises(SceneError) as err:
+        Scene.from_dict(d)
+    assert "domain: must be a table, got a list" in str(err.value)

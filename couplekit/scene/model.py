@@ -552,7 +552,7 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
     dom_raw = data.get("domain", {})
     dom_raw = dict(dom_raw) if isinstance(dom_raw, dict) else dom_raw
     boundary_raw = dom_raw.pop("boundary", {}) if isinstance(dom_raw, dict) else {}
-    dom_raw = dom_raw if isinstance(dom_raw, dict) else {}
+    # [[domain]] or domain = 1 is read as given, so that it is said to be no table (as for every other table)
     dom = read_table(dom_raw, "domain", SECTIONS["domain"], problems)
     bnd = read_table(boundary_raw, "domain.boundary", SECTIONS["domain.boundary"], problems)
     tim = read_table(data.get("time", {}), "time", SECTIONS["time"], problems)
