@@ -25,8 +25,9 @@
 #define CPL_REP26(M) CPL_REP8(M, 1) CPL_REP8(M, 9) CPL_REP8(M, 17) M(25) M(26)
 
 // n = nx * ny * nz.  Without retention d_bound is not read (pass a 1-element array).
-// the source of interior cell c (x, y, z) from its eps stencil; CPL_NB(q) (defined by each path) is 1u where
-// neighbour q is a FLUID cell (GPU: its flag; host: the row chunk's widened flags), ISFLUID likewise for c
+// the source of interior cell c (x, y, z) from its eps stencil; CPL_DIFF(q, nb) (defined by each path) is
+// eps[nb] - e where neighbour q (index nb) is a FLUID cell, else 0 (GPU: its flag, a predicated load; host: the
+// row chunk's widened flags and a blend), ISFLUID likewise for c, CPL_MAX_E(e) = fmaxf(e, 1e-6)
 #define CPL_SOURCE_CELL(ISFLUID)                                                                \
     {                                                                                                   \
         const float e = eps[c];                                                                         \
@@ -34,7 +35,7 @@
         /* straight-line over the 26 neighbours: an inner loop would stop the host's x-loop vectoriser */ \
         CPL_REP26(CPL_GRAD_TERM)                                                                        \
         const float advect = u[c] * gx + u[N + c] * gy + u[2 * N + c] * gz;                             \
-        const float inv_e = 1.f / ck_select((unsigned int)(e > 1e-6f), e, 1e-6f); /* fmaxf, vectorisable */ \
+        const float inv_e = 1.f / CPL_MAX_E(e);                                                       \
         float s = -phi[c] * inv_e * ((e - eps_prev[c]) + advect); /* Eq. 45 */                         \
         CPL_RETENTION_TERM                                                                              \
         source[c] = ck_select(ISFLUID, s, 0.f); /* no early exit: keeps the host x loop vectorisable */ \
@@ -42,7 +43,7 @@
 #define CPL_GRAD_TERM(q)                                                                \
     {                                                                                   \
         const long long nb = c + CX27[q] + PX * (long long)CY27[q] + PXY * CZ27[q];     \
-        const float w = 3.f * W27[q] * ck_select(CPL_NB(q), eps[nb] - e, 0.f);        \
+        const float w = 3.f * W27[q] * CPL_DIFF(q, nb);                                 \
         gx += w * (float)CX27[q];                                                       \
         gy += w * (float)CY27[q];                                                       \
         gz += w * (float)CZ27[q];                                                       \
@@ -70,19 +71,26 @@ KERNEL void coupling_phase_source(const long long n, const float* RESTRICT eps /
     const long long PXY = (long long)PX * (ny + 2);
     const long long N = PXY * (nz + 2);
 #if CK_ON_GPU
-#define CPL_NB(q) (unsigned int)(flags[c + CX27[q] + PX * (long long)CY27[q] + PXY * CZ27[q]] == 0)
+// the GPU takes the original form: a conditional load and fmaxf (64-78 registers on sm_80/90; the host's blend
+// form took 94-106 there)
+#define CPL_DIFF(q, nb) (flags[nb] == 0 ? eps[nb] - e : 0.f)
+#define CPL_MAX_E(e) fmaxf(e, 1e-6f)
 #define CPL_D_INDEX (x + (long long)nx * (y + (long long)ny * z))
     FOR_EACH_CELL(x, y, z, nx, ny, nz) {
         const long long c = (x + 1) + PX * (long long)(y + 1) + PXY * (z + 1);
         CPL_SOURCE_CELL((unsigned int)(flags[c] == 0))
     }
-#undef CPL_NB
+#undef CPL_DIFF
+#undef CPL_MAX_E
 #undef CPL_D_INDEX
 #else
     // host: (z, y) rows in parallel; per chunk of a row the flags of its 9 neighbour rows (x - 1 .. x + len) are
     // widened to 32-bit 0/1 words first, so the x loop reads no byte data (26 flag bytes per cell read in the
     // loop left this stage at ~11 ns per cell, a third of the flow collide's time in Fig. 13 small)
 #define CPL_D_INDEX (d0 + i)
+// fmaxf as a blend (same value, NaN included): g++ does not if-convert fmaxf in the x loop
+#define CPL_MAX_E(e) ck_select((unsigned int)((e) > 1e-6f), e, 1e-6f)
+#define CPL_DIFF(q, nb) ck_select(CPL_NB(q), eps[nb] - e, 0.f)
 #define CPL_NB(q) fl[((CY27[q] + 1) * 3 + (CZ27[q] + 1)) * (CPL_ROW_CHUNK + 2) + i + 1 + CX27[q]]
     CK_PRAGMA(omp parallel for collapse(2) schedule(static))
     for (int z = 0; z < nz; ++z)
@@ -108,6 +116,8 @@ KERNEL void coupling_phase_source(const long long n, const float* RESTRICT eps /
             }
         }
 #undef CPL_NB
+#undef CPL_DIFF
+#undef CPL_MAX_E
 #undef CPL_D_INDEX
 #endif
 #if !CK_RETENTION
