@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent / "scene"))
-from sim_scenes import tiny_coupled, tiny_fluid, tiny_sand  # noqa: E402
+from sim_scenes import tiny_coupled, tiny_fluid, tiny_jet, tiny_sand  # noqa: E402
 
 from couplekit.scene import Scene  # noqa: E402
 from couplekit.simulation import Simulation  # noqa: E402
@@ -40,17 +40,6 @@ def _with(d: dict, **tables) -> dict:
     return d
 
 
-def _jet() -> dict:
-    """tiny_coupled with a water jet carrying sand through an outlet in the x_min wall (particle emission)."""
-    d = tiny_coupled()
-    d["domain"]["boundary"]["x_min"] = "wall"
-    d["inflows"] = [
-        {"face": "x_min", "kind": "water", "velocity": [1.0, 0, 0], "sand_fraction": 0.2, "shape": "rect",
-         "center": [0.01, 0.015], "size": [0.01, 0.01]}
-    ]  # fmt: skip
-    return d
-
-
 # name -> (scene dict, steps): every scheduler on the coupled scene, one solver alone, emission
 CASES = {
     "sand": (tiny_sand(), 12),
@@ -58,7 +47,7 @@ CASES = {
     "lockstep": (tiny_coupled(), 12),
     "subcycle3": (_with(tiny_coupled(), scheduler={"kind": "subcycle", "substeps": 3}), 12),
     "multirate3": (_with(tiny_coupled(), scheduler={"kind": "multirate", "sand_every": 3}), 12),
-    "jet": (_jet(), 70),  # the jet's first particle layer is emitted after ~60 steps
+    "jet": (tiny_jet(), 70),  # the jet's first particle layer is emitted after ~60 steps
 }
 
 

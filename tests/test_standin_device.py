@@ -21,27 +21,14 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent / "scene"))
-from sim_scenes import run_with_a_nan_after_step_7, tiny_coupled, tiny_fluid, tiny_sand  # noqa: E402
+from sim_scenes import run_with_a_nan_after_step_7, tiny_coupled, tiny_fluid, tiny_jet, tiny_sand  # noqa: E402
 
 from couplekit.backend import Backend, get_backend  # noqa: E402
 from couplekit.backend.standin import StandInArray, stand_in_device  # noqa: E402
 from couplekit.scene import Scene  # noqa: E402
 from couplekit.simulation import Simulation  # noqa: E402
 
-
-def _jet() -> dict:
-    """tiny_coupled with a water jet carrying sand through an outlet in the x_min wall (particle emission)."""
-    d = tiny_coupled()
-    d["scene"]["name"] = "tiny_jet"
-    d["domain"]["boundary"]["x_min"] = "wall"
-    d["inflows"] = [
-        {"face": "x_min", "kind": "water", "velocity": [1.0, 0, 0], "sand_fraction": 0.2, "shape": "rect",
-         "center": [0.01, 0.015], "size": [0.01, 0.01]}
-    ]  # fmt: skip
-    return d
-
-
-SCENES = {"sand": tiny_sand, "fluid": tiny_fluid, "coupled": tiny_coupled, "jet": _jet}
+SCENES = {"sand": tiny_sand, "fluid": tiny_fluid, "coupled": tiny_coupled, "jet": tiny_jet}
 STEPS = {"jet": 70}  # the jet's first particle layer is emitted after ~60 steps; 3 steps elsewhere
 
 

@@ -1681,20 +1681,24 @@ def _seeds_any(sdf, lo, hi, dx: float, per_axis: int, chunk: int = 1 << 18, cap:
     return None if float(np.prod(n)) > cap else False
 
 
+def _shapes_of_kind(built: list[tuple[int, Body]], kind: str, domain: Domain):
+    """(index, body, solver shape, box lo, box hi) of each body of ``kind``, its box clipped to the domain."""
+    size = np.asarray(domain.size, np.float64)
+    for i, b in built:
+        if b.kind == kind:
+            shape = b.geometry.solver_shape(domain)
+            lo, hi = shape.bounds()
+            yield i, b, shape, np.maximum(lo, 0.0), np.minimum(hi, size)
+
+
 def _check_seeding(built: list[tuple[int, Body]], domain: Domain, sand: Sand, problems: list[Problem]) -> None:
     """Every sand body gets particles: seeded as :func:`couplekit.assembly.build_sand` seeds it (the seeding
     lattice over its bounding box, less what lies inside an obstacle), searched cheaply (:func:`_seeds_any`)."""
     from .geometry import Difference, overlapping
 
-    size = np.asarray(domain.size, np.float64)
     k = sand.particles_per_axis
     obstacles = [(i, b.geometry.solver_shape(domain)) for i, b in built if b.kind == "obstacle"]
-    for i, b in built:
-        if b.kind != "sand":
-            continue
-        shape = b.geometry.solver_shape(domain)
-        lo, hi = shape.bounds()
-        lo, hi = np.maximum(lo, 0.0), np.minimum(hi, size)
+    for i, b, shape, lo, hi in _shapes_of_kind(built, "sand", domain):
         try:
             cutters = overlapping(shape, [s for _, s in obstacles])
             seeded = _seeds_any(Difference(shape, cutters).sdf if cutters else shape.sdf, lo, hi, domain.dx, k)
@@ -1755,12 +1759,7 @@ def _check_fluid_room(built: list[tuple[int, Body]], domain: Domain, problems: l
             )
         )
         return
-    for i, b in built:
-        if b.kind != "water":
-            continue
-        shape = b.geometry.solver_shape(domain)
-        lo, hi = shape.bounds()
-        lo, hi = np.maximum(lo, 0.0), np.minimum(hi, size)
+    for i, b, shape, lo, hi in _shapes_of_kind(built, "water", domain):
         hits = overlapping(shape, cutters)
         if not hits:
             continue
@@ -1786,14 +1785,8 @@ def _check_sand_overlaps(built: list[tuple[int, Body]], domain: Domain, sand: Sa
     """No two sand bodies seed particles at the same points: each body is seeded on its own (the seeding lattice
     over its box), so where two overlap the sand would be packed twice as densely (twice sand.packing_fraction,
     beyond ε_max). Searched as :func:`_check_seeding` searches, on the intersection of each pair whose boxes meet."""
-    size = np.asarray(domain.size, np.float64)
     k = sand.particles_per_axis
-    shapes = []
-    for i, b in built:
-        if b.kind == "sand":
-            shape = b.geometry.solver_shape(domain)
-            lo, hi = shape.bounds()
-            shapes.append((i, b, shape, np.maximum(lo, 0.0), np.minimum(hi, size)))
+    shapes = list(_shapes_of_kind(built, "sand", domain))
     for n, (i, bi, si, loi, hii) in enumerate(shapes):
         for j, bj, sj, loj, hij in shapes[n + 1 :]:
             lo, hi = np.maximum(loi, loj), np.minimum(hii, hij)

@@ -56,6 +56,19 @@ def tiny_coupled(retention: bool = True) -> dict:
     return d
 
 
+def tiny_jet() -> dict:
+    """tiny_coupled with a water jet carrying sand through an outlet in the x_min wall (particle emission: the
+    first particle layer leaves the outlet after ~60 steps)."""
+    d = tiny_coupled()
+    d["scene"]["name"] = "tiny_jet"
+    d["domain"]["boundary"]["x_min"] = "wall"
+    d["inflows"] = [
+        {"face": "x_min", "kind": "water", "velocity": [1.0, 0, 0], "sand_fraction": 0.2, "shape": "rect",
+         "center": [0.01, 0.015], "size": [0.01, 0.01]}
+    ]  # fmt: skip
+    return d
+
+
 TINY_SAND_TOML = """
 [domain]
 size = [0.06, 0.06, 0.06]

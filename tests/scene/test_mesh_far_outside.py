@@ -10,9 +10,11 @@ sampling's were), and the samples kept are counted as well (the KD-tree's own no
 
 from __future__ import annotations
 
+import sys
 import time
 import tomllib
 import tracemalloc
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -23,39 +25,22 @@ from couplekit.scene import Box, Scene, SceneError, TriangleMesh, sdf_on_grid
 from couplekit.scene.mesh import REGION_MARGIN, point_triangle_distance
 from couplekit.scene.model import Geometry
 
+sys.path.insert(0, str(Path(__file__).parent))
+from sim_scenes import TINY_SAND_TOML  # noqa: E402
+
 SECONDS, BYTES, SAMPLES = 10.0, 300e6, 1_000_000
 _FACES = [(1, 2, 4), (1, 4, 3), (5, 7, 8), (5, 8, 6), (1, 5, 6), (1, 6, 2), (3, 4, 8), (3, 8, 7), (1, 3, 7),
           (1, 7, 5), (2, 6, 8), (2, 8, 4)]  # fmt: skip
 """The 12 triangles of /tmp/fuzz/bigcube.obj, the repro's mesh (1-based OBJ indices of the corners below)."""
 
-_SCENE = """
-[domain]
-size = [0.06, 0.06, 0.06]
-dx = 0.005
-
-[time]
-dt = 2e-4
-frame_duration = 1e-3
-frames = 2
-
-[sand]
-youngs_modulus = 1e5
-
-[outputs]
-preview = false
-
-[[bodies]]
-kind = "sand"
-velocity = [0.0, 0.0, -0.5]
-[bodies.geometry]
-type = "box"
-min = [0.02, 0.02, 0.03]
-max = [0.04, 0.04, 0.045]
-
+_SCENE = (
+    TINY_SAND_TOML
+    + """
 [[bodies]]
 kind = "obstacle"
 [bodies.geometry]
 """
+)
 
 
 def _cube_obj(lo, hi) -> str:
