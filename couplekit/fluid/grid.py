@@ -294,6 +294,15 @@ def slip_wall_layers(odd_floor: bool) -> int:
     return SLIP_WALL_LAYERS_ODD_FLOOR if odd_floor else SLIP_WALL_LAYERS
 
 
+def wrap_interior(a: np.ndarray, axis: int, cells: int) -> np.ndarray:
+    """The padded array ``a``'s interior along ``axis`` (its ghost layers dropped) with ``cells`` layers of it
+    wrapped onto both sides: what a periodic axis shows a stencil or a distance that reaches ``cells`` deep."""
+    inner = np.take(a, np.arange(1, a.shape[axis] - 1), axis=axis)
+    pad = [(0, 0)] * a.ndim
+    pad[axis] = (cells, cells)
+    return np.pad(inner, pad, mode="wrap")
+
+
 def slip_cells(flags: np.ndarray, periodic: tuple[bool, bool, bool], layers: int = SLIP_WALL_LAYERS) -> np.ndarray:
     """Padded uint8 mask of the fluid cells with no wall, inflow or solid cell within Chebyshev distance
     ``layers`` (every cell there a stencil cell: fluid or outflow ghost), the cells where Eq. 39 keeps its slip
@@ -310,10 +319,7 @@ def slip_cells(flags: np.ndarray, periodic: tuple[bool, bool, bool], layers: int
     if d > 0:
         for axis, wraps in zip((2, 1, 0), periodic, strict=True):  # x, y, z = array axes 2, 1, 0
             if wraps:
-                inner = np.take(ext, np.arange(1, ext.shape[axis] - 1), axis=axis)
-                pad = [(0, 0)] * 3
-                pad[axis] = (d, d)
-                ext = np.pad(inner, pad, mode="wrap")
+                ext = wrap_interior(ext, axis, d)
             else:
                 pad = [(0, 0)] * 3
                 pad[axis] = (d - 1, d - 1)

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .grid import FLUID, INTERIOR
+from .grid import FLUID, INTERIOR, wrap_interior
 
 MIN_GAP_CELLS = 8
 """The narrowest fluid gap between boundary cells along an axis at which the ramp is accepted (module docstring)."""
@@ -43,10 +43,7 @@ def boundary_mask(flags: np.ndarray, periodic: tuple[bool, bool, bool], extend: 
     mask = flags != FLUID
     for axis, wraps in zip((2, 1, 0), periodic, strict=True):  # x, y, z = array axes 2, 1, 0
         if wraps:
-            inner = np.take(mask, np.arange(1, mask.shape[axis] - 1), axis=axis)
-            pad = [(0, 0)] * 3
-            pad[axis] = (extend, extend)
-            mask = np.pad(inner, pad, mode="wrap")
+            mask = wrap_interior(mask, axis, extend)
     return mask
 
 
