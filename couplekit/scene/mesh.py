@@ -459,11 +459,26 @@ def open_edges(vertices: np.ndarray, faces: np.ndarray) -> int:
     return int(np.count_nonzero(counts % 2))
 
 
+def repeated_triangles(vertices: np.ndarray, faces: np.ndarray) -> int:
+    """Triangles given more than once (the same three vertices, in any order or orientation, vertices welded as
+    in :func:`open_edges`): a closed surface with its faces repeated still has every edge used an even number of
+    times, but the parity test of :meth:`TriangleMesh.inside` then counts every crossing twice and finds no
+    inside at all. The number of surplus copies."""
+    v = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+    _, weld = np.unique(v, axis=0, return_inverse=True)
+    f = np.sort(weld.reshape(-1)[np.asarray(faces, dtype=np.int64).reshape(-1, 3)], axis=1)
+    f = f[(f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2])]  # degenerate triangles enclose nothing
+    if f.size == 0:
+        return 0
+    return int(len(f) - len(np.unique(f, axis=0)))
+
+
 def load_mesh(path: str | Path, sample_spacing: float | None = None) -> TriangleMesh:
     """Read a closed triangle mesh (OBJ, STL, PLY, or any format meshio reads) as a :class:`TriangleMesh`.
 
     Raises ValueError for a file meshio cannot read (whatever meshio raised is in the message), a mesh without
-    triangles or quads, non-finite vertices, or an open surface (:func:`open_edges`)."""
+    triangles or quads, non-finite vertices, an open surface (:func:`open_edges`) or repeated triangles
+    (:func:`repeated_triangles`)."""
     import contextlib
     import io
 
@@ -499,6 +514,13 @@ def load_mesh(path: str | Path, sample_spacing: float | None = None) -> Triangle
             f"{path}: the mesh is not closed (watertight): {holes} edges belong to one triangle only (or an odd "
             "number), so its inside is undefined; close the holes (e.g. Blender's 'Fill Holes' or MeshLab's "
             "'Close Holes')"
+        )
+    twice = repeated_triangles(points, faces)
+    if twice:
+        raise ValueError(
+            f"{path}: {twice} triangles are given more than once (the same three vertices): the inside test counts "
+            "each crossing of a repeated face twice, so the solid would vanish; remove the duplicate faces (e.g. "
+            "Blender's 'Merge by Distance' and 'Delete Loose', MeshLab's 'Remove Duplicate Faces')"
         )
     mesh = TriangleMesh(points, faces, sample_spacing)
     mesh.source = str(path)
