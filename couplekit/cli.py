@@ -77,20 +77,28 @@ def _cmd_info(args: argparse.Namespace) -> int:
     return 0 if all(r.ok for r in results) else 1
 
 
+def _with_sets(scene, args: argparse.Namespace):
+    """``scene`` with the ``--set KEY=VALUE`` options of ``args`` applied (``with_settings``; relative files
+    resolve against the scene file's folder); unchanged without any."""
+    from .simulation import parse_setting, with_settings
+
+    if not args.set:
+        return scene
+    return with_settings(scene, dict(parse_setting(s) for s in args.set), base_dir=Path(args.scene).parent)
+
+
 def _cmd_validate(args: argparse.Namespace) -> int:
     """Exit 0 valid, 2 invalid, 3 refused with ``run``'s message and exit code: an effect the coupling cannot
     switch off yet, or a memory estimate beyond what any machine holds.  What ``run`` refuses on this machine
     only (its memory) is noted with ``run``'s message, exit 0: the same file validates alike on every host."""
     from .assembly import CouplingUnavailableError, check_odd_ramp_gaps, check_run, stability_cautions
     from .scene import Scene, SceneError
-    from .simulation import InsufficientMemoryError, _gib, parse_setting, with_settings
+    from .simulation import InsufficientMemoryError, _gib
     from .sweep.keys import KeyPathError
 
     any_machine = 2.0**44  # 16 TiB: more than the memory of any single host or device couplekit runs on
     try:
-        scene = Scene.load(args.scene)
-        if args.set:
-            scene = with_settings(scene, dict(parse_setting(s) for s in args.set), base_dir=Path(args.scene).parent)
+        scene = _with_sets(Scene.load(args.scene), args)
     except SceneError as exc:
         print(exc, file=sys.stderr)
         return 2
@@ -165,14 +173,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from .io.checkpoint import CheckpointError
     from .io.outputs import OutputFolderError, default_output, prepare_output
     from .scene import Scene, SceneError
-    from .simulation import (
-        CouplingUnavailableError,
-        InsufficientMemoryError,
-        Simulation,
-        parse_setting,
-        with_scheduler,
-        with_settings,
-    )
+    from .simulation import CouplingUnavailableError, InsufficientMemoryError, Simulation, with_scheduler
     from .sweep.keys import KeyPathError
 
     for name in ("frames", "threads"):
@@ -191,7 +192,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
             if args.resume:
                 print("error: --set cannot change a resumed run (the checkpoint keeps its scene)", file=sys.stderr)
                 return 2
-            scene = with_settings(scene, dict(parse_setting(s) for s in args.set), base_dir=Path(args.scene).parent)
+            scene = _with_sets(scene, args)
         # the output folder before anything is allocated: a used one is refused unless resumed or overwritten
         out = prepare_output(
             args.out or scene.outputs.directory or default_output(scene.name),

@@ -38,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["save_checkpoint", "load_checkpoint", "CheckpointError", "FORMAT", "dataset_checksum"]
+__all__ = ["save_checkpoint", "load_checkpoint", "checkpoint_scene", "CheckpointError", "FORMAT", "dataset_checksum"]
 
 FORMAT = "couplekit-checkpoint"
 VERSION = 3
@@ -123,28 +123,45 @@ def _json(text: str, path, name: str) -> dict:
     return value
 
 
+def _open(path):
+    import h5py
+
+    try:
+        return h5py.File(path, "r")
+    except OSError as exc:
+        raise CheckpointError(f"{path}: not a readable HDF5 file ({exc})") from None
+
+
+def _header(f, path) -> tuple[dict, dict, int]:
+    """(scene dict, meta, version) of an open checkpoint, its format, version and checksum verified."""
+    if f.attrs.get("format") != FORMAT:
+        raise CheckpointError(f"{path}: not a couplekit checkpoint (format attribute {f.attrs.get('format')!r})")
+    try:
+        version = int(f.attrs["version"])
+    except (KeyError, TypeError, ValueError):
+        raise CheckpointError(f"{path}: the checkpoint has no readable version attribute") from None
+    if version not in READABLE:
+        raise CheckpointError(f"{path}: checkpoint version {version} (this couplekit reads {READABLE})")
+    scene_text, meta_text = _attr_text(f, path, "scene"), _attr_text(f, path, "meta")
+    if version >= 2 and _attr_text(f, path, "checksum") != _text_checksum(scene_text, meta_text):
+        raise CheckpointError(f"{path}: the scene or metadata was changed after the checkpoint was written")
+    return _json(scene_text, path, "scene"), _json(meta_text, path, "metadata"), version
+
+
+def checkpoint_scene(path: str | Path) -> dict:
+    """The scene dict stored in a checkpoint, verified as :func:`load_checkpoint` verifies it, without reading
+    the solver arrays; :class:`CheckpointError` naming the file and the defect."""
+    with _open(path) as f:
+        return _header(f, path)[0]
+
+
 def load_checkpoint(path: str | Path) -> tuple[dict, dict[str, dict[str, np.ndarray]], dict]:
     """(scene dict, states, meta) of a checkpoint written by :func:`save_checkpoint`, verified (module
     docstring); raises :class:`CheckpointError` naming the file and the defect."""
     import h5py
 
-    try:
-        f = h5py.File(path, "r")
-    except OSError as exc:
-        raise CheckpointError(f"{path}: not a readable HDF5 file ({exc})") from None
-    with f:
-        if f.attrs.get("format") != FORMAT:
-            raise CheckpointError(f"{path}: not a couplekit checkpoint (format attribute {f.attrs.get('format')!r})")
-        try:
-            version = int(f.attrs["version"])
-        except (KeyError, TypeError, ValueError):
-            raise CheckpointError(f"{path}: the checkpoint has no readable version attribute") from None
-        if version not in READABLE:
-            raise CheckpointError(f"{path}: checkpoint version {version} (this couplekit reads {READABLE})")
-        scene_text, meta_text = _attr_text(f, path, "scene"), _attr_text(f, path, "meta")
-        if version >= 2 and _attr_text(f, path, "checksum") != _text_checksum(scene_text, meta_text):
-            raise CheckpointError(f"{path}: the scene or metadata was changed after the checkpoint was written")
-        scene, meta = _json(scene_text, path, "scene"), _json(meta_text, path, "metadata")
+    with _open(path) as f:
+        scene, meta, version = _header(f, path)
         if "step" not in meta:
             raise CheckpointError(f"{path}: the checkpoint's metadata has no step count")
         states: dict[str, dict[str, np.ndarray]] = {}

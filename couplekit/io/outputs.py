@@ -108,19 +108,17 @@ def _folder_run(out: Path) -> tuple[str | None, str | None]:
         return marker.get("scene"), marker.get("fingerprint")
     except (OSError, ValueError, AttributeError):
         pass
+    from .checkpoint import CheckpointError, checkpoint_scene
+
     for name in ("checkpoint.h5", "interrupted.h5", "last_good.h5"):
         path = out / name
         if not path.is_file():
             continue
         try:
-            import h5py
-
-            with h5py.File(path, "r") as f:
-                text = f.attrs["scene"]
-            scene = json.loads(text.decode() if isinstance(text, bytes) else str(text))
-            return scene.get("scene", {}).get("name"), scene_fingerprint(scene)
-        except Exception:  # a damaged or foreign file: it tells nothing
+            scene = checkpoint_scene(path)
+        except CheckpointError:  # a damaged or foreign file: it tells nothing
             continue
+        return scene.get("scene", {}).get("name"), scene_fingerprint(scene)
     return None, None
 
 

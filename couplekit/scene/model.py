@@ -1691,6 +1691,16 @@ def _shapes_of_kind(built: list[tuple[int, Body]], kind: str, domain: Domain):
             yield i, b, shape, np.maximum(lo, 0.0), np.minimum(hi, size)
 
 
+def _inside_obstacles(i: int, body: Body, obstacles, cutters, consequence: str) -> Problem:
+    """The problem of body ``i`` lying wholly inside the ``cutters`` (among ``obstacles``: (index, shape))."""
+    names = ", ".join(f"bodies[{j}]" for j, s in obstacles if s in cutters)
+    return Problem(
+        f"bodies[{i}].geometry",
+        f"the {body.kind} body {body.name!r} lies wholly inside obstacles ({names}): {consequence}",
+        f"move the {body.kind} body out of the obstacle, or the obstacle away",
+    )
+
+
 def _check_seeding(built: list[tuple[int, Body]], domain: Domain, sand: Sand, problems: list[Problem]) -> None:
     """Every sand body gets particles: seeded as :func:`couplekit.assembly.build_sand` seeds it (the seeding
     lattice over its bounding box, less what lies inside an obstacle), searched cheaply (:func:`_seeds_any`)."""
@@ -1712,13 +1722,9 @@ def _check_seeding(built: list[tuple[int, Body]], domain: Domain, sand: Sand, pr
             continue
         spacing = domain.dx / k
         if alone:
-            names = ", ".join(f"bodies[{j}]" for j, s in obstacles if s in cutters)
             problems.append(
-                Problem(
-                    f"bodies[{i}].geometry",
-                    f"the sand body {b.name!r} lies wholly inside obstacles ({names}): no particle would be seeded "
-                    "(particles are not seeded inside obstacles)",
-                    "move the sand body out of the obstacle, or the obstacle away",
+                _inside_obstacles(
+                    i, b, obstacles, cutters, "no particle would be seeded (particles are not seeded inside obstacles)"
                 )
             )
         else:
@@ -1770,15 +1776,7 @@ def _check_fluid_room(built: list[tuple[int, Body]], domain: Domain, problems: l
         except Exception:
             continue
         if inside_only:
-            names = ", ".join(f"bodies[{j}]" for j, s in obstacles if s in hits)
-            problems.append(
-                Problem(
-                    f"bodies[{i}].geometry",
-                    f"the water body {b.name!r} lies wholly inside obstacles ({names}): its water would be in solid "
-                    "cells",
-                    "move the water body out of the obstacle, or the obstacle away",
-                )
-            )
+            problems.append(_inside_obstacles(i, b, obstacles, hits, "its water would be in solid cells"))
 
 
 def _check_sand_overlaps(built: list[tuple[int, Body]], domain: Domain, sand: Sand, problems: list[Problem]) -> None:
