@@ -29,22 +29,30 @@
 // live through them and the fp16 mixture variants spilled 4-8 B on sm_80 / sm_90 (measured).
 // GUARD = 1 (host wall rows): every cell of the chunk goes through the arithmetic; p is written only where bit 0
 // of the mask says FLUID, elsewhere its value is kept (a blend, no branch: lbm_collide_stream's scheme).
-template <int ODD, int MODE, int SCALAR, int GPU = 0, int GUARD = 0>
+// FSUM = 1: s0 = Σ_j (f_j - w_j) is read from `fsum` (lbm_momentum wrote it from the same populations, in the
+// same order, so bitwise the same value) instead of summed from the 27 loads: the coupled step's pressure update
+// does not read f again (FluidSolver.current_velocity, keep_fsum).
+template <int ODD, int MODE, int SCALAR, int GPU = 0, int GUARD = 0, int FSUM = 0>
 LBM_INLINE void lbm_pressure_cell(const long long c, const ck_store_t* RESTRICT f, const unsigned char* RESTRICT flags,
                                   const float* RESTRICT vel, const float* RESTRICT phi, const float* RESTRICT eps,
-                                  const float* RESTRICT sand_v, float* RESTRICT p, const int px, const long long pxy,
-                                  const long long N, const float rho_h, const float rho_l, unsigned int mask,
-                                  unsigned int slip_on, const int odd = 0,
+                                  const float* RESTRICT sand_v, const float* RESTRICT fsum, float* RESTRICT p,
+                                  const int px, const long long pxy, const long long N, const float rho_h,
+                                  const float rho_l, unsigned int mask, unsigned int slip_on, const int odd = 0,
                                   const unsigned char* RESTRICT slip_cells = nullptr) {
-    float fj[27];
-    if (GPU ? odd != 0 : ODD != 0)
-        lbm_load<1, SCALAR>(f, c, N, px, pxy, fj);
-    else
-        lbm_load<0, SCALAR>(f, c, N, px, pxy, fj);
     float s0 = 0.f;
+    if (FSUM) {
+        s0 = fsum[c];
+        (void)f, (void)odd;
+    } else {
+        float fj[27];
+        if (GPU ? odd != 0 : ODD != 0)
+            lbm_load<1, SCALAR>(f, c, N, px, pxy, fj);
+        else
+            lbm_load<0, SCALAR>(f, c, N, px, pxy, fj);
 #define LBM_SUM(q) s0 += fj[q];
-    LBM_FOR27(LBM_SUM)
+        LBM_FOR27(LBM_SUM)
 #undef LBM_SUM
+    }
     // 1 - sum f = -sum (f - w): the stored populations are f - w (lbm_core.cuh), sum w = 1.  Written
     // `0.f - s0`: with `-s0` (or a negative accumulation) ptxas spilled 8 B on sm_80 in the two-phase
     // mixture variant; this form builds with the registers of the former `1.f - s0` (124 / 128)
@@ -94,14 +102,16 @@ LBM_INLINE void lbm_pressure_cell(const long long c, const ck_store_t* RESTRICT 
     p[c] = GUARD ? ck_select(mask & 1u, pn, pc) : pn;
 }
 
+// use_fsum != 0: s0 from `fsum` (padded, Σ_j (f_j - w_j) of these populations, lbm_momentum), f not read.
 KERNEL void lbm_macro_pressure(const long long n, const ck_store_t* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
                                const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                                const float* RESTRICT vel /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
                                const float* RESTRICT phi, const float* RESTRICT eps, const float* RESTRICT sand_v,
-                               const unsigned char* RESTRICT slip_cells,
-                               float* RESTRICT p /* size: (nx + 2) * (ny + 2) * (nz + 2) */, const int parity, const int nx,
-                               const int ny, const int nz, const float rho_h, const float rho_l) {
-#define LBM_P_ARGS(px, pxy, N) f, flags, vel, phi, eps, sand_v, p, px, pxy, N, rho_h, rho_l
+                               const unsigned char* RESTRICT slip_cells, const float* RESTRICT fsum,
+                               float* RESTRICT p /* size: (nx + 2) * (ny + 2) * (nz + 2) */, const int parity,
+                               const int use_fsum, const int nx, const int ny, const int nz, const float rho_h,
+                               const float rho_l) {
+#define LBM_P_ARGS(px, pxy, N) f, flags, vel, phi, eps, sand_v, fsum, p, px, pxy, N, rho_h, rho_l
 #if CK_ON_GPU
     const int odd = parity & 1;
     FOR_EACH_CELL(x, y, z, nx, ny, nz) {
@@ -113,7 +123,10 @@ KERNEL void lbm_macro_pressure(const long long n, const ck_store_t* RESTRICT f /
         const long long N = pxy * (nz + 2);
         const long long c = (x + 1) + px * (long long)(y + 1) + pxy * (z + 1);
         if (flags[c] != FLAG_FLUID) continue;
-        lbm_pressure_cell<0, LBM_NB_MASK, 1, 1>(c, LBM_P_ARGS(px, pxy, N), 0u, false, odd, slip_cells);
+        if (use_fsum)
+            lbm_pressure_cell<0, LBM_NB_MASK, 1, 1, 0, 1>(c, LBM_P_ARGS(px, pxy, N), 0u, false, odd, slip_cells);
+        else
+            lbm_pressure_cell<0, LBM_NB_MASK, 1, 1>(c, LBM_P_ARGS(px, pxy, N), 0u, false, odd, slip_cells);
     }
 #else
     // host: the row scheme of lbm_collide_stream.  A row whose cells are all fluid (with the mixture's stencils:
@@ -132,7 +145,7 @@ KERNEL void lbm_macro_pressure(const long long n, const ck_store_t* RESTRICT f /
 #define LBM_P_ROWS(row) lbm_row_fluid(flags, row, 1, nx)
 #define LBM_P_SLIP(i) 0u
 #endif
-#define LBM_P_LOOP(ODD)                                                                                   \
+#define LBM_P_LOOP(ODD, FSUM)                                                                             \
     CK_PRAGMA(omp parallel for collapse(2) schedule(static))                                              \
     for (int z = 0; z < nz; ++z)                                                                          \
         for (int y = 0; y < ny; ++y) {                                                                    \
@@ -152,21 +165,27 @@ KERNEL void lbm_macro_pressure(const long long n, const ck_store_t* RESTRICT f /
                 if (bulk) {                                                                               \
                     CK_PRAGMA(omp simd)                                                                   \
                     for (int i = 0; i < len; ++i)                                                         \
-                        lbm_pressure_cell<ODD, LBM_NB_BULK, 0>(c0 + i, LBM_P_ARGS(px, pxy, N), LBM_FULL_MASK, \
-                                                               LBM_P_SLIP(i));                            \
+                        lbm_pressure_cell<ODD, LBM_NB_BULK, 0, 0, 0, FSUM>(c0 + i, LBM_P_ARGS(px, pxy, N),    \
+                                                                           LBM_FULL_MASK, LBM_P_SLIP(i)); \
                     continue;                                                                             \
                 }                                                                                         \
                 lbm_link_masks(flags, c0, len, px, pxy, masks, scratch);                                  \
                 CK_PRAGMA(omp simd)                                                                       \
                 for (int i = 0; i < len; ++i)                                                             \
-                    lbm_pressure_cell<ODD, LBM_NB_MASK, 0, 0, 1>(c0 + i, LBM_P_ARGS(px, pxy, N), masks[i],    \
-                                                                 LBM_P_SLIP(i));                          \
+                    lbm_pressure_cell<ODD, LBM_NB_MASK, 0, 0, 1, FSUM>(c0 + i, LBM_P_ARGS(px, pxy, N),        \
+                                                                       masks[i], LBM_P_SLIP(i));          \
             }                                                                                             \
         }
-    if (parity & 1) {
-        LBM_P_LOOP(1)
+    if (use_fsum) {
+        if (parity & 1) {
+            LBM_P_LOOP(1, 1)
+        } else {
+            LBM_P_LOOP(0, 1)
+        }
+    } else if (parity & 1) {
+        LBM_P_LOOP(1, 0)
     } else {
-        LBM_P_LOOP(0)
+        LBM_P_LOOP(0, 0)
     }
 #undef LBM_P_LOOP
 #undef LBM_P_ROWS
@@ -294,11 +313,13 @@ KERNEL void lbm_filter_wall_rule(const long long n, const float* RESTRICT p /* s
 
 // out = sum_j f_j c_j of the current populations (read rule of the parity, no force shift) in interior fluid
 // cells: the fluid velocity "now", as the sand-fluid exchange needs it (odd parity: ghosts and wall links
-// must have been prepared as before an odd step)
+// must have been prepared as before an odd step).  want_fsum != 0: also fsum = sum_j (f_j - w_j) there, summed
+// in lbm_pressure_cell's order (q = 0 .. 26), so that the next pressure update can take it instead of reading
+// f again (use_fsum of lbm_macro_pressure); fsum's other cells are left as they are.
 KERNEL void lbm_momentum(const long long n, const ck_store_t* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
                          const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
-                         float* RESTRICT out /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */, const int parity,
-                         const int nx, const int ny, const int nz) {
+                         float* RESTRICT out /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */, float* RESTRICT fsum,
+                         const int parity, const int want_fsum, const int nx, const int ny, const int nz) {
     const int odd = parity & 1;
 #define LBM_MOM(q) ux += CX27[q] * fj[q], uy += CY27[q] * fj[q], uz += CZ27[q] * fj[q];
 #if CK_ON_GPU
@@ -319,6 +340,13 @@ KERNEL void lbm_momentum(const long long n, const ck_store_t* RESTRICT f /* size
         out[c] = ux;
         out[N + c] = uy;
         out[2 * N + c] = uz;
+        if (want_fsum) {
+            float s0 = 0.f;
+#define LBM_FSUM(q) s0 += fj[q];
+            LBM_FOR27(LBM_FSUM)
+#undef LBM_FSUM
+            fsum[c] = s0;
+        }
     }
 #else
     // host: rows in parallel, each x loop over every cell of the row (`omp simd`, the parity a template
@@ -333,8 +361,9 @@ KERNEL void lbm_momentum(const long long n, const ck_store_t* RESTRICT f /* size
     {                                                                                       \
         const float v_ = CK_LOAD(f, LBM_PULL_INDEX(mom_odd, q, c, N, px, pxy), CK_F_SCALE); \
         ux += CX27[q] * v_, uy += CY27[q] * v_, uz += CZ27[q] * v_;                         \
+        if (mom_fsum) s0 += v_;                                                             \
     }
-#define LBM_MOM_LOOP(ODD)                                                                          \
+#define LBM_MOM_LOOP(ODD, FSUM)                                                                    \
     CK_PRAGMA(omp parallel for collapse(2) schedule(static))                                       \
     for (int z = 0; z < nz; ++z)                                                                   \
         for (int y = 0; y < ny; ++y) {                                                             \
@@ -350,19 +379,27 @@ KERNEL void lbm_momentum(const long long n, const ck_store_t* RESTRICT f /* size
                 CK_PRAGMA(omp simd)                                                                \
                 for (int i = 0; i < len; ++i) {                                                    \
                     const long long c = c0 + i;                                                    \
-                    constexpr int mom_odd = ODD;                                                   \
-                    float ux = 0.f, uy = 0.f, uz = 0.f;                                            \
+                    constexpr int mom_odd = ODD, mom_fsum = FSUM;                                  \
+                    float ux = 0.f, uy = 0.f, uz = 0.f, s0 = 0.f;                                  \
+                    if (FSUM) s0 += CK_LOAD(f, LBM_PULL_INDEX(mom_odd, 0, c, N, px, pxy), CK_F_SCALE); \
                     LBM_FOR26(LBM_MOM_AT)                                                          \
                     out[c] = ck_select(live[i], ux, out[c]);                                       \
                     out[N + c] = ck_select(live[i], uy, out[N + c]);                               \
                     out[2 * N + c] = ck_select(live[i], uz, out[2 * N + c]);                       \
+                    if (FSUM) fsum[c] = ck_select(live[i], s0, fsum[c]);                           \
                 }                                                                                  \
             }                                                                                      \
         }
-    if (odd) {
-        LBM_MOM_LOOP(1)
+    if (want_fsum) {
+        if (odd) {
+            LBM_MOM_LOOP(1, 1)
+        } else {
+            LBM_MOM_LOOP(0, 1)
+        }
+    } else if (odd) {
+        LBM_MOM_LOOP(1, 0)
     } else {
-        LBM_MOM_LOOP(0)
+        LBM_MOM_LOOP(0, 0)
     }
 #undef LBM_MOM_LOOP
 #undef LBM_MOM_AT

@@ -37,7 +37,10 @@ KERNEL_TRAFFIC: dict[str, Traffic] = {
     ),
     "lbm_macro_pressure": Traffic(27 * F4 + FLAG + 2 * F4 + F4, "cell", "f read, flags, p read+write, phi"),
     "lbm_pressure_filter": Traffic(F4 + F4 + FLAG, "cell", "p read, p-bar write, flags"),
-    "lbm_momentum": Traffic(27 * F4 + FLAG + 3 * F4, "cell", "f read, flags, momentum write"),
+    # coupled steps: Σ f c for the exchange, and Σ (f − w) kept for the pressure update (FluidSolver.current_velocity)
+    "lbm_momentum": Traffic(27 * F4 + FLAG + 3 * F4 + F4, "cell", "f read, flags, momentum write, Σ(f − w) write"),
+    # the coupled step's pressure update: Σ (f − w) from lbm_momentum's pass instead of the 27 populations
+    "lbm_macro_pressure (kept Σ)": Traffic(F4 + FLAG + 2 * F4 + F4, "cell", "Σ(f − w) read, flags, p read+write, phi"),
     "phase_macroscopic": Traffic(7 * F4 + F4 + FLAG, "cell", "h read, phi write, flags"),
     # a diagnostic now (FluidSolver.phase_gradients), not a stage of the step
     "phase_gradients": Traffic(F4 + 3 * F4 + F4 + FLAG, "cell", "phi read, grad write, mu write, flags"),

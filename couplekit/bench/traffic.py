@@ -23,7 +23,14 @@ Launch overhead: 5 µs per kernel launch (CUDA launch latency on a busy stream),
 
 from __future__ import annotations
 
-from ..backend.traffic import BANDWIDTH_EFFICIENCY, GPU, GPUS, PARTICLE_BANDWIDTH_EFFICIENCY, two_phase_step_bytes
+from ..backend.traffic import (
+    BANDWIDTH_EFFICIENCY,
+    GPU,
+    GPUS,
+    KERNEL_TRAFFIC,
+    PARTICLE_BANDWIDTH_EFFICIENCY,
+    two_phase_step_bytes,
+)
 
 F32 = 4
 
@@ -42,11 +49,14 @@ FLUID_STAGE_BYTES_PER_CELL = {
 }
 # mixture inputs read by the collide kernel when coupled: ε, sand velocity, force
 MIXTURE_BYTES_PER_CELL = (1 + 3 + 3) * F32
+# the coupled step's pressure update: Σ (f − w) kept by the exchange velocity's pass (fluid_velocity) instead of
+# f, plus its mixture inputs (ε, sand velocity, the last collision's u, the slip-cell byte)
+COUPLED_PRESSURE_BYTES_PER_CELL = KERNEL_TRAFFIC["lbm_macro_pressure (kept Σ)"].bytes + (1 + 3 + 3) * F32 + 1
 
 # ---------------------------------------------------------------------------------------------- coupling
 COUPLING_STAGE_BYTES_PER_CELL = {
     "volume_fractions": 2 * F32,  # node volume read, ε̃ write (the sand and water fractions are not stored)
-    "fluid_velocity": 3 * F32 + 3 * F32 + F32,  # u read, fluid_u write, ε
+    "fluid_velocity": KERNEL_TRAFFIC["lbm_momentum"].bytes,  # f read, Σ f c and Σ (f − w) written
     "drag_buoyancy": 3 * F32 + 3 * F32 + F32 + F32,  # force write, sand velocity read, ε, p
     "retention_source": 4 * F32 + F32,  # ε, ε_prev, φ, source write, d_bound
     "sand_velocity": 3 * F32 + F32,  # sand velocity write, mass read
@@ -91,6 +101,8 @@ def stage_bytes(cells: float, particles: float, two_phase: bool = True, coupled:
 
     if cells:
         for s, b in FLUID_STAGE_BYTES_PER_CELL.items():
+            if coupled and s == "lbm_pressure":
+                b = COUPLED_PRESSURE_BYTES_PER_CELL
             if two_phase or not s.startswith(("phase", "volume")):
                 add(s, b * cells)
         if coupled:

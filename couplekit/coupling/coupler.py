@@ -140,8 +140,9 @@ class SandFluidCoupler:
     def fluid_velocity(self) -> None:
         """``fluid_u`` := Σ_j f_j c_j of the fluid's current populations on interior fluid cells (solid cells
         and ghosts keep what the buffer held, the sand velocity; no coupling stage reads them there):
-        FluidSolver.current_velocity (module docstring)."""
-        self.fluid.current_velocity(out=self.fluid_u)
+        FluidSolver.current_velocity (module docstring). The same pass keeps Σ_j (f_j − w_j) for the fluid
+        step's pressure update (``keep_fsum``), which then does not read the populations again."""
+        self.fluid.current_velocity(out=self.fluid_u, keep_fsum=True)
 
     def fractions(self, share: float = 1.0) -> None:
         """ε (Eq. 25), bound water (Eqs. 53–56, retention) and the porosity into ``fluid.fluid_fraction``.

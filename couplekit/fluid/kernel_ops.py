@@ -130,9 +130,10 @@ class KernelOps:
         return nx * ny * nz, nx, ny, nz
 
     def macro_pressure(
-        self, f, flags, velocity, phi, eps, sand_v, slip, p, parity: int, rho_h: float, rho_l: float
+        self, f, flags, velocity, phi, eps, sand_v, slip, p, parity: int, rho_h: float, rho_l: float, fsum=None
     ) -> None:
-        """Eq. 39 pressure update in place (see ReferenceOps.macro_pressure)."""
+        """Eq. 39 pressure update in place (see ReferenceOps.macro_pressure; ``fsum``: Σ_j (f_j − w_j) of these
+        populations from :meth:`momentum`, read instead of f)."""
         n, nx, ny, nz = self._interior(flags)
         if parity & 1:
             self._wall_call(self._prefill, f, flags, velocity)
@@ -145,8 +146,10 @@ class KernelOps:
             self._or_dummy(eps, self.mixture),
             self._or_dummy(sand_v, self.mixture),
             slip if (self.mixture and slip is not None) else self._dummy_mask,
+            self._dummy if fsum is None else fsum,
             p,
             np.int32(parity),
+            np.int32(fsum is not None),
             np.int32(nx),
             np.int32(ny),
             np.int32(nz),
@@ -154,12 +157,16 @@ class KernelOps:
             np.float32(rho_l),
         )
 
-    def momentum(self, f, flags, velocity, out, parity: int) -> None:
-        """Σ_j f_j c_j of the current populations into ``out`` (see ReferenceOps.momentum)."""
+    def momentum(self, f, flags, velocity, out, parity: int, fsum=None) -> None:
+        """Σ_j f_j c_j of the current populations into ``out``, and Σ_j (f_j − w_j) into ``fsum`` if given (see
+        ReferenceOps.momentum)."""
         n, nx, ny, nz = self._interior(flags)
         if parity & 1:
             self._wall_call(self._prefill, f, flags, velocity)
-        self._momentum(n, f, flags, out, np.int32(parity), np.int32(nx), np.int32(ny), np.int32(nz))
+        self._momentum(
+            n, f, flags, out, self._dummy if fsum is None else fsum, np.int32(parity), np.int32(fsum is not None),
+            np.int32(nx), np.int32(ny), np.int32(nz),
+        )  # fmt: skip
 
     def pressure_filter(self, p, flags, pbar, axes=(True, True, True)) -> None:
         """Eq. 40 filter (see ReferenceOps.pressure_filter)."""

@@ -342,9 +342,13 @@ class ReferenceOps:
 
     # ------------------------------------------------------------------------------------------ stages
     def macro_pressure(
-        self, f, flags, velocity, phi, eps, sand_v, slip, p, parity: int, rho_h: float, rho_l: float
+        self, f, flags, velocity, phi, eps, sand_v, slip, p, parity: int, rho_h: float, rho_l: float, fsum=None
     ) -> None:
         """Pressure update, Eq. 39, in place on the interior fluid cells of ``p``.
+
+        ``fsum``: Σ_j (f_j − w_j) of the current populations (padded, from :meth:`momentum`), which then stands for
+        Σ_j f_j − 1 instead of a sum over ``f`` (the coupled step computes it with the exchange velocity, so the
+        pressure update does not read the populations again).
 
         p^{n+1} = p^n − c_s² ρ^{n+1} [(1 − Σ_j f_j) + (ε_s ∇·v + (u − v)·∇ε)/ε], with 1 − Σf ≈ ∇·u (Eq. 38),
         ε_s = 1 − ε the sand fraction, u the fluid velocity of Eq. 13 as the last collision wrote it
@@ -388,10 +392,12 @@ class ReferenceOps:
         0.03 m/s.  The term keeps its full weight in water, where the mixture continuity matters for the
         sand (air's drag on it is ~800× weaker).
         """
-        fi = self.load(f, flags, velocity, parity)
-        s0 = fi.sum(axis=0)
+        if fsum is None:
+            s0 = self.load(f, flags, velocity, parity).sum(axis=0)
+        else:
+            s0 = 1.0 + interior(fsum).astype(np.float64)  # Σ_j f_j = Σ_j (f_j − w_j) + Σ_j w_j, Σ_j w_j = 1
         rho = self._density(phi, rho_h, rho_l)
-        divergence = 1.0 - s0
+        divergence = 1.0 - s0  # Eq. 38: 1 − Σ_j f_j ≈ ∇·u
         if self.mixture:
             e = interior(eps).astype(np.float64)
             u = interior(velocity).astype(np.float64)  # Eq. 13 velocity of the last collision (docstring)
@@ -407,14 +413,18 @@ class ReferenceOps:
         new = interior(p).astype(np.float64) - CS2 * rho * divergence
         interior(p)[fluid] = new[fluid]
 
-    def momentum(self, f, flags, velocity, out, parity: int) -> None:
+    def momentum(self, f, flags, velocity, out, parity: int, fsum=None) -> None:
         """out = Σ_j f_j c_j of the current populations (Eq. 13 without the force shift) on interior fluid
-        cells: the velocity "now", between two steps, as the sand–fluid exchange needs it."""
+        cells: the velocity "now", between two steps, as the sand–fluid exchange needs it; and ``fsum`` (if given)
+        = Σ_j f_j − 1 = Σ_j (f_j − w_j) there, for :meth:`macro_pressure` (Eq. 38's 1 − Σ_j f_j with the sign
+        turned)."""
         fi = self.load(f, flags, velocity, parity)
         u = np.einsum("jd,j...->d...", C27.astype(np.float64), fi)
         fluid = interior(flags) == FLUID
         for d in range(3):
             interior(out[d])[fluid] = u[d][fluid]
+        if fsum is not None:
+            interior(fsum)[fluid] = (fi.sum(axis=0) - 1.0)[fluid]
 
     def pressure_filter(self, p, flags, pbar, axes=(True, True, True)) -> None:
         """Eq. 40: p̄ = Σ_j w_j p(x + c_j) on interior fluid cells, with :func:`local_average`'s wall rules (the

@@ -189,6 +189,52 @@ def test_momentum_matches_reference(cpu, boundaries, parity):
     assert np.abs(out_r).max() > 1e-2
 
 
+@pytest.mark.parametrize("effects", ["single", "all"])
+@pytest.mark.parametrize("shape", ["default", "wide"])
+@pytest.mark.parametrize("parity", [0, 1])
+def test_kept_population_sum_matches_reference_and_rereading(cpu, effects, shape, parity):
+    """momentum(fsum=...) keeps Σ_j (f_j − w_j) of the populations it reads (the reference's Σ f − 1 within
+    27 · 6e-8 of float32 round-off on sums ≤ 1), and a pressure update that takes it gives bitwise the p of one
+    that reads f (the host's vector rows and the 9-cell grid's short tails; cells outside the fluid keep their
+    values in ``fsum``)."""
+    b = {"default": BOUNDARY_SETS["mixed"], "wide": WIDE_X_WALLS}[shape]
+    kw = {"shape": (6, 7, 40)} if shape == "wide" else {}
+    ko, ro = KernelOps(cpu, **EFFECTS[effects]), ReferenceOps(**EFFECTS[effects])
+    sk = random_state(71 + parity, b, **kw)
+    sr = {k: v.copy() for k, v in sk.items()}
+    fsum_k = np.full(sk["p"].shape, 7.0, np.float32)
+    fsum_r = fsum_k.copy()
+    out = np.zeros_like(sk["velocity"])
+    ko.momentum(sk["f"], sk["flags"], sk["velocity"], out, parity, fsum=fsum_k)
+    ro.momentum(sr["f"], sr["flags"], sr["velocity"], out.copy(), parity, fsum=fsum_r)
+    fluid = sk["flags"] == 0
+    np.testing.assert_allclose(fsum_k[fluid], fsum_r[fluid], rtol=0, atol=2e-6)
+    assert np.all(fsum_k[~fluid] == 7.0) and np.abs(fsum_r[fluid]).max() > 1e-3
+    args = lambda s: (s["f"], s["flags"], s["velocity"], s["phi"], s["eps"], s["sand_v"], s["slip"])  # noqa: E731
+    p_read, p_kept, p_ref = sk["p"].copy(), sk["p"].copy(), sr["p"].copy()
+    ko.macro_pressure(*args(sk), p_read, parity, *PARAMS[:2])
+    ko.macro_pressure(*args(sk), p_kept, parity, *PARAMS[:2], fsum=fsum_k)
+    ro.macro_pressure(*args(sr), p_ref, parity, *PARAMS[:2], fsum=fsum_r)
+    assert p_kept.tobytes() == p_read.tobytes()
+    np.testing.assert_allclose(p_kept, p_ref, rtol=0, atol=5e-7)
+    assert np.abs(p_kept - sk["p"]).max() > 1e-5
+
+
+def test_kept_population_sum_with_fp16_storage_is_the_re_read_one(cpu):
+    """fp16 storage: the kept Σ (f − w) decodes the populations as the pressure update does (bitwise p)."""
+    ko = KernelOps(cpu, storage="fp16", **EFFECTS["all"])
+    for parity in (0, 1):
+        s = random_state(81 + parity, WIDE_X_WALLS, shape=(6, 7, 40))
+        s["f"] = to_stored(from_stored(s["f"]), "fp16")
+        fsum = np.zeros_like(s["p"])
+        ko.momentum(s["f"], s["flags"], s["velocity"], np.zeros_like(s["velocity"]), parity, fsum=fsum)
+        a, b = s["p"].copy(), s["p"].copy()
+        rest = (s["f"], s["flags"], s["velocity"], s["phi"], s["eps"], s["sand_v"], s["slip"])
+        ko.macro_pressure(*rest, a, parity, *PARAMS[:2])
+        ko.macro_pressure(*rest, b, parity, *PARAMS[:2], fsum=fsum)
+        assert a.tobytes() == b.tobytes()
+
+
 WIDE_X_WALLS = Boundaries({"x-": Face("wall"), "x+": Face("wall", velocity=(0.0, 0.02, 0.0))})
 
 
