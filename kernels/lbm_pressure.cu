@@ -32,7 +32,9 @@
 // FSUM = 1: s0 = Σ_j (f_j - w_j) is read from `fsum` (lbm_momentum wrote it from the same populations, in the
 // same order, so bitwise the same value) instead of summed from the 27 loads: the coupled step's pressure update
 // does not read f again (FluidSolver.current_velocity, keep_fsum).
-template <int ODD, int MODE, int SCALAR, int GPU = 0, int GUARD = 0, int FSUM = 0>
+// MIX = 0 in a CK_MIXTURE build: a host row without sand around it (lbm_rows_sand_free), whose mixture terms are
+// exactly 0; the single-fluid arithmetic, bitwise the same result.
+template <int ODD, int MODE, int SCALAR, int GPU = 0, int GUARD = 0, int FSUM = 0, int MIX = CK_MIXTURE>
 LBM_INLINE void lbm_pressure_cell(const long long c, const ck_store_t* RESTRICT f, const unsigned char* RESTRICT flags,
                                   const float* RESTRICT vel, const float* RESTRICT phi, const float* RESTRICT eps,
                                   const float* RESTRICT sand_v, const float* RESTRICT fsum, float* RESTRICT p,
@@ -58,6 +60,7 @@ LBM_INLINE void lbm_pressure_cell(const long long c, const ck_store_t* RESTRICT 
     // mixture variant; this form builds with the registers of the former `1.f - s0` (124 / 128)
     float divergence = 0.f - s0;
 #if CK_MIXTURE
+    if (MIX) {
     // u: the fluid velocity of Eq. 13 (with its half-force shift) from the last collision, not sum f c:
     // sum f c = u - a/2 puts -(a/2).grad eps / eps = (grad p - rho g).grad eps / (2 rho eps) into the
     // update, which grows a grid-scale mode where eps changes next to a wall (reference docstring)
@@ -88,6 +91,9 @@ LBM_INLINE void lbm_pressure_cell(const long long c, const ck_store_t* RESTRICT 
 #else
     divergence += ((1.f - e) * div_v + slip) / e;
 #endif
+    } else {
+        (void)vel, (void)eps, (void)sand_v, (void)slip_on, (void)slip_cells;
+    }
 #else
     (void)vel, (void)eps, (void)sand_v, (void)mask, (void)slip_on, (void)slip_cells;
 #endif
@@ -103,17 +109,20 @@ LBM_INLINE void lbm_pressure_cell(const long long c, const ck_store_t* RESTRICT 
 }
 
 // use_fsum != 0: s0 from `fsum` (padded, Σ_j (f_j - w_j) of these populations, lbm_momentum), f not read.
+// skip_sand_free != 0 (host, CK_MIXTURE): rows without sand around them skip the mixture's four stencils
+// (lbm_rows_sand_free; bitwise the same p).  The GPU ignores it.
 KERNEL void lbm_macro_pressure(const long long n, const ck_store_t* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
                                const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                                const float* RESTRICT vel /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
                                const float* RESTRICT phi, const float* RESTRICT eps, const float* RESTRICT sand_v,
                                const unsigned char* RESTRICT slip_cells, const float* RESTRICT fsum,
                                float* RESTRICT p /* size: (nx + 2) * (ny + 2) * (nz + 2) */, const int parity,
-                               const int use_fsum, const int nx, const int ny, const int nz, const float rho_h,
-                               const float rho_l) {
+                               const int use_fsum, const int skip_sand_free, const int nx, const int ny,
+                               const int nz, const float rho_h, const float rho_l) {
 #define LBM_P_ARGS(px, pxy, N) f, flags, vel, phi, eps, sand_v, fsum, p, px, pxy, N, rho_h, rho_l
 #if CK_ON_GPU
     const int odd = parity & 1;
+    (void)skip_sand_free;
     FOR_EACH_CELL(x, y, z, nx, ny, nz) {
         // the grid sizes through CK_PER_ITEM (common.cuh): on the GPU the 27 load offsets and the 4 gradients'
         // 26 neighbour offsets derived from them are recomputed where used, not hoisted out of the loop or
@@ -141,10 +150,34 @@ KERNEL void lbm_macro_pressure(const long long n, const ck_store_t* RESTRICT f /
 #if CK_MIXTURE
 #define LBM_P_ROWS(row) lbm_rows_all_fluid(flags, row, 0, nx + 1, px, pxy)
 #define LBM_P_SLIP(i) slipw[i]
+#define LBM_P_MIX(row) (!skip_sand_free || !lbm_rows_sand_free(eps, sand_v, row, nx, px, pxy, N))
 #else
 #define LBM_P_ROWS(row) lbm_row_fluid(flags, row, 1, nx)
 #define LBM_P_SLIP(i) 0u
+#define LBM_P_MIX(row) false
 #endif
+// the chunks of one row, MIX: the mixture's terms (1) or a sand-free row's (0, lbm_pressure_cell)
+#define LBM_P_CHUNKS(ODD, FSUM, MIX)                                                                      \
+    for (int x0 = lo; x0 <= hi; x0 += LBM_P_CHUNK) {                                                      \
+        const int len = hi + 1 - x0 < LBM_P_CHUNK ? hi + 1 - x0 : LBM_P_CHUNK;                            \
+        const long long c0 = row + x0;                                                                    \
+        if (MIX) {                                                                                        \
+            CK_PRAGMA(omp simd)                                                                           \
+            for (int i = 0; i < len; ++i) slipw[i] = slip_cells[c0 + i] != 0 ? 1u : 0u;                   \
+        }                                                                                                 \
+        if (bulk) {                                                                                       \
+            CK_PRAGMA(omp simd)                                                                           \
+            for (int i = 0; i < len; ++i)                                                                 \
+                lbm_pressure_cell<ODD, LBM_NB_BULK, 0, 0, 0, FSUM, MIX>(c0 + i, LBM_P_ARGS(px, pxy, N),       \
+                                                                        LBM_FULL_MASK, LBM_P_SLIP(i));    \
+            continue;                                                                                     \
+        }                                                                                                 \
+        lbm_link_masks(flags, c0, len, px, pxy, masks, scratch);                                          \
+        CK_PRAGMA(omp simd)                                                                               \
+        for (int i = 0; i < len; ++i)                                                                     \
+            lbm_pressure_cell<ODD, LBM_NB_MASK, 0, 0, 1, FSUM, MIX>(c0 + i, LBM_P_ARGS(px, pxy, N), masks[i], \
+                                                                    LBM_P_SLIP(i));                       \
+    }
 #define LBM_P_LOOP(ODD, FSUM)                                                                             \
     CK_PRAGMA(omp parallel for collapse(2) schedule(static))                                              \
     for (int z = 0; z < nz; ++z)                                                                          \
@@ -155,25 +188,10 @@ KERNEL void lbm_macro_pressure(const long long n, const ck_store_t* RESTRICT f /
             (void)slipw;                                                                                  \
             int lo = 1, hi = nx;                                                                          \
             if (!bulk) lbm_row_fluid_span(flags, row, nx, lo, hi);                                        \
-            for (int x0 = lo; x0 <= hi; x0 += LBM_P_CHUNK) {                                              \
-                const int len = hi + 1 - x0 < LBM_P_CHUNK ? hi + 1 - x0 : LBM_P_CHUNK;                    \
-                const long long c0 = row + x0;                                                            \
-                if (CK_MIXTURE) {                                                                         \
-                    CK_PRAGMA(omp simd)                                                                   \
-                    for (int i = 0; i < len; ++i) slipw[i] = slip_cells[c0 + i] != 0 ? 1u : 0u;           \
-                }                                                                                         \
-                if (bulk) {                                                                               \
-                    CK_PRAGMA(omp simd)                                                                   \
-                    for (int i = 0; i < len; ++i)                                                         \
-                        lbm_pressure_cell<ODD, LBM_NB_BULK, 0, 0, 0, FSUM>(c0 + i, LBM_P_ARGS(px, pxy, N),    \
-                                                                           LBM_FULL_MASK, LBM_P_SLIP(i)); \
-                    continue;                                                                             \
-                }                                                                                         \
-                lbm_link_masks(flags, c0, len, px, pxy, masks, scratch);                                  \
-                CK_PRAGMA(omp simd)                                                                       \
-                for (int i = 0; i < len; ++i)                                                             \
-                    lbm_pressure_cell<ODD, LBM_NB_MASK, 0, 0, 1, FSUM>(c0 + i, LBM_P_ARGS(px, pxy, N),        \
-                                                                       masks[i], LBM_P_SLIP(i));          \
+            if (LBM_P_MIX(row)) {                                                                         \
+                LBM_P_CHUNKS(ODD, FSUM, CK_MIXTURE)                                                       \
+            } else {                                                                                      \
+                LBM_P_CHUNKS(ODD, FSUM, 0)                                                                \
             }                                                                                             \
         }
     if (use_fsum) {
@@ -188,8 +206,10 @@ KERNEL void lbm_macro_pressure(const long long n, const ck_store_t* RESTRICT f /
         LBM_P_LOOP(0, 0)
     }
 #undef LBM_P_LOOP
+#undef LBM_P_CHUNKS
 #undef LBM_P_ROWS
 #undef LBM_P_SLIP
+#undef LBM_P_MIX
 #endif
 #undef LBM_P_ARGS
 }

@@ -20,6 +20,11 @@ from .storage import check_storage
 class KernelOps:
     """The fluid stages as kernels on ``backend`` (``cpu`` or ``cuda``); see :class:`ReferenceOps` for the maths."""
 
+    skip_sand_free_rows = True
+    """Host kernels of a mixture: rows with no sand in their 3 × 3-row neighbourhood (fluid fraction exactly 1,
+    sand velocity exactly 0) skip the mixture's stencils, whose terms are exactly 0 there (bitwise the same
+    results; ``lbm_rows_sand_free`` in kernels/lbm_core.cuh). False runs every row's stencils (tests compare)."""
+
     def __init__(
         self,
         backend: Backend,
@@ -150,6 +155,7 @@ class KernelOps:
             p,
             np.int32(parity),
             np.int32(fsum is not None),
+            np.int32(self.skip_sand_free_rows),
             np.int32(nx),
             np.int32(ny),
             np.int32(nz),
