@@ -28,18 +28,21 @@
 // the source of interior cell c (x, y, z) from its eps stencil; CPL_DIFF(q, nb) (defined by each path) is
 // eps[nb] - e where neighbour q (index nb) is a FLUID cell, else 0 (GPU: its flag, a predicated load; host: the
 // row chunk's widened flags and a blend), ISFLUID likewise for c, CPL_MAX_E(e) = fmaxf(e, 1e-6)
-#define CPL_SOURCE_CELL(ISFLUID)                                                                \
+// STENCIL = 0 (host rows whose 3 x 3-row neighbourhood has eps exactly 1): grad eps is exactly +0 there (each term
+// is w * 0, and +0 + -0 = +0), so the 26 terms are skipped and the same s results, bit for bit
+#define CPL_SOURCE_CELL_S(ISFLUID, STENCIL)                                                             \
     {                                                                                                   \
         const float e = eps[c];                                                                         \
         float gx = 0.f, gy = 0.f, gz = 0.f;                                                             \
         /* straight-line over the 26 neighbours: an inner loop would stop the host's x-loop vectoriser */ \
-        CPL_REP26(CPL_GRAD_TERM)                                                                        \
+        if (STENCIL) { CPL_REP26(CPL_GRAD_TERM) }                                                       \
         const float advect = u[c] * gx + u[N + c] * gy + u[2 * N + c] * gz;                             \
         const float inv_e = 1.f / CPL_MAX_E(e);                                                       \
         float s = -phi[c] * inv_e * ((e - eps_prev[c]) + advect); /* Eq. 45 */                         \
         CPL_RETENTION_TERM                                                                              \
         source[c] = ck_select(ISFLUID, s, 0.f); /* no early exit: keeps the host x loop vectorisable */ \
     }
+#define CPL_SOURCE_CELL(ISFLUID) CPL_SOURCE_CELL_S(ISFLUID, 1)
 #define CPL_GRAD_TERM(q)                                                                \
     {                                                                                   \
         const long long nb = c + CX27[q] + PX * (long long)CY27[q] + PXY * CZ27[q];     \
@@ -97,6 +100,14 @@ KERNEL void coupling_phase_source(const long long n, const float* RESTRICT eps /
         for (int y = 0; y < ny; ++y) {
             unsigned int fl[9 * (CPL_ROW_CHUNK + 2)];
             const long long row = PX * (long long)(y + 1) + PXY * (z + 1);
+            // no sand around the row: eps exactly 1 in its 9-row neighbourhood, grad eps exactly 0 (CPL_SOURCE_CELL_S)
+            unsigned int sandy = 0;
+            for (int dz = -1; dz <= 1; ++dz)
+                for (int dy = -1; dy <= 1; ++dy) {
+                    const float* r = eps + row + dy * (long long)PX + dz * PXY;
+                    CK_PRAGMA(omp simd reduction(| : sandy))
+                    for (int x = 0; x <= nx + 1; ++x) sandy |= r[x] != 1.f;
+                }
             for (int x0 = 0; x0 < nx; x0 += CPL_ROW_CHUNK) {
                 const int len = nx - x0 < CPL_ROW_CHUNK ? nx - x0 : CPL_ROW_CHUNK;
                 for (int dy = -1; dy <= 1; ++dy)
@@ -108,10 +119,18 @@ KERNEL void coupling_phase_source(const long long n, const float* RESTRICT eps /
                     }
                 const long long c0 = row + x0 + 1, d0 = x0 + (long long)nx * (y + (long long)ny * z);
                 (void)d0;
-                CK_PRAGMA(omp simd)
-                for (int i = 0; i < len; ++i) {
-                    const long long c = c0 + i;
-                    CPL_SOURCE_CELL(fl[4 * (CPL_ROW_CHUNK + 2) + i + 1])
+                if (sandy) {
+                    CK_PRAGMA(omp simd)
+                    for (int i = 0; i < len; ++i) {
+                        const long long c = c0 + i;
+                        CPL_SOURCE_CELL_S(fl[4 * (CPL_ROW_CHUNK + 2) + i + 1], 1)
+                    }
+                } else {
+                    CK_PRAGMA(omp simd)
+                    for (int i = 0; i < len; ++i) {
+                        const long long c = c0 + i;
+                        CPL_SOURCE_CELL_S(fl[4 * (CPL_ROW_CHUNK + 2) + i + 1], 0)
+                    }
                 }
             }
         }
