@@ -21,9 +21,10 @@ class KernelOps:
     """The fluid stages as kernels on ``backend`` (``cpu`` or ``cuda``); see :class:`ReferenceOps` for the maths."""
 
     skip_sand_free_rows = True
-    """Host kernels of a mixture: rows with no sand in their 3 × 3-row neighbourhood (fluid fraction exactly 1,
-    sand velocity exactly 0) skip the mixture's stencils, whose terms are exactly 0 there (bitwise the same
-    results; ``lbm_rows_sand_free`` in kernels/lbm_core.cuh). False runs every row's stencils (tests compare)."""
+    """Host pressure update of a mixture: rows with no sand in their 3 × 3-row neighbourhood (fluid fraction
+    exactly 1, sand velocity exactly 0) skip the mixture's four stencils (∇ε, ∇·v), whose terms are exactly 0
+    there (bitwise the same results; ``lbm_rows_sand_free`` in kernels/lbm_core.cuh). False runs every row's
+    stencils (tests compare)."""
 
     def __init__(
         self,
