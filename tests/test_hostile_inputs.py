@@ -231,10 +231,16 @@ def test_set_values_nested_too_deeply_are_refused(tmp_path, capsys):
     assert "nested too deeply" in capsys.readouterr().err
 
 
-def test_set_into_a_list_the_scene_lacks_says_the_index_is_beyond_it(tmp_path, capsys):
-    """Fuzz finding: --set inflows[0].velocity on a scene with no inflows said 'inflows is a table'."""
-    assert main(["validate", str(_toml(tmp_path)), "--set", "inflows[0].velocity=[1, 0, 0]"]) == 2
-    assert "inflows has 0 entries, so [0] is beyond it" in capsys.readouterr().err
+def test_set_into_a_list_the_scene_lacks_says_to_set_the_whole_list(tmp_path, capsys):
+    """Fuzz findings: --set inflows[0].velocity on a scene with no inflows said 'inflows is a table', then
+    'inflows has 0 entries'; and outputs.fields[0] on a scene taking the default field list said the list had 0
+    entries. The key is not in the scene: the message says so and how to set the whole list."""
+    for key in ("inflows[0].velocity=[1, 0, 0]", 'outputs.fields[0]="phi"'):
+        assert main(["validate", str(_toml(tmp_path)), "--set", key]) == 2
+        err = capsys.readouterr().err
+        name = key.split("[")[0]
+        assert f"{name} is not in the scene (it takes its default), so [0] has no entry to set" in err, err
+        assert f"--set '{name}=[...]'" in err
 
 
 def test_set_file_paths_resolve_against_the_scene_files_folder(tmp_path, monkeypatch):

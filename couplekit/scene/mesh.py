@@ -297,6 +297,8 @@ class TriangleMesh(Shape):
         pos = (w0 > 0) & (w1 > 0) & (w2 > 0)
         neg = (w0 < 0) & (w1 < 0) & (w2 < 0)
         hit = pos | neg
+        if not hit.any():  # candidate triangles near the rays, none crossed (points beside or above a height field)
+            return np.zeros(p.shape[0], np.int64)
         area = (w0 + w1 + w2)[hit]
         x_hit = (a[hit, 0] * w1[hit] + b[hit, 0] * w2[hit] + c[hit, 0] * w0[hit]) / area
         sign = np.ones(int(hit.sum()), np.int64)

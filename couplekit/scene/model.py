@@ -1259,7 +1259,16 @@ def _geometry(raw: Any, path: str, base_dir: Path, source: dict | None, problems
         try:
             from .mesh import load_heights
 
-            load_heights(params["file"])
+            heights = load_heights(params["file"])
+            if params.get("base") is not None and float(heights.min()) <= params["base"]:
+                problems.append(
+                    Problem(
+                        f"{path}.base",
+                        f"the base {params['base']:g} is not below every height of the file (lowest "
+                        f"{float(heights.min()):g})",
+                        "lower base",
+                    )
+                )
         except Exception as exc:  # whatever the reader raises: a file that is no height grid
             problems.append(
                 Problem(

@@ -160,12 +160,18 @@ def _describe(value: Any) -> str:
     return names.get(type(value), type(value).__name__)
 
 
-def _step_into(container: Any, part: str | int, done: str, create: bool, new: Any = None) -> Any:
+def _step_into(container: Any, part: str | int, done: str, create: bool, new: Any = None, absent: bool = False) -> Any:
     """The child ``part`` of ``container`` (the path so far is ``done``); a missing one is created as ``new``
-    (a table by default; a list when the key indexes into it next)."""
+    (a table by default; a list when the key indexes into it next). ``absent``: ``container`` is a list the
+    scene does not give (created just now: the scene takes that key's default)."""
     if isinstance(part, int):
         if not isinstance(container, list):
             raise KeyPathError(f"{done} is {_describe(container)}, not a list", f"drop the index [{part}]")
+        if absent:
+            raise KeyPathError(
+                f"{done} is not in the scene (it takes its default), so [{part}] has no entry to set",
+                f"set the whole list instead, e.g. --set '{done}=[...]' (the scene reference gives the default)",
+            )
         if part >= len(container):
             raise KeyPathError(
                 f"{done} has {len(container)} entr{'y' if len(container) == 1 else 'ies'}, so [{part}] is beyond it",
@@ -194,13 +200,17 @@ def set_key(scene: dict, key: str, value: Any) -> None:
     parts = parse_key(key)
     container: Any = scene
     done = ""
+    absent = False  # the container was created just now (the scene does not give it)
     for i, part in enumerate(parts[:-1]):
-        # a missing key that the next part indexes is a list (empty: the index is then reported beyond it)
-        container = _step_into(container, part, done, create=True, new=[] if isinstance(parts[i + 1], int) else {})
+        indexed = isinstance(parts[i + 1], int)
+        missing = isinstance(part, str) and isinstance(container, dict) and part not in container
+        # a missing key that the next part indexes is a list (the index then has no entry: reported)
+        container = _step_into(container, part, done, create=True, new=[] if indexed else {}, absent=absent)
+        absent = missing and indexed
         done = _join(done, part)
     last = parts[-1]
     if isinstance(last, int):
-        _step_into(container, last, done, create=False)  # checks the bounds
+        _step_into(container, last, done, create=False, absent=absent)  # checks the bounds
         container[last] = value
     else:
         if not isinstance(container, dict):

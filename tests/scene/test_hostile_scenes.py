@@ -284,6 +284,30 @@ def test_height_fields_with_non_finite_heights(tmp_path, bad):
         _refused(d, key="bodies[1].geometry.file", words=words, base_dir=tmp_path)
 
 
+def test_a_height_file_whose_base_is_not_below_its_heights_names_the_base(tmp_path):
+    """Fuzz finding: inline heights named `base`, a height file's were reported under `geometry` at sampling."""
+    d = sand_scene()
+    np.save(tmp_path / "h.npy", np.array([[0.01, 0.03], [0.02, 0.02]]))
+    hf = {"type": "heightfield", "file": "h.npy", "x_range": [0.0, 0.1], "y_range": [0, 0.1], "base": 0.015}
+    d["bodies"].append({"kind": "obstacle", "geometry": hf})
+    _refused(d, key="bodies[1].geometry.base", words="lowest 0.01", base_dir=tmp_path)
+    hf["base"] = 0.005  # below every height: accepted
+    Scene.from_dict(d, base_dir=tmp_path)
+
+
+def test_sand_above_a_height_field_obstacle_is_seeded():
+    """Found with the test above: a sand box above a height-field obstacle was refused with NumPy's "zero-size
+    array to reduction operation minimum" (the mesh's inside test, when the triangles near a point's ray are all
+    missed by it)."""
+    d = sand_scene()  # sand box z 0.03-0.07
+    hf = {"type": "heightfield", "heights": [[0.01, 0.03], [0.02, 0.02]], "x_range": [0.0, 0.1], "y_range": [0, 0.1]}
+    d["bodies"].append({"kind": "obstacle", "geometry": hf})
+    scene = Scene.from_dict(d)
+    shape = scene.bodies[1].geometry.solver_shape(scene.domain)
+    inside = shape.sdf(np.array([[0.05, 0.05, 0.01], [0.05, 0.05, 0.05], [0.02, 0.08, 0.005]])) < 0
+    assert inside.tolist() == [True, False, True]
+
+
 def test_a_tall_height_field_is_refused_not_sampled():
     """Heights far outside the domain would need ~1e16 surface samples: refused by the sample count."""
     d = sand_scene()
