@@ -330,7 +330,7 @@ class FluidSolver:
         pshape = padded_shape(self.shape)
 
         flags, wall_u, wall_phi = build_flags(self.shape, self.boundaries, solid)
-        self._fluid_host = flags[INTERIOR] == FLUID
+        fluid_host = flags[INTERIOR] == FLUID
         self.phase_trt_lambda = params.phase_lambda_for(bool((flags == INFLOW).any()))
         ghost, image = periodic_lists(self.shape, self.boundaries)
         out_ghost, out_src = outflow_lists(self.shape, flags)
@@ -347,9 +347,9 @@ class FluidSolver:
         u0 = np.zeros((3,) + self.shape) if velocity is None else np.asarray(velocity, np.float64)
         if u0.shape != (3,) + self.shape:
             raise ValueError(f"velocity must have shape {(3,) + self.shape}, got {u0.shape}")
-        u0 = np.where(self._fluid_host[None], u0, 0.0)
+        u0 = np.where(fluid_host[None], u0, 0.0)
         vel = wall_u.astype(np.float32)
-        vel[(slice(None), *INTERIOR)] = np.where(self._fluid_host[None], u0, vel[(slice(None), *INTERIOR)])
+        vel[(slice(None), *INTERIOR)] = np.where(fluid_host[None], u0, vel[(slice(None), *INTERIOR)])
         # stored as f - w (shifted storage, reference.py); 0 in the ghost / wall cells, which are written before
         # they are read
         f = np.zeros((27,) + pshape, dtype_of(self.storage))
@@ -570,6 +570,12 @@ class FluidSolver:
         return out
 
     # ------------------------------------------------------------------------------------------ outputs
+    @property
+    def _fluid_host(self) -> np.ndarray:
+        """The interior FLUID cells (host bool array, nz × ny × nx), read from the flags when asked: not kept
+        (1 B per cell; it is wanted only by outputs and diagnostics, once a frame)."""
+        return self._host_interior(self.flags) == FLUID
+
     def _host_interior(self, a) -> np.ndarray:
         return np.asarray(self.backend.to_host(a)[(Ellipsis, *INTERIOR)])
 
