@@ -1710,6 +1710,25 @@ def _inside_obstacles(i: int, body: Body, obstacles, cutters, consequence: str) 
     )
 
 
+def _seeding_failure(i: int, exc: Exception, obstacles, cutters, lo, hi) -> Problem:
+    """The problem of seeding sand body ``i`` failing with ``exc``: under the key of the obstacle whose SDF fails
+    over the sand body's box (probed at its corners and centre: a mesh sampled lazily samples that box, so it
+    fails there as on the lattice), else under the sand body's own."""
+    probe = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    probe = np.vstack([probe, 0.5 * (np.asarray(lo) + np.asarray(hi))])
+    for j, shape in obstacles:
+        if any(shape is c for c in cutters or ()):
+            try:
+                shape.sdf(probe)
+            except Exception as own:  # this obstacle's SDF is what fails
+                return Problem(
+                    f"bodies[{j}].geometry",
+                    f"cannot be sampled where the sand body bodies[{i}] lies: {_error_text(own)}",
+                    "check its geometry",
+                )
+    return Problem(f"bodies[{i}].geometry", f"cannot seed the sand body: {_error_text(exc)}", "check its geometry")
+
+
 def _check_seeding(built: list[tuple[int, Body]], domain: Domain, sand: Sand, problems: list[Problem]) -> None:
     """Every sand body gets particles: seeded as :func:`couplekit.assembly.build_sand` seeds it (the seeding
     lattice over its bounding box, less what lies inside an obstacle), searched cheaply (:func:`_seeds_any`)."""
@@ -1718,14 +1737,13 @@ def _check_seeding(built: list[tuple[int, Body]], domain: Domain, sand: Sand, pr
     k = sand.particles_per_axis
     obstacles = [(i, b.geometry.solver_shape(domain)) for i, b in built if b.kind == "obstacle"]
     for i, b, shape, lo, hi in _shapes_of_kind(built, "sand", domain):
+        cutters: list = []
         try:
             cutters = overlapping(shape, [s for _, s in obstacles])
             seeded = _seeds_any(Difference(shape, cutters).sdf if cutters else shape.sdf, lo, hi, domain.dx, k)
             alone = bool(cutters) and seeded is False and _seeds_any(shape.sdf, lo, hi, domain.dx, k)
-        except Exception as exc:  # an SDF that fails on the lattice points
-            problems.append(
-                Problem(f"bodies[{i}].geometry", f"cannot seed the sand body: {_error_text(exc)}", "check its geometry")
-            )
+        except Exception as exc:  # an SDF that fails on the lattice points: the sand's own, or an obstacle's
+            problems.append(_seeding_failure(i, exc, obstacles, cutters, lo, hi))
             continue
         if seeded is not False:  # particles found, or a body too large to search (None)
             continue

@@ -244,3 +244,17 @@ def test_a_mesh_far_too_large_for_any_domain_is_a_problem_of_its_geometry(tmp_pa
     problem = next(p for p in err.value.problems if p.key == "bodies[1].geometry")
     assert "sampling the surface every 0.00125 m" in problem.message
     assert "use a coarser dx, or a mesh clipped to the domain" in problem.message
+
+
+def test_a_cap_hit_while_seeding_sand_is_a_problem_of_the_obstacle(tmp_path, monkeypatch):
+    """Fuzz finding: an obstacle mesh whose lazily sampled surface passes the sample cap near a sand body it cuts
+    was reported under the sand body's key ("cannot seed the sand body: cube.obj: ..."); it is the obstacle's
+    geometry that needs changing. (The cap lowered so that the test's cube reaches it.)"""
+    path = _scene_file(tmp_path, [-4.97, -4.97, -9.99], [5.03, 5.03, 0.035])  # its top face cuts the sand box
+    monkeypatch.setattr(mesh_module, "MAX_SURFACE_SAMPLES", 2000)
+    with pytest.raises(SceneError) as err:
+        Scene.load(path)
+    keys = [p.key for p in err.value.problems]
+    assert keys == ["bodies[1].geometry"], err.value.problems
+    message = err.value.problems[0].message
+    assert message.startswith("cannot be sampled where the sand body bodies[0] lies: cube.obj: the mesh needs about")
