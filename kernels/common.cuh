@@ -313,6 +313,21 @@ float ck_select(const unsigned int c, const float a, const float b) {
 }
 
 #if !CK_ON_GPU
+// host: whether every cell of the 9 padded rows around `row` (the row and its y, z neighbours; x in xa .. xb)
+// holds exactly `v` in `s` (a row with no sand around it: fluid fraction 1, sand velocity 0; the row schemes of
+// lbm_macro_pressure and coupling_phase_source take such rows without their mixture stencils)
+static inline bool ck_rows_equal(const float* RESTRICT s, const long long row, const int xa, const int xb,
+                                 const int px, const long long pxy, const float v) {
+    unsigned int any = 0;
+    for (int dz = -1; dz <= 1; ++dz)
+        for (int dy = -1; dy <= 1; ++dy) {
+            const float* r = s + row + (long long)dy * px + (long long)dz * pxy;
+            CK_PRAGMA(omp simd reduction(| : any))
+            for (int x = xa; x <= xb; ++x) any |= r[x] != v;
+        }
+    return any == 0;
+}
+
 // host: the stored value `new_` where live = 1, else `old_`, blended bit by bit without a branch (the guarded
 // stores of the wall-row loops, which write a non-fluid cell's old value back); fp32 and fp16 storage
 static inline __attribute__((always_inline)) ck_store_t ck_store_blend(const unsigned int live, const ck_store_t new_,

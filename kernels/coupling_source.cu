@@ -101,13 +101,7 @@ KERNEL void coupling_phase_source(const long long n, const float* RESTRICT eps /
             unsigned int fl[9 * (CPL_ROW_CHUNK + 2)];
             const long long row = PX * (long long)(y + 1) + PXY * (z + 1);
             // no sand around the row: eps exactly 1 in its 9-row neighbourhood, grad eps exactly 0 (CPL_SOURCE_CELL_S)
-            unsigned int sandy = 0;
-            for (int dz = -1; dz <= 1; ++dz)
-                for (int dy = -1; dy <= 1; ++dy) {
-                    const float* r = eps + row + dy * (long long)PX + dz * PXY;
-                    CK_PRAGMA(omp simd reduction(| : sandy))
-                    for (int x = 0; x <= nx + 1; ++x) sandy |= r[x] != 1.f;
-                }
+            const bool sandy = !ck_rows_equal(eps, row, 0, nx + 1, PX, PXY, 1.f);
             for (int x0 = 0; x0 < nx; x0 += CPL_ROW_CHUNK) {
                 const int len = nx - x0 < CPL_ROW_CHUNK ? nx - x0 : CPL_ROW_CHUNK;
                 for (int dy = -1; dy <= 1; ++dy)

@@ -303,19 +303,14 @@ LBM_INLINE bool lbm_rows_all_fluid(const unsigned char* RESTRICT flags, const lo
 // velocity exactly 0 in every cell.  There every stencil of the mixture's terms over such cells (grad eps, div v)
 // is exactly 0 (lbm_gradient sums differences of equal values), so the mixture terms they feed add exactly 0:
 // a row can take the stage's single-fluid arithmetic and give bitwise the same result.
+#if !CK_ON_GPU
 LBM_INLINE bool lbm_rows_sand_free(const float* RESTRICT eps, const float* RESTRICT sand_v, const long long row,
                                    const int nx, const int px, const long long pxy, const long long N) {
-    unsigned int any = 0;
-    for (int dz = -1; dz <= 1; ++dz)
-        for (int dy = -1; dy <= 1; ++dy) {
-            const long long r = row + (long long)dy * px + (long long)dz * pxy;
-            CK_PRAGMA(omp simd reduction(| : any))
-            for (int x = 0; x <= nx + 1; ++x)
-                any |= (eps[r + x] != 1.f) | (sand_v[r + x] != 0.f) | (sand_v[N + r + x] != 0.f) |
-                       (sand_v[2 * N + r + x] != 0.f);
-        }
-    return any == 0;
+    return ck_rows_equal(eps, row, 0, nx + 1, px, pxy, 1.f) && ck_rows_equal(sand_v, row, 0, nx + 1, px, pxy, 0.f) &&
+           ck_rows_equal(sand_v + N, row, 0, nx + 1, px, pxy, 0.f) &&
+           ck_rows_equal(sand_v + 2 * N, row, 0, nx + 1, px, pxy, 0.f);
 }
+#endif
 
 // Host: the first (lo) and last (hi) interior x (1..nx) of padded row `row` whose cell is FLUID; lo > hi when
 // the row has none.  The stages' masked rows loop over lo..hi only: every stage leaves a non-fluid cell as it is
