@@ -1717,7 +1717,7 @@ def _seeding_failure(i: int, exc: Exception, obstacles, cutters, lo, hi) -> Prob
     probe = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
     probe = np.vstack([probe, 0.5 * (np.asarray(lo) + np.asarray(hi))])
     for j, shape in obstacles:
-        if any(shape is c for c in cutters or ()):
+        if any(shape is c for c in cutters):
             try:
                 shape.sdf(probe)
             except Exception as own:  # this obstacle's SDF is what fails
