@@ -1867,20 +1867,20 @@ def water_outlet_speed_limit(interface_width: float, across_cells: int, air_latt
     extent (cells) and the air's lattice viscosity; ``inf`` where no failure was measured up to 0.08; 0 where
     the scene is refused at any speed.
 
-    Measured (session 13) on a 12 × 12 × 24 box, square outlets of 2-8 cells in the z- wall, σ = 1e-4, M = 0.02,
-    1000-1500 steps, with the phase field's exact inflow flux and its two-rate collision at the inflow default
-    Λ_h = 1/6 (``couplekit.fluid.solver.PHASE_TRT_LAMBDA_INFLOW``, which says what 0.1 left diverging), at three
-    viscosity sets: ν_h = ν_l = 0.01; the scenes' ν_h = 1e-4, ν_l = 0.01 with their closures (odd-rate floor,
-    Smagorinsky); Fig. 1's ν_h = 5e-4, ν_l = 0.1 with the closures (tests/fluid/test_inflow_region.py,
-    ``test_narrow_outlet_jet_runs``, has the table):
+    Measured (session 18) on a 12 × 12 × 24 box, square outlets of 1-5 cells in the z- wall, σ = 1e-4, M = 0.02,
+    1000 steps (1500 at the limits), with the phase field's exact inflow flux, its two-rate collision at the
+    inflow default Λ_h = 1/6 (``couplekit.fluid.solver.PHASE_TRT_LAMBDA_INFLOW``) and the flow's bounce-back
+    links taking the face's velocity where they cross it (``kernels/lbm_halo.cu``, lbm_link_wall_cu: before it,
+    narrow outlets put part of their volume flux into the cells beside them and 2-cell outlets diverged at
+    0.06), at three viscosity sets: ν_h = ν_l = 0.01; the scenes' ν_h = 1e-4, ν_l = 0.01 with their closures
+    (odd-rate floor, Smagorinsky); Fig. 1's ν_h = 5e-4, ν_l = 0.1 with the closures (the "viscous air";
+    docs/fluid-stability.md, "Water outlets at 800:1", has the map):
 
-    * ξ ≥ 4: outlets of ≥ 3 cells finite to 0.08 at every viscosity set (peak ≤ 1.8 u_in). 2-cell outlets (every
-      cell a rim cell): finite to 0.04 (ν_h = 0.01: NaN at 0.06 at ξ = 4 by step 100; with the closures finite to
-      0.08), with the more viscous air to 0.02 (NaN at 0.04 by step 150).
-    * 3 ≤ ξ < 4: outlets of ≥ 3 cells finite to 0.06 (closures at the scenes' viscosities: NaN at 0.07 with 3
-      and 7 cells, at 0.08 with 3 and 5 cells, ξ = 3.5 with 3 cells), with the more viscous air to 0.05 (NaN at
-      0.06 with 3 cells). 2-cell outlets: finite at 0.02 (NaN at 0.03 with ν_h = 0.01, ξ = 3), with the more viscous
-      air refused (NaN at 0.02 by step 200 at ξ = 3, at 0.03 at ξ = 3.5).
+    * ξ ≥ 4: outlets of ≥ 2 cells finite to 0.08 at every viscosity set (ξ = 4 and 6); 1-cell outlets to 0.08
+      except with the viscous air (0.04; NaN at 0.08 by step 350 at ξ = 4).
+    * 3 ≤ ξ < 4: outlets of ≥ 2 cells finite to 0.06 (NaN at 0.08: 5 cells at ν = 0.01 and ξ = 3; 3 and 5 cells
+      with the viscous air, 2 cells with the scenes' closures, at ξ = 3), except 2-cell outlets with the viscous
+      air: to 0.02 (NaN at 0.04 by step 200 at ξ = 3). 1-cell outlets as 2-cell ones.
     * ξ < 3: refused. At ξ = 2 and 800:1 the interface is under-resolved independently of outlets: a drop
       moving at 0.04 through still air in a periodic box diverges by step 80 with the paper's collision
       (Eq. 48), and with two rates (Λ = 1/6) a drop at 0.02 diverges by step 520.
@@ -1891,12 +1891,10 @@ def water_outlet_speed_limit(interface_width: float, across_cells: int, air_latt
     if interface_width < 3.0:
         return 0.0
     if interface_width >= 4.0:
-        if across_cells >= 3:
-            return math.inf
-        return 0.02 if viscous else 0.04
-    if across_cells >= 3:
-        return 0.05 if viscous else 0.06
-    return 0.0 if viscous else 0.02
+        return 0.04 if (viscous and across_cells < 2) else math.inf
+    if viscous and across_cells < 3:
+        return 0.02
+    return 0.06
 
 
 def _check_water_outlets(domain: Domain, time: Time, fluid: Fluid | None, inflows, problems: list[Problem]) -> None:
@@ -1929,30 +1927,25 @@ def _check_water_outlets(domain: Domain, time: Time, fluid: Fluid | None, inflow
                 "through still air diverges)"
             )
             fix = (
-                "set fluid.interface_width >= 4 (outlets at least 3 cells across then run at lattice speeds up to 0.08)"
+                "set fluid.interface_width >= 4 (outlets at least 2 cells across then run at lattice speeds up to 0.08)"
             )
         else:
             why = (
-                f"outlets {'under 3' if across < 3 else 'of 3 or more'} cells across at fluid.interface_width "
+                f"outlets {across} cell{'s' if across != 1 else ''} across at fluid.interface_width "
                 f"{'< 4' if xi < 4.0 else '>= 4'}"
                 + (f" with fluid.air_lattice_viscosity = {nu_air:g} > 0.01" if _viscous_air(nu_air) else "")
             )
-            options = []
-            if limit > 0.0:
-                options.append(f"lower the speed to <= {limit * domain.dx / time.dt:.3g} m/s (lattice {limit:g})")
-            if across < 3:
-                options.append(f"widen the outlet to >= 3 cells ({3 * domain.dx:g} m) across")
+            options = [f"lower the speed to <= {limit * domain.dx / time.dt:.3g} m/s (lattice {limit:g})"]
+            wider = next((n for n in (2, 3) if n > across and water_outlet_speed_limit(xi, n, nu_air) >= lattice), None)
+            if wider is not None:
+                options.append(f"widen the outlet to >= {wider} cells ({wider * domain.dx:g} m) across")
             if xi < 4.0:
                 options.append("set fluid.interface_width >= 4")
             fix = ", or ".join(options)
-            measured = (
-                f"measured stable up to {limit:g}"
-                if limit > 0.0
-                else "refused at any speed: measured to diverge at 0.02"
-            )
             what = (
-                f"a water jet at lattice speed {lattice:.3g} (|velocity| dt/dx) from an outlet {across} cells across "
-                f"diverges at fluid.interface_width = {xi:g} ({why}: {measured})"
+                f"a water jet at lattice speed {lattice:.3g} (|velocity| dt/dx) from an outlet {across} "
+                f"cell{'s' if across != 1 else ''} across "
+                f"diverges at fluid.interface_width = {xi:g} ({why}: measured stable up to {limit:g})"
             )
         problems.append(Problem(f"inflows[{i}].velocity", what, fix))
 

@@ -58,6 +58,37 @@ def test_collide_stream_matches_reference(cpu, effects, boundaries, parity):
     assert np.abs(sk["f"] - random_state(11 + parity, BOUNDARY_SETS[boundaries])["f"]).max() > 1e-3
 
 
+@pytest.mark.parametrize("effects", ["single", "all"])
+@pytest.mark.parametrize("parity", [0, 1])
+def test_wall_links_carry_the_face_velocity_where_they_cross(cpu, effects, parity):
+    """Bounce-back links from a face ghost carry the mean of that ghost's velocity and the receiving cell's own
+    ghost's across the face (kernels/lbm_halo.cu lbm_link_wall_cu, reference.link_wall_velocity): with a
+    random velocity on every wall and inflow ghost (an outlet's face is not uniform) kernel and reference agree,
+    and the mean differs from the sending ghost's velocity on the diagonal links (so the state tests it)."""
+    from couplekit.fluid.reference import link_wall_velocity, shifted
+
+    ko, ro = KernelOps(cpu, **EFFECTS[effects]), ReferenceOps(**EFFECTS[effects])
+    sk, sr = _pair(21 + parity, BOUNDARY_SETS["mixed"])
+    ghost_u = np.random.default_rng(9).uniform(-0.04, 0.04, sk["velocity"].shape).astype(np.float32)
+    walls = (sk["flags"] == 1) | (sk["flags"] == 2)
+    for s in (sk, sr):
+        s["velocity"] = np.where(walls[None], ghost_u, s["velocity"])
+    before = sk["f"].copy()
+    for ops, s in ((ko, sk), (ro, sr)):
+        ops.collide_stream(
+            s["f"], s["flags"], s["velocity"], s["phi"], s["eps"], s["force"], s["pbar"], parity,
+            *PARAMS, *GRAVITY, chemical_potential=chem_of(ops, s),
+        )  # fmt: skip
+    state = (sk["flags"] == 0) | (sk["flags"] == 3)
+    np.testing.assert_allclose(sk["f"][:, state], sr["f"][:, state], rtol=0, atol=ATOL)
+    assert np.abs(sk["f"] - before).max() > 1e-3
+    diagonal = (1, 0, 1)  # a link from the z- face's ghosts, x-shifted: w and c's own ghost differ
+    mean, own = link_wall_velocity(sk["velocity"], diagonal), shifted(sk["velocity"], (-1, 0, -1))
+    assert np.abs(mean - own)[:, 0, :, 1:].max() > 1e-3  # first layer, away from the x- edge ghosts
+    straight = (0, 0, 1)
+    np.testing.assert_array_equal(link_wall_velocity(sk["velocity"], straight), shifted(sk["velocity"], (0, 0, -1)))
+
+
 # (smagorinsky C, odd_lambda): the subgrid viscosity alone, the odd-moment rate floor alone (with nu_h = 0.01 and
 # nu_l = 0.05 in PARAMS a floor of 0.25 gives r_o = 0.11 / 0.38: far from 1, so a wrong odd moment shows), both.
 CLOSURES = {"smagorinsky": (0.17, 0.0), "odd_rate": (0.0, 0.25), "both": (0.1, 0.25)}
