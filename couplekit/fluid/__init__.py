@@ -12,7 +12,7 @@ The D3Q7 phase field lives in :mod:`.phasefield` (its own module and owner).
 from .grid import INFLOW, OUTFLOW, WALL, Boundaries, Face
 from .kernel_ops import KernelOps
 from .reference import ReferenceOps, equilibrium, from_stored, to_stored
-from .solver import FluidParams, FluidSolver, OddFloorInactiveWarning
+from .solver import FluidParams, FluidSolver, OddFloorInactiveWarning, SharpInterfaceWarning
 
 __all__ = [
     "Boundaries",
@@ -21,6 +21,7 @@ __all__ = [
     "FluidSolver",
     "KernelOps",
     "OddFloorInactiveWarning",
+    "SharpInterfaceWarning",
     "ReferenceOps",
     "equilibrium",
     "from_stored",

@@ -165,3 +165,39 @@ def test_phase_gradients_diagnostic_is_eqs_21_23_of_the_current_phi():
     assert checked > 100 and np.abs(grad).max() > 0.05  # an interface is there
     with pytest.raises(ValueError, match="two-phase"):
         _solver(get_backend("cpu")).phase_gradients()
+
+
+def _layered(backend, ratio: float, ramp_cells: int, solid=None):
+    """Water below air in a closed 12 × 10 × 9 box at ``ratio``:1, φ a linear ramp over ``ramp_cells`` (1: a
+    one-cell step)."""
+    shape = (12, 10, 9)
+    z = np.arange(shape[0])[:, None, None] + 0.5
+    phi = np.broadcast_to(np.clip((5.0 - z) / ramp_cells + 0.5, 0.0, 1.0), shape).copy()
+    faces = Boundaries({k: Face("wall") for k in ("x-", "x+", "y-", "y+", "z-", "z+")})
+    params = FluidParams(rho_h=1.0, rho_l=1 / ratio, nu_h=1e-2, nu_l=1e-2, sigma=1e-4)
+    return FluidSolver(backend, shape, params, faces, solid=solid, phi=phi)
+
+
+def test_a_sharp_initial_interface_at_a_high_density_ratio_is_warned_about():
+    """A one-cell step of φ at 800:1 goes non-finite within a few steps (measured: 3; it runs at 100:1, and a
+    2-cell ramp, jump 0.5, runs at 800:1): FluidSolver warns, naming the jump, the ratio and the fix (the
+    equilibrium profile), and does not warn at 100:1, for the 2-cell ramp, or where the step lies between a
+    fluid cell and an obstacle."""
+    import warnings
+
+    from couplekit.fluid import SharpInterfaceWarning
+
+    cpu = get_backend("cpu")
+    with pytest.warns(SharpInterfaceWarning, match=r"jumps by 1\.00 .* 800:1.*tanh_profile"):
+        solver = _layered(cpu, 800.0, 1)
+    solver.step(200)
+    assert not np.isfinite(solver.fields()["velocity"]).all()  # the warning is not a false alarm
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", SharpInterfaceWarning)
+        _layered(cpu, 100.0, 1)
+        ramp = _layered(cpu, 800.0, 2)
+        solid = np.zeros((12, 10, 9), bool)
+        solid[5:] = True  # the step is now the water's top against an obstacle: no fluid–fluid jump
+        _layered(cpu, 800.0, 1, solid=solid)
+    ramp.step(200)
+    assert np.isfinite(ramp.fields()["velocity"]).all()
