@@ -40,20 +40,27 @@ def _pair(seed, boundaries):
     return a, {k: v.copy() for k, v in a.items()}
 
 
+def _collide_both(ko, ro, sk, sr, parity, extra=()):
+    """One collide-stream of ``sk`` on the kernels and of ``sr`` on the reference; f (fluid cells and fluid /
+    outflow ghosts) and the velocity agree to ATOL."""
+    for ops, s in ((ko, sk), (ro, sr)):
+        ops.collide_stream(
+            s["f"], s["flags"], s["velocity"], s["phi"], s["eps"], s["force"], s["pbar"], parity,
+            *PARAMS, *GRAVITY, *extra, chemical_potential=chem_of(ops, s),
+        )  # fmt: skip
+    state = (sk["flags"] == 0) | (sk["flags"] == 3)
+    np.testing.assert_allclose(sk["f"][:, state], sr["f"][:, state], rtol=0, atol=ATOL)
+    np.testing.assert_allclose(sk["velocity"], sr["velocity"], rtol=0, atol=ATOL)
+    return state
+
+
 @pytest.mark.parametrize("effects", list(EFFECTS))
 @pytest.mark.parametrize("boundaries", list(BOUNDARY_SETS))
 @pytest.mark.parametrize("parity", [0, 1])
 def test_collide_stream_matches_reference(cpu, effects, boundaries, parity):
     ko, ro = KernelOps(cpu, **EFFECTS[effects]), ReferenceOps(**EFFECTS[effects])
     sk, sr = _pair(11 + parity, BOUNDARY_SETS[boundaries])
-    for ops, s in ((ko, sk), (ro, sr)):
-        ops.collide_stream(
-            s["f"], s["flags"], s["velocity"], s["phi"], s["eps"], s["force"], s["pbar"], parity,
-            *PARAMS, *GRAVITY, chemical_potential=chem_of(ops, s),
-        )  # fmt: skip
-    state = (sk["flags"] == 0) | (sk["flags"] == 3)
-    np.testing.assert_allclose(sk["f"][:, state], sr["f"][:, state], rtol=0, atol=ATOL)
-    np.testing.assert_allclose(sk["velocity"], sr["velocity"], rtol=0, atol=ATOL)
+    _collide_both(ko, ro, sk, sr, parity)
     # the state really changed (the test cannot pass by doing nothing)
     assert np.abs(sk["f"] - random_state(11 + parity, BOUNDARY_SETS[boundaries])["f"]).max() > 1e-3
 
@@ -74,13 +81,7 @@ def test_wall_links_carry_the_face_velocity_where_they_cross(cpu, effects, parit
     for s in (sk, sr):
         s["velocity"] = np.where(walls[None], ghost_u, s["velocity"])
     before = sk["f"].copy()
-    for ops, s in ((ko, sk), (ro, sr)):
-        ops.collide_stream(
-            s["f"], s["flags"], s["velocity"], s["phi"], s["eps"], s["force"], s["pbar"], parity,
-            *PARAMS, *GRAVITY, chemical_potential=chem_of(ops, s),
-        )  # fmt: skip
-    state = (sk["flags"] == 0) | (sk["flags"] == 3)
-    np.testing.assert_allclose(sk["f"][:, state], sr["f"][:, state], rtol=0, atol=ATOL)
+    _collide_both(ko, ro, sk, sr, parity)
     assert np.abs(sk["f"] - before).max() > 1e-3
     diagonal = (1, 0, 1)  # a link from the z- face's ghosts, x-shifted: w and c's own ghost differ
     mean, own = link_wall_velocity(sk["velocity"], diagonal), shifted(sk["velocity"], (-1, 0, -1))
@@ -108,14 +109,7 @@ def test_collide_stream_closures_match_reference(cpu, closure, effects, parity):
     for s in (sk, sr):
         s["f"] = to_stored(from_stored(s["f"]) * noise)  # noise on the full f (the arrays hold f - w)
         s["eps"][: s["eps"].shape[0] // 2] = 1.0  # sand-free cells: the odd-rate floor acts only there
-    for ops, s in ((ko, sk), (ro, sr)):
-        ops.collide_stream(
-            s["f"], s["flags"], s["velocity"], s["phi"], s["eps"], s["force"], s["pbar"], parity,
-            *PARAMS, *GRAVITY, *CLOSURES[closure], chemical_potential=chem_of(ops, s),
-        )  # fmt: skip
-    state = (sk["flags"] == 0) | (sk["flags"] == 3)
-    np.testing.assert_allclose(sk["f"][:, state], sr["f"][:, state], rtol=0, atol=ATOL)
-    np.testing.assert_allclose(sk["velocity"], sr["velocity"], rtol=0, atol=ATOL)
+    state = _collide_both(ko, ro, sk, sr, parity, CLOSURES[closure])
     # the closure changes the result (the test would catch a kernel that ignores it)
     plain = _pair(31 + parity, boundaries)[0]
     plain["f"] = to_stored(from_stored(plain["f"]) * noise)
