@@ -420,7 +420,7 @@ class FluidSolver:
             phi0 = np.asarray(phi, np.float32)
             if phi0.shape != self.shape:
                 raise ValueError(f"phi must have the interior shape {self.shape}, got {phi0.shape}")
-            self._check_interface(phi0, flags)
+            self._check_interface(phi0, fluid_host)
             phi_p = wall_phi.astype(np.float32)  # inflow cells carry their phase value
             phi_p[INTERIOR] = phi0
             self.phi = backend.asarray(phi_p)
@@ -432,14 +432,14 @@ class FluidSolver:
         self.volume0 = self._volume()
         self._setup_open_faces(flags, wall_u, out_ghost, out_src)
 
-    def _check_interface(self, phi0: np.ndarray, flags: np.ndarray) -> None:
+    def _check_interface(self, phi0: np.ndarray, fluid: np.ndarray) -> None:
         """Warn (:class:`SharpInterfaceWarning`) when the initial φ is sharper than a resolved interface at a
         density ratio where that diverges (:data:`SHARP_JUMP`, :data:`SHARP_RATIO`); scenes build the equilibrium
-        profile themselves."""
+        profile themselves. ``fluid``: the interior FLUID cells (host bool array)."""
         ratio = self.params.rho_h / self.params.rho_l if self.params.rho_l > 0 else math.inf
         if ratio <= SHARP_RATIO:
             return
-        jump = _max_phi_jump(np.clip(phi0.astype(np.float64), 0.0, 1.0), flags[INTERIOR] == FLUID)
+        jump = _max_phi_jump(np.clip(phi0.astype(np.float64), 0.0, 1.0), fluid)
         if jump > SHARP_JUMP:
             warnings.warn(
                 SharpInterfaceWarning(

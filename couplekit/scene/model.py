@@ -1930,10 +1930,9 @@ def _check_water_outlets(domain: Domain, time: Time, fluid: Fluid | None, inflow
                 "set fluid.interface_width >= 4 (outlets at least 2 cells across then run at lattice speeds up to 0.08)"
             )
         else:
-            why = (
-                f"outlets {across} cell{'s' if across != 1 else ''} across at fluid.interface_width "
-                f"{'< 4' if xi < 4.0 else '>= 4'}"
-                + (f" with fluid.air_lattice_viscosity = {nu_air:g} > 0.01" if _viscous_air(nu_air) else "")
+            cells = f"{across} cell{'s' if across != 1 else ''}"
+            why = f"outlets {cells} across at fluid.interface_width {'< 4' if xi < 4.0 else '>= 4'}" + (
+                f" with fluid.air_lattice_viscosity = {nu_air:g} > 0.01" if _viscous_air(nu_air) else ""
             )
             options = [f"lower the speed to <= {limit * domain.dx / time.dt:.3g} m/s (lattice {limit:g})"]
             wider = next((n for n in (2, 3) if n > across and water_outlet_speed_limit(xi, n, nu_air) >= lattice), None)
@@ -1943,8 +1942,7 @@ def _check_water_outlets(domain: Domain, time: Time, fluid: Fluid | None, inflow
                 options.append("set fluid.interface_width >= 4")
             fix = ", or ".join(options)
             what = (
-                f"a water jet at lattice speed {lattice:.3g} (|velocity| dt/dx) from an outlet {across} "
-                f"cell{'s' if across != 1 else ''} across "
+                f"a water jet at lattice speed {lattice:.3g} (|velocity| dt/dx) from an outlet {cells} across "
                 f"diverges at fluid.interface_width = {xi:g} ({why}: measured stable up to {limit:g})"
             )
         problems.append(Problem(f"inflows[{i}].velocity", what, fix))
