@@ -598,8 +598,9 @@ KERNEL void lbm_collide_stream(const long long n, ck_store_t* RESTRICT f /* size
             const bool bulk = lbm_rows_all_fluid(flags, row, 0, nx + 1, px, pxy);                      \
             int lo = 1, hi = nx;                                                                       \
             if (!bulk) lbm_row_fluid_span(flags, row, nx, lo, hi);                                     \
-            for (int x0 = lo; x0 <= hi; x0 += LBM_ROW_CHUNK) {                                         \
-                const int len = hi + 1 - x0 < LBM_ROW_CHUNK ? hi + 1 - x0 : LBM_ROW_CHUNK;             \
+            const int rem = lbm_row_tail(lo, hi);                                                      \
+            for (int x0 = lo; x0 <= hi - rem; x0 += LBM_ROW_CHUNK) {                                   \
+                const int len = hi - rem + 1 - x0 < LBM_ROW_CHUNK ? hi - rem + 1 - x0 : LBM_ROW_CHUNK; \
                 const long long c0 = row + x0;                                                         \
                 if (bulk) {                                                                            \
                     LBM_PHI_CHUNK(LBM_NB_BULK, c0, len, masks)                                          \
@@ -613,6 +614,15 @@ KERNEL void lbm_collide_stream(const long long n, ck_store_t* RESTRICT f /* size
                 LBM_PHI_CHUNK(LBM_NB_MASK, c0, len, masks)                                              \
                 CK_PRAGMA(omp simd)                                                                    \
                 for (int i = 0; i < len; ++i)                                                          \
+                    lbm_collide_cell<ODD, LBM_NB_MASK, 1>(c0 + i, LBM_CELL_ARGS(px, pxy, N), masks[i],          \
+                                                          LBM_CHUNK_VALUES(i));                        \
+            }                                                                                          \
+            if (rem) { /* the last rem cells: one whole vector ending at hi (lbm_row_tail) */          \
+                const long long c0 = row + hi - (LBM_VEC - 1);                                         \
+                lbm_tail_masks(flags, c0, rem, px, pxy, masks, scratch);                               \
+                LBM_PHI_CHUNK(LBM_NB_MASK, c0, LBM_VEC, masks)                                          \
+                CK_PRAGMA(omp simd)                                                                    \
+                for (int i = 0; i < LBM_VEC; ++i)                                                      \
                     lbm_collide_cell<ODD, LBM_NB_MASK, 1>(c0 + i, LBM_CELL_ARGS(px, pxy, N), masks[i],          \
                                                           LBM_CHUNK_VALUES(i));                        \
             }                                                                                          \

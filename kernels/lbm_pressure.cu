@@ -158,8 +158,8 @@ KERNEL void lbm_macro_pressure(const long long n, const ck_store_t* RESTRICT f /
 #endif
 // the chunks of one row, MIX: the mixture's terms (1) or a sand-free row's (0, lbm_pressure_cell)
 #define LBM_P_CHUNKS(ODD, FSUM, MIX)                                                                      \
-    for (int x0 = lo; x0 <= hi; x0 += LBM_P_CHUNK) {                                                      \
-        const int len = hi + 1 - x0 < LBM_P_CHUNK ? hi + 1 - x0 : LBM_P_CHUNK;                            \
+    for (int x0 = lo; x0 <= hi - rem; x0 += LBM_P_CHUNK) {                                                \
+        const int len = hi - rem + 1 - x0 < LBM_P_CHUNK ? hi - rem + 1 - x0 : LBM_P_CHUNK;                \
         const long long c0 = row + x0;                                                                    \
         if (MIX) {                                                                                        \
             CK_PRAGMA(omp simd)                                                                           \
@@ -177,6 +177,18 @@ KERNEL void lbm_macro_pressure(const long long n, const ck_store_t* RESTRICT f /
         for (int i = 0; i < len; ++i)                                                                     \
             lbm_pressure_cell<ODD, LBM_NB_MASK, 0, 0, 1, FSUM, MIX>(c0 + i, LBM_P_ARGS(px, pxy, N), masks[i], \
                                                                     LBM_P_SLIP(i));                       \
+    }                                                                                                     \
+    if (rem) { /* the last rem cells: one whole vector ending at hi (lbm_row_tail) */                     \
+        const long long c0 = row + hi - (LBM_VEC - 1);                                                    \
+        if (MIX) {                                                                                        \
+            CK_PRAGMA(omp simd)                                                                           \
+            for (int i = 0; i < LBM_VEC; ++i) slipw[i] = slip_cells[c0 + i] != 0 ? 1u : 0u;               \
+        }                                                                                                 \
+        lbm_tail_masks(flags, c0, rem, px, pxy, masks, scratch);                                          \
+        CK_PRAGMA(omp simd)                                                                               \
+        for (int i = 0; i < LBM_VEC; ++i)                                                                 \
+            lbm_pressure_cell<ODD, LBM_NB_MASK, 0, 0, 1, FSUM, MIX>(c0 + i, LBM_P_ARGS(px, pxy, N), masks[i], \
+                                                                    LBM_P_SLIP(i));                       \
     }
 #define LBM_P_LOOP(ODD, FSUM)                                                                             \
     CK_PRAGMA(omp parallel for collapse(2) schedule(static))                                              \
@@ -188,6 +200,7 @@ KERNEL void lbm_macro_pressure(const long long n, const ck_store_t* RESTRICT f /
             (void)slipw;                                                                                  \
             int lo = 1, hi = nx;                                                                          \
             if (!bulk) lbm_row_fluid_span(flags, row, nx, lo, hi);                                        \
+            const int rem = lbm_row_tail(lo, hi);                                                         \
             if (LBM_P_MIX(row)) {                                                                         \
                 LBM_P_CHUNKS(ODD, FSUM, CK_MIXTURE)                                                       \
             } else {                                                                                      \
@@ -280,20 +293,30 @@ KERNEL void lbm_pressure_filter(const long long n, const float* RESTRICT p /* si
     for (int z = 0; z < nz; ++z)
         for (int y = 0; y < ny; ++y) {
             const long long row = px * (long long)(y + 1) + pxy * (z + 1);
-            if (lbm_rows_all_fluid(flags, row, 0, nx + 1, px, pxy)) {
-                CK_PRAGMA(omp simd)
-                for (int x = 1; x <= nx; ++x) lbm_filter_cell<LBM_NB_BULK>(row + x, p, flags, pbar, px, pxy, LBM_FULL_MASK);
-                continue;
-            }
+            const bool bulk = lbm_rows_all_fluid(flags, row, 0, nx + 1, px, pxy);
             unsigned int masks[LBM_P_CHUNK], scratch[10 * (LBM_P_CHUNK + 2)];
-            int lo, hi;
-            lbm_row_fluid_span(flags, row, nx, lo, hi);
-            for (int x0 = lo; x0 <= hi; x0 += LBM_P_CHUNK) {
-                const int len = hi + 1 - x0 < LBM_P_CHUNK ? hi + 1 - x0 : LBM_P_CHUNK;
-                const long long c0 = row + x0;
-                lbm_link_masks(flags, c0, len, px, pxy, masks, scratch);
+            int lo = 1, hi = nx;
+            if (!bulk) lbm_row_fluid_span(flags, row, nx, lo, hi);
+            const int rem = lbm_row_tail(lo, hi);  // the last rem cells: one whole vector ending at hi
+            if (bulk) {
                 CK_PRAGMA(omp simd)
-                for (int i = 0; i < len; ++i) lbm_filter_cell<LBM_NB_MASK, 1>(c0 + i, p, flags, pbar, px, pxy, masks[i]);
+                for (int x = 1; x <= nx - rem; ++x)
+                    lbm_filter_cell<LBM_NB_BULK>(row + x, p, flags, pbar, px, pxy, LBM_FULL_MASK);
+            } else {
+                for (int x0 = lo; x0 <= hi - rem; x0 += LBM_P_CHUNK) {
+                    const int len = hi - rem + 1 - x0 < LBM_P_CHUNK ? hi - rem + 1 - x0 : LBM_P_CHUNK;
+                    const long long c0 = row + x0;
+                    lbm_link_masks(flags, c0, len, px, pxy, masks, scratch);
+                    CK_PRAGMA(omp simd)
+                    for (int i = 0; i < len; ++i)
+                        lbm_filter_cell<LBM_NB_MASK, 1>(c0 + i, p, flags, pbar, px, pxy, masks[i]);
+                }
+            }
+            if (rem) {
+                const long long c0 = row + hi - (LBM_VEC - 1);
+                lbm_tail_masks(flags, c0, rem, px, pxy, masks, scratch);
+                CK_PRAGMA(omp simd)
+                for (int i = 0; i < LBM_VEC; ++i) lbm_filter_cell<LBM_NB_MASK, 1>(c0 + i, p, flags, pbar, px, pxy, masks[i]);
             }
         }
 #endif
@@ -391,11 +414,17 @@ KERNEL void lbm_momentum(const long long n, const ck_store_t* RESTRICT f /* size
             unsigned int live[LBM_P_CHUNK];                                                        \
             int lo, hi;                                                                            \
             lbm_row_fluid_span(flags, row, nx, lo, hi);                                            \
-            for (int x0 = lo; x0 <= hi; x0 += LBM_P_CHUNK) {                                       \
-                const int len = hi + 1 - x0 < LBM_P_CHUNK ? hi + 1 - x0 : LBM_P_CHUNK;             \
-                const long long c0 = row + x0;                                                     \
+            const int rem = lbm_row_tail(lo, hi);                                                  \
+            /* whole vectors to hi - rem, then the last rem cells as one vector ending at hi, */  \
+            /* its first LBM_VEC - rem lanes kept (lbm_row_tail) */                               \
+            for (int x0 = lo; x0 <= hi;) {                                                         \
+                const int tail = x0 > hi - rem ? LBM_VEC - rem : 0;                                \
+                const int len = tail ? LBM_VEC                                                     \
+                                     : (hi - rem + 1 - x0 < LBM_P_CHUNK ? hi - rem + 1 - x0 : LBM_P_CHUNK); \
+                const long long c0 = row + (tail ? hi - (LBM_VEC - 1) : x0);                       \
                 CK_PRAGMA(omp simd)                                                                \
-                for (int i = 0; i < len; ++i) live[i] = flags[c0 + i] == FLAG_FLUID ? 1u : 0u;     \
+                for (int i = 0; i < len; ++i)                                                      \
+                    live[i] = flags[c0 + i] == FLAG_FLUID && i >= tail ? 1u : 0u;                  \
                 CK_PRAGMA(omp simd)                                                                \
                 for (int i = 0; i < len; ++i) {                                                    \
                     const long long c = c0 + i;                                                    \
@@ -408,6 +437,7 @@ KERNEL void lbm_momentum(const long long n, const ck_store_t* RESTRICT f /* size
                     out[2 * N + c] = ck_select(live[i], uz, out[2 * N + c]);                       \
                     if (FSUM) fsum[c] = ck_select(live[i], s0, fsum[c]);                           \
                 }                                                                                  \
+                x0 = tail ? hi + 1 : x0 + len;                                                     \
             }                                                                                      \
         }
     if (want_fsum) {

@@ -830,8 +830,9 @@ KERNEL void phase_collide_stream(const long long n, ck_store_t* RESTRICT h /* si
                 // a masked row from its first to its last fluid cell (the others are left as they are)
                 int lo = 1, hi = nx;
                 if (!bulk9) lbm_row_fluid_span(flags, row, nx, lo, hi);
-                for (int x0 = lo; x0 <= hi; x0 += PF_ROW_CHUNK) {
-                    const int len = hi + 1 - x0 < PF_ROW_CHUNK ? hi + 1 - x0 : PF_ROW_CHUNK;
+                const int rem = lbm_row_tail(lo, hi);
+                for (int x0 = lo; x0 <= hi - rem; x0 += PF_ROW_CHUNK) {
+                    const int len = hi - rem + 1 - x0 < PF_ROW_CHUNK ? hi - rem + 1 - x0 : PF_ROW_CHUNK;
                     const long long c0 = row + x0;
                     if (bulk9) {
                         pf_gradient_chunk<PF_NB_BULK>(c0, len, phi, flags, sy, sz, masks, gbx, gby, gbz);
@@ -846,6 +847,18 @@ KERNEL void phase_collide_stream(const long long n, ck_store_t* RESTRICT h /* si
                     pf_gradient_chunk<PF_NB_MASK>(c0, len, phi, flags, sy, sz, masks, gbx, gby, gbz);
                     CK_PRAGMA(omp simd)
                     for (int i = 0; i < len; ++i) {
+                        const long long c = c0 + i;
+                        const unsigned int live = (masks[i] >> 13) & 1u;
+                        PF_EVEN_BODY(PF_ST_GUARDED, PF_GRAD_BUF(i))
+                    }
+                }
+                if (rem) {  // the last rem cells: one whole vector ending at hi, its first lanes kept (lbm_row_tail)
+                    const long long c0 = row + hi - (LBM_VEC - 1);
+                    pf_fluid_masks(flags, c0, LBM_VEC, sy, sz, masks, scratch);
+                    pf_gradient_chunk<PF_NB_MASK>(c0, LBM_VEC, phi, flags, sy, sz, masks, gbx, gby, gbz);
+                    for (int i = 0; i < LBM_VEC - rem; ++i) masks[i] &= ~(1u << 13);  // done: kept
+                    CK_PRAGMA(omp simd)
+                    for (int i = 0; i < LBM_VEC; ++i) {
                         const long long c = c0 + i;
                         const unsigned int live = (masks[i] >> 13) & 1u;
                         PF_EVEN_BODY(PF_ST_GUARDED, PF_GRAD_BUF(i))

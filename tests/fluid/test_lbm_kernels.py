@@ -90,6 +90,26 @@ def test_wall_links_carry_the_face_velocity_where_they_cross(cpu, effects, parit
     np.testing.assert_array_equal(link_wall_velocity(sk["velocity"], straight), shifted(sk["velocity"], (0, 0, -1)))
 
 
+# rows long enough for the host loops' vector tail (kernels/lbm_core.cuh lbm_row_tail): spans of 16 + r cells
+# (r = 5, 6, 0, 1), whose last r cells run as one more vector over cells the loop has done; rows cut by the
+# state's obstacle (a span with solid cells inside) and bulk rows (periodic x)
+TAIL_SHAPES = [(5, 6, 21), (4, 5, 38), (4, 5, 16), (4, 5, 17)]
+
+
+@pytest.mark.parametrize("shape", TAIL_SHAPES, ids=lambda s: "x".join(map(str, s)))
+@pytest.mark.parametrize("boundaries", list(BOUNDARY_SETS))
+@pytest.mark.parametrize("parity", [0, 1])
+def test_collide_stream_rows_with_a_vector_tail(cpu, shape, boundaries, parity):
+    ko, ro = KernelOps(cpu, **EFFECTS["all"]), ReferenceOps(**EFFECTS["all"])
+    sk = random_state(41 + parity, BOUNDARY_SETS[boundaries], shape=shape)
+    sr = {k: v.copy() for k, v in sk.items()}
+    before = sk["f"].copy()
+    _collide_both(ko, ro, sk, sr, parity)
+    inner = (slice(1, -1),) * 3  # every interior fluid cell ran (a cell left out would also differ from sr)
+    changed = np.abs(sk["f"] - before).max(axis=0)[inner][sk["flags"][inner] == 0]
+    assert (changed > 0).all(), "a fluid cell was left out of the collide"
+
+
 # (smagorinsky C, odd_lambda): the subgrid viscosity alone, the odd-moment rate floor alone (with nu_h = 0.01 and
 # nu_l = 0.05 in PARAMS a floor of 0.25 gives r_o = 0.11 / 0.38: far from 1, so a wrong odd moment shows), both.
 CLOSURES = {"smagorinsky": (0.17, 0.0), "odd_rate": (0.0, 0.25), "both": (0.1, 0.25)}
