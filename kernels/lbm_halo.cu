@@ -89,14 +89,11 @@ KERNEL void lbm_outflow_fix(const long long n, ck_store_t* RESTRICT f /* size: 2
 // (a 2 x 2 outlet ~31 %, while the phase field's D3Q7 inflow puts all its water into the outlet's cells), and a
 // water jet from a 2-cell outlet into air at 800:1 diverged at lattice speed 0.06 (docs/fluid-stability.md,
 // "Water outlets at 800:1").  Where the face's velocity is uniform, u(w') = u(w) and the mean is exactly u(w);
-// ghosts of two faces (edges, corners) and interior solid cells keep their own velocity.
-LBM_INLINE float lbm_link_wall_cu(const int q, const long long c, const long long w, const float* RESTRICT vel,
-                                  const long long N, const int px, const long long pxy, const int nx, const int ny,
-                                  const int nz) {
-    const int wz = (int)(w / pxy), wy = (int)((w / px) % (ny + 2)), wx = (int)(w % px);
-    const int gx = (wx == 0) | (wx == nx + 1), gy = (wy == 0) | (wy == ny + 1), gz = (wz == 0) | (wz == nz + 1);
-    long long v = w;  // w': c shifted across the one face w lies beyond
-    if (gx + gy + gz == 1) v = c - (gx ? CX27[q] : (gy ? CY27[q] * (long long)px : CZ27[q] * pxy));
+// ghosts of two faces (edges, corners) and interior solid cells keep their own velocity (w' = w).  w' comes with
+// the link list (`mate`, couplekit.fluid.grid.wall_link_mates, built once per flags array): decoding w into
+// (x, y, z) here took three 64-bit divisions per link and call.
+LBM_INLINE float lbm_link_wall_cu(const int q, const long long w, const long long v, const float* RESTRICT vel,
+                                  const long long N) {
     const float cu_w = CX27[q] * vel[w] + CY27[q] * vel[N + w] + CZ27[q] * vel[2 * N + w];
     const float cu_v = CX27[q] * vel[v] + CY27[q] * vel[N + v] + CZ27[q] * vel[2 * N + v];
     return 0.5f * (cu_w + cu_v);
@@ -107,7 +104,8 @@ LBM_INLINE float lbm_link_wall_cu(const int q, const long long c, const long lon
 KERNEL void lbm_wall_prefill(const long long n, ck_store_t* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
                              const float* RESTRICT vel /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
                              const long long* RESTRICT cell /* size: n */, const int* RESTRICT dir /* size: n */,
-                             const int nx, const int ny, const int nz) {
+                             const long long* RESTRICT mate /* size: n */, const int nx, const int ny,
+                             const int nz) {
     const int px = nx + 2;
     const long long pxy = (long long)px * (ny + 2);
     const long long N = pxy * (nz + 2);
@@ -115,7 +113,7 @@ KERNEL void lbm_wall_prefill(const long long n, ck_store_t* RESTRICT f /* size: 
         const long long c = cell[i];
         const int q = dir[i];
         const long long w = c - LBM_OFFSET(q, px, pxy);
-        const float cu = lbm_link_wall_cu(q, c, w, vel, N, px, pxy, nx, ny, nz);
+        const float cu = lbm_link_wall_cu(q, w, mate[i], vel, N);
         CK_STORE(f, opposite_dir(q) * N + w, CK_LOAD(f, q * N + c, CK_F_SCALE) + 6.f * W27[q] * cu, CK_F_SCALE);
     }
 }
@@ -125,7 +123,8 @@ KERNEL void lbm_wall_prefill(const long long n, ck_store_t* RESTRICT f /* size: 
 KERNEL void lbm_wall_bounce(const long long n, ck_store_t* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
                             const float* RESTRICT vel /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
                             const long long* RESTRICT cell /* size: n */, const int* RESTRICT dir /* size: n */,
-                            const int nx, const int ny, const int nz) {
+                            const long long* RESTRICT mate /* size: n */, const int nx, const int ny,
+                            const int nz) {
     const int px = nx + 2;
     const long long pxy = (long long)px * (ny + 2);
     const long long N = pxy * (nz + 2);
@@ -133,7 +132,7 @@ KERNEL void lbm_wall_bounce(const long long n, ck_store_t* RESTRICT f /* size: 2
         const long long c = cell[i];
         const int q = dir[i];
         const long long w = c - LBM_OFFSET(q, px, pxy);
-        const float cu = lbm_link_wall_cu(q, c, w, vel, N, px, pxy, nx, ny, nz);
+        const float cu = lbm_link_wall_cu(q, w, mate[i], vel, N);
         CK_STORE(f, q * N + c, CK_LOAD(f, opposite_dir(q) * N + w, CK_F_SCALE) + 6.f * W27[q] * cu, CK_F_SCALE);
     }
 }

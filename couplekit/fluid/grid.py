@@ -454,6 +454,27 @@ def wall_links(flags: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate(cells).astype(np.int64), np.concatenate(dirs).astype(np.int32)
 
 
+def wall_link_mates(cell: np.ndarray, direction: np.ndarray, padded: tuple[int, int, int]) -> np.ndarray:
+    """The second velocity cell w' of each wall link (``cell`` c, ``direction`` j of :func:`wall_links`): the
+    link's wall velocity is the mean of u(w) and u(w') (``reference.link_wall_velocity``), where w = c − c_j and
+    w' is c's own ghost across the face that w lies beyond, c − c_j projected on that face's normal, when w is in
+    exactly one of the domain's ghost layers; otherwise (an edge or corner ghost, an interior solid cell) w' = w.
+    Computed once per flags array for the list kernels (lbm_wall_prefill / lbm_wall_bounce), which read it
+    instead of decoding w into (x, y, z) with three 64-bit divisions per link and call (measured: 0.29 ms per
+    call for Fig. 13 small's 35,364 links, as much as a fifth of its flow step)."""
+    from ..lattice import C27
+
+    pz, py, px = padded
+    cell = np.asarray(cell, np.int64)
+    c = C27[np.asarray(direction)].astype(np.int64)  # (n, 3): x, y, z
+    w = cell - (c[:, 0] + px * c[:, 1] + px * py * c[:, 2])
+    wz, wy, wx = w // (px * py), (w // px) % py, w % px
+    gx, gy, gz = (wx == 0) | (wx == px - 1), (wy == 0) | (wy == py - 1), (wz == 0) | (wz == pz - 1)
+    one = (gx.astype(int) + gy + gz) == 1
+    shift = np.where(gx, c[:, 0], np.where(gy, c[:, 1] * px, c[:, 2] * px * py))
+    return np.where(one, cell - shift, w).astype(np.int64)
+
+
 def inflow_front_ramp(distance: np.ndarray, width: float) -> np.ndarray:
     """Fraction (0 → 1) of the way from the initial to the carried phase value of an inflow cell, after the
     inflow has pushed fluid ``distance`` cells in (normal speed × time).

@@ -91,13 +91,16 @@ class KernelOps:
         }
 
     def _wall_links(self, flags):
-        """Wall links of ``flags`` (built once per flags array; flags are treated as immutable — call
-        :meth:`forget_links` after changing one in place)."""
+        """Wall links of ``flags``, ``(cell, direction, mate)`` (:func:`~couplekit.fluid.grid.wall_links`,
+        :func:`~couplekit.fluid.grid.wall_link_mates`; built once per flags array; flags are treated as immutable
+        — call :meth:`forget_links` after changing one in place)."""
         if self._links_flags is not flags:
-            from .grid import wall_links
+            from .grid import wall_link_mates, wall_links
 
-            cell, d = wall_links(self.backend.to_host(flags))
-            self._links = (self.backend.asarray(cell), self.backend.asarray(d))
+            host = self.backend.to_host(flags)
+            cell, d = wall_links(host)
+            mate = wall_link_mates(cell, d, host.shape)
+            self._links = (self.backend.asarray(cell), self.backend.asarray(d), self.backend.asarray(mate))
             self._links_flags = flags
         return self._links
 
@@ -121,10 +124,10 @@ class KernelOps:
         self._rule_flags = self._rule = None
 
     def _wall_call(self, fn, f, flags, velocity) -> None:
-        cell, d = self._wall_links(flags)
+        cell, d, mate = self._wall_links(flags)
         if cell.size:
             pz, py, px = flags.shape
-            fn(int(cell.size), f, velocity, cell, d, np.int32(px - 2), np.int32(py - 2), np.int32(pz - 2))
+            fn(int(cell.size), f, velocity, cell, d, mate, np.int32(px - 2), np.int32(py - 2), np.int32(pz - 2))
 
     def _or_dummy(self, a, used: bool):
         return a if (used and a is not None) else self._dummy
@@ -205,13 +208,17 @@ class KernelOps:
         odd_nu_max: float = 1.0,
         chemical_potential: tuple[float, float] | None = None,
         odd_ramp=None,
+        prefilled: bool = False,
     ) -> None:
-        """Fused forces + NOCM-MRT collision + AA streaming (see ReferenceOps.collide_stream)."""
+        """Fused forces + NOCM-MRT collision + AA streaming (see ReferenceOps.collide_stream). ``prefilled``: an
+        odd step's wall links were already prefilled for these populations and wall velocities (by this step's
+        :meth:`macro_pressure`, with nothing in between that writes f or the velocities); the prefill is then not
+        repeated (it would write the same values)."""
         check_closures(self, smagorinsky, odd_lambda)
         check_odd_ramp(self, odd_ramp)
         beta, kappa = check_chemical_potential(self, chemical_potential)
         n, nx, ny, nz = self._interior(flags)
-        if parity & 1:
+        if parity & 1 and not prefilled:
             self._wall_call(self._prefill, f, flags, velocity)
         self._collide(
             n,

@@ -566,6 +566,7 @@ class ReferenceOps:
         odd_nu_max: float = 1.0,
         chemical_potential: tuple[float, float] | None = None,
         odd_ramp=None,
+        prefilled: bool = False,
     ) -> None:
         """Fused collide + stream (Eqs. 8-10): forces, NOCM-MRT collision, AA store; writes u to ``velocity``.
         ``smagorinsky``: the Smagorinsky constant C of the subgrid viscosity (0 = off, the paper's model);
@@ -573,7 +574,9 @@ class ReferenceOps:
         cells whose molecular viscosity is below ``odd_nu_max``; ``chemical_potential``: (β, κ) of Eq. 22, given
         exactly when the ops have surface tension (the collide computes μ_φ from φ itself, no stored field);
         ``odd_ramp``: padded float32 weights s of rate 1 (:func:`ramped_odd_rates`), given exactly when the ops
-        were built with ``odd_ramp=True``."""
+        were built with ``odd_ramp=True``; ``prefilled``: :meth:`KernelOps.collide_stream`'s (the reference keeps
+        no wall-link slots, so it changes nothing here)."""
+        del prefilled
         check_closures(self, smagorinsky, odd_lambda)
         check_odd_ramp(self, odd_ramp)
         chem = check_chemical_potential(self, chemical_potential)

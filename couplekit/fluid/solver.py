@@ -573,6 +573,7 @@ class FluidSolver:
                 parity, prm.rho_h, prm.rho_l, prm.nu_h, prm.nu_l, *prm.gravity, prm.smagorinsky, self._odd_lambda,
                 prm.odd_nu_max, chemical_potential=(self.beta, self.kappa) if self.surface_tension else None,
                 odd_ramp=self.odd_ramp,
+                prefilled=True,  # macro_pressure prefilled this odd step's wall links; nothing since wrote f or u
             )  # fmt: skip
             if parity:
                 ops.fold(self.f, self._ghost, self._image)

@@ -90,6 +90,35 @@ def test_wall_links_carry_the_face_velocity_where_they_cross(cpu, effects, parit
     np.testing.assert_array_equal(link_wall_velocity(sk["velocity"], straight), shifted(sk["velocity"], (0, 0, -1)))
 
 
+def test_wall_link_mates_follow_the_face_rule():
+    """grid.wall_link_mates, the second velocity cell of each wall link that the list kernels read: c's own ghost
+    across the face for a link from a ghost of one face, the sending cell itself for straight links, edge and
+    corner ghosts and interior solids (checked link by link against the rule written out in (x, y, z))."""
+    from couplekit.fluid.grid import wall_link_mates, wall_links
+    from couplekit.lattice import C27
+
+    flags = random_state(5, BOUNDARY_SETS["mixed"])["flags"]
+    pz, py, px = flags.shape
+    cell, d = wall_links(flags)
+    mate = wall_link_mates(cell, d, flags.shape)
+    kinds = set()
+    for c, j, m in zip(cell.tolist(), d.tolist(), mate.tolist(), strict=True):
+        z, y, x = c // (px * py), (c // px) % py, c % px
+        cx, cy, cz = (int(v) for v in C27[j])
+        w = (x - cx, y - cy, z - cz)
+        ghost = [w[0] in (0, px - 1), w[1] in (0, py - 1), w[2] in (0, pz - 1)]
+        if sum(ghost) == 1:
+            axis = ghost.index(True)
+            v = [x, y, z]
+            v[axis] = w[axis]
+            kinds.add("straight" if (cx, cy, cz)[axis] != 0 and sum(map(abs, (cx, cy, cz))) == 1 else "face")
+        else:
+            v = list(w)
+            kinds.add("edge or solid")
+        assert m == v[0] + px * (v[1] + py * v[2]), (c, j)
+    assert kinds == {"straight", "face", "edge or solid"}
+
+
 # rows long enough for the host loops' vector tail (kernels/lbm_core.cuh lbm_row_tail): spans of 16 + r cells
 # (r = 5, 6, 0, 1), whose last r cells run as one more vector over cells the loop has done; rows cut by the
 # state's obstacle (a span with solid cells inside) and bulk rows (periodic x)
