@@ -44,8 +44,8 @@ def cpu(kernel_backend):
     return kernel_backend
 
 
-def _fp16_state(seed, boundaries):
-    s = random_state(seed, boundaries)
+def _fp16_state(seed, boundaries, shape=None):
+    s = random_state(seed, boundaries, **({"shape": shape} if shape else {}))
     s["f"] = to_stored(from_stored(s["f"]), "fp16")
     return s, {k: (v.copy() if isinstance(v, np.ndarray) else v) for k, v in s.items()}
 
@@ -161,10 +161,13 @@ def test_an_fp16_module_refuses_float32_populations(cpu):
 @pytest.mark.parametrize("effects", list(EFFECTS))
 @pytest.mark.parametrize("boundaries", list(BOUNDARY_SETS))
 @pytest.mark.parametrize("parity", [0, 1])
-def test_collide_stream_matches_reference_fp16(cpu, effects, boundaries, parity):
+@pytest.mark.parametrize("shape", [None, (4, 5, 21)], ids=["default", "21-cell rows"])
+def test_collide_stream_matches_reference_fp16(cpu, effects, boundaries, parity, shape):
+    """21-cell rows: the host loop's last 5 cells run as one more vector whose first 11 lanes keep their stored
+    binary16 bits (kernels/lbm_core.cuh lbm_row_tail)."""
     ko = KernelOps(cpu, **EFFECTS[effects], storage="fp16")
     ro = ReferenceOps(**EFFECTS[effects], storage="fp16")
-    sk, sr = _fp16_state(11 + parity, BOUNDARY_SETS[boundaries])
+    sk, sr = _fp16_state(11 + parity, BOUNDARY_SETS[boundaries], shape)
     f0 = sk["f"].copy()
     for ops, s in ((ko, sk), (ro, sr)):
         ops.collide_stream(
