@@ -9,6 +9,11 @@ temporary ``git worktree`` (the working tree is used as it is) and timed in its 
 checkout first on ``PYTHONPATH``. The contenders alternate, ``--repeats`` times each, and each stage keeps its
 best time: timings on a shared machine drift by up to 3x (DESIGN), a ratio within one run does not.
 
+Compare two commits rather than a commit and the working tree: with the same code on both sides (the working
+tree stashed to HEAD), ``HEAD`` against the working tree read the collide-stream 0.85x for the working tree in
+session 19 (Fig. 13 small, 1 thread; 0.73x and 0.76x in two runs where only an unrelated kernel differed), while
+the other stages agreed. So commit first and name both revisions.
+
 Writes ``benchmarks/results/compare_commits.json``. Kernel libraries are cached by source hash, so the first
 repeat of a commit may build them: the ``--warm-up`` steps (not timed) absorb that.
 """
