@@ -599,10 +599,14 @@ KERNEL void lbm_collide_stream(const long long n, ck_store_t* RESTRICT f /* size
             int lo = 1, hi = nx;                                                                       \
             if (!bulk) lbm_row_fluid_span(flags, row, nx, lo, hi);                                     \
             const int rem = lbm_row_tail(lo, hi);                                                      \
-            for (int x0 = lo; x0 <= hi - rem; x0 += LBM_ROW_CHUNK) {                                   \
-                const int len = hi - rem + 1 - x0 < LBM_ROW_CHUNK ? hi - rem + 1 - x0 : LBM_ROW_CHUNK; \
-                const long long c0 = row + x0;                                                         \
-                if (bulk) {                                                                            \
+            for (int x0 = lo; x0 <= hi;) {                                                             \
+                /* whole vectors to hi - rem, then the last rem cells as one vector ending at hi */     \
+                const int tail = x0 > hi - rem; /* (lbm_row_tail: its first lanes are kept) */         \
+                const int len = tail ? LBM_VEC                                                         \
+                                     : (hi - rem + 1 - x0 < LBM_ROW_CHUNK ? hi - rem + 1 - x0 : LBM_ROW_CHUNK); \
+                const long long c0 = row + (tail ? hi - (LBM_VEC - 1) : x0);                           \
+                x0 = tail ? hi + 1 : x0 + len;                                                         \
+                if (bulk && !tail) {                                                                   \
                     LBM_PHI_CHUNK(LBM_NB_BULK, c0, len, masks)                                          \
                     CK_PRAGMA(omp simd)                                                                \
                     for (int i = 0; i < len; ++i)                                                      \
@@ -610,19 +614,13 @@ KERNEL void lbm_collide_stream(const long long n, ck_store_t* RESTRICT f /* size
                                                            LBM_CHUNK_VALUES(i));                       \
                     continue;                                                                          \
                 }                                                                                      \
-                lbm_link_masks(flags, c0, len, px, pxy, masks, scratch);                               \
+                if (tail)                                                                              \
+                    lbm_tail_masks(flags, c0, rem, px, pxy, masks, scratch);                           \
+                else                                                                                   \
+                    lbm_link_masks(flags, c0, len, px, pxy, masks, scratch);                           \
                 LBM_PHI_CHUNK(LBM_NB_MASK, c0, len, masks)                                              \
                 CK_PRAGMA(omp simd)                                                                    \
                 for (int i = 0; i < len; ++i)                                                          \
-                    lbm_collide_cell<ODD, LBM_NB_MASK, 1>(c0 + i, LBM_CELL_ARGS(px, pxy, N), masks[i],          \
-                                                          LBM_CHUNK_VALUES(i));                        \
-            }                                                                                          \
-            if (rem) { /* the last rem cells: one whole vector ending at hi (lbm_row_tail) */          \
-                const long long c0 = row + hi - (LBM_VEC - 1);                                         \
-                lbm_tail_masks(flags, c0, rem, px, pxy, masks, scratch);                               \
-                LBM_PHI_CHUNK(LBM_NB_MASK, c0, LBM_VEC, masks)                                          \
-                CK_PRAGMA(omp simd)                                                                    \
-                for (int i = 0; i < LBM_VEC; ++i)                                                      \
                     lbm_collide_cell<ODD, LBM_NB_MASK, 1>(c0 + i, LBM_CELL_ARGS(px, pxy, N), masks[i],          \
                                                           LBM_CHUNK_VALUES(i));                        \
             }                                                                                          \

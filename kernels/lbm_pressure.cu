@@ -158,35 +158,29 @@ KERNEL void lbm_macro_pressure(const long long n, const ck_store_t* RESTRICT f /
 #endif
 // the chunks of one row, MIX: the mixture's terms (1) or a sand-free row's (0, lbm_pressure_cell)
 #define LBM_P_CHUNKS(ODD, FSUM, MIX)                                                                      \
-    for (int x0 = lo; x0 <= hi - rem; x0 += LBM_P_CHUNK) {                                                \
-        const int len = hi - rem + 1 - x0 < LBM_P_CHUNK ? hi - rem + 1 - x0 : LBM_P_CHUNK;                \
-        const long long c0 = row + x0;                                                                    \
+    for (int x0 = lo; x0 <= hi;) {                                                                        \
+        /* whole vectors to hi - rem, then the last rem cells as one vector ending at hi */                \
+        const int tail = x0 > hi - rem; /* (lbm_row_tail: its first lanes are kept) */                    \
+        const int len = tail ? LBM_VEC : (hi - rem + 1 - x0 < LBM_P_CHUNK ? hi - rem + 1 - x0 : LBM_P_CHUNK); \
+        const long long c0 = row + (tail ? hi - (LBM_VEC - 1) : x0);                                      \
+        x0 = tail ? hi + 1 : x0 + len;                                                                    \
         if (MIX) {                                                                                        \
             CK_PRAGMA(omp simd)                                                                           \
             for (int i = 0; i < len; ++i) slipw[i] = slip_cells[c0 + i] != 0 ? 1u : 0u;                   \
         }                                                                                                 \
-        if (bulk) {                                                                                       \
+        if (bulk && !tail) {                                                                              \
             CK_PRAGMA(omp simd)                                                                           \
             for (int i = 0; i < len; ++i)                                                                 \
                 lbm_pressure_cell<ODD, LBM_NB_BULK, 0, 0, 0, FSUM, MIX>(c0 + i, LBM_P_ARGS(px, pxy, N),       \
                                                                         LBM_FULL_MASK, LBM_P_SLIP(i));    \
             continue;                                                                                     \
         }                                                                                                 \
-        lbm_link_masks(flags, c0, len, px, pxy, masks, scratch);                                          \
+        if (tail)                                                                                         \
+            lbm_tail_masks(flags, c0, rem, px, pxy, masks, scratch);                                      \
+        else                                                                                              \
+            lbm_link_masks(flags, c0, len, px, pxy, masks, scratch);                                      \
         CK_PRAGMA(omp simd)                                                                               \
         for (int i = 0; i < len; ++i)                                                                     \
-            lbm_pressure_cell<ODD, LBM_NB_MASK, 0, 0, 1, FSUM, MIX>(c0 + i, LBM_P_ARGS(px, pxy, N), masks[i], \
-                                                                    LBM_P_SLIP(i));                       \
-    }                                                                                                     \
-    if (rem) { /* the last rem cells: one whole vector ending at hi (lbm_row_tail) */                     \
-        const long long c0 = row + hi - (LBM_VEC - 1);                                                    \
-        if (MIX) {                                                                                        \
-            CK_PRAGMA(omp simd)                                                                           \
-            for (int i = 0; i < LBM_VEC; ++i) slipw[i] = slip_cells[c0 + i] != 0 ? 1u : 0u;               \
-        }                                                                                                 \
-        lbm_tail_masks(flags, c0, rem, px, pxy, masks, scratch);                                          \
-        CK_PRAGMA(omp simd)                                                                               \
-        for (int i = 0; i < LBM_VEC; ++i)                                                                 \
             lbm_pressure_cell<ODD, LBM_NB_MASK, 0, 0, 1, FSUM, MIX>(c0 + i, LBM_P_ARGS(px, pxy, N), masks[i], \
                                                                     LBM_P_SLIP(i));                       \
     }
