@@ -349,12 +349,12 @@ LBM_INLINE bool lbm_row_fluid(const unsigned char* RESTRICT flags, const long lo
 // the cells lo .. hi - rem in whole vectors, and the last rem cells as one more vector of LBM_VEC cells that
 // ends at hi: its first LBM_VEC - rem lanes are cells the loop has already done (or non-fluid cells of the
 // row), which it runs again as non-fluid (GUARD = 1, bit 0 of the mask cleared: each keeps the values it has).
-// This needs the whole vector inside the padded row (hi >= LBM_VEC - 1); rem = 0 otherwise, and for spans of
-// fewer than LBM_VEC cells (their scalar loop as before).  The loops' chunk lengths are multiples of LBM_VEC.
+// Spans of fewer than LBM_VEC cells get rem = 0 (their scalar loop as before); a longer span starts at lo >= 1,
+// so its last vector lies inside the row.  The loops' chunk lengths are multiples of LBM_VEC.
 #define LBM_VEC 16
 LBM_INLINE int lbm_row_tail(const int lo, const int hi) {
     const int span = hi + 1 - lo;
-    return (span >= LBM_VEC && hi >= LBM_VEC - 1) ? span % LBM_VEC : 0;
+    return span >= LBM_VEC ? span % LBM_VEC : 0;
 }
 
 // Host: link masks of the `len` cells starting at padded index c0.  The flags of the 9 rows around them are

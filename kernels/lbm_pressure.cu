@@ -291,26 +291,26 @@ KERNEL void lbm_pressure_filter(const long long n, const float* RESTRICT p /* si
             unsigned int masks[LBM_P_CHUNK], scratch[10 * (LBM_P_CHUNK + 2)];
             int lo = 1, hi = nx;
             if (!bulk) lbm_row_fluid_span(flags, row, nx, lo, hi);
-            const int rem = lbm_row_tail(lo, hi);  // the last rem cells: one whole vector ending at hi
-            if (bulk) {
-                CK_PRAGMA(omp simd)
-                for (int x = 1; x <= nx - rem; ++x)
-                    lbm_filter_cell<LBM_NB_BULK>(row + x, p, flags, pbar, px, pxy, LBM_FULL_MASK);
-            } else {
-                for (int x0 = lo; x0 <= hi - rem; x0 += LBM_P_CHUNK) {
-                    const int len = hi - rem + 1 - x0 < LBM_P_CHUNK ? hi - rem + 1 - x0 : LBM_P_CHUNK;
-                    const long long c0 = row + x0;
-                    lbm_link_masks(flags, c0, len, px, pxy, masks, scratch);
+            const int rem = lbm_row_tail(lo, hi);
+            for (int x0 = lo; x0 <= hi;) {
+                // whole vectors to hi - rem, then the last rem cells as one vector ending at hi, its first lanes
+                // kept (lbm_row_tail)
+                const int tail = x0 > hi - rem;
+                const int len = tail ? LBM_VEC : (hi - rem + 1 - x0 < LBM_P_CHUNK ? hi - rem + 1 - x0 : LBM_P_CHUNK);
+                const long long c0 = row + (tail ? hi - (LBM_VEC - 1) : x0);
+                x0 = tail ? hi + 1 : x0 + len;
+                if (bulk && !tail) {
                     CK_PRAGMA(omp simd)
                     for (int i = 0; i < len; ++i)
-                        lbm_filter_cell<LBM_NB_MASK, 1>(c0 + i, p, flags, pbar, px, pxy, masks[i]);
+                        lbm_filter_cell<LBM_NB_BULK>(c0 + i, p, flags, pbar, px, pxy, LBM_FULL_MASK);
+                    continue;
                 }
-            }
-            if (rem) {
-                const long long c0 = row + hi - (LBM_VEC - 1);
-                lbm_tail_masks(flags, c0, rem, px, pxy, masks, scratch);
+                if (tail)
+                    lbm_tail_masks(flags, c0, rem, px, pxy, masks, scratch);
+                else
+                    lbm_link_masks(flags, c0, len, px, pxy, masks, scratch);
                 CK_PRAGMA(omp simd)
-                for (int i = 0; i < LBM_VEC; ++i) lbm_filter_cell<LBM_NB_MASK, 1>(c0 + i, p, flags, pbar, px, pxy, masks[i]);
+                for (int i = 0; i < len; ++i) lbm_filter_cell<LBM_NB_MASK, 1>(c0 + i, p, flags, pbar, px, pxy, masks[i]);
             }
         }
 #endif

@@ -831,10 +831,14 @@ KERNEL void phase_collide_stream(const long long n, ck_store_t* RESTRICT h /* si
                 int lo = 1, hi = nx;
                 if (!bulk9) lbm_row_fluid_span(flags, row, nx, lo, hi);
                 const int rem = lbm_row_tail(lo, hi);
-                for (int x0 = lo; x0 <= hi - rem; x0 += PF_ROW_CHUNK) {
-                    const int len = hi - rem + 1 - x0 < PF_ROW_CHUNK ? hi - rem + 1 - x0 : PF_ROW_CHUNK;
-                    const long long c0 = row + x0;
-                    if (bulk9) {
+                for (int x0 = lo; x0 <= hi;) {
+                    // whole vectors to hi - rem, then the last rem cells as one vector ending at hi, its first
+                    // lanes kept (lbm_row_tail)
+                    const int tail = x0 > hi - rem;
+                    const int len = tail ? LBM_VEC : (hi - rem + 1 - x0 < PF_ROW_CHUNK ? hi - rem + 1 - x0 : PF_ROW_CHUNK);
+                    const long long c0 = row + (tail ? hi - (LBM_VEC - 1) : x0);
+                    x0 = tail ? hi + 1 : x0 + len;
+                    if (bulk9 && !tail) {
                         pf_gradient_chunk<PF_NB_BULK>(c0, len, phi, flags, sy, sz, masks, gbx, gby, gbz);
                         CK_PRAGMA(omp simd)
                         for (int i = 0; i < len; ++i) {
@@ -845,20 +849,10 @@ KERNEL void phase_collide_stream(const long long n, ck_store_t* RESTRICT h /* si
                     }
                     pf_fluid_masks(flags, c0, len, sy, sz, masks, scratch);
                     pf_gradient_chunk<PF_NB_MASK>(c0, len, phi, flags, sy, sz, masks, gbx, gby, gbz);
+                    if (tail)
+                        for (int i = 0; i < LBM_VEC - rem; ++i) masks[i] &= ~(1u << 13);  // done: kept
                     CK_PRAGMA(omp simd)
                     for (int i = 0; i < len; ++i) {
-                        const long long c = c0 + i;
-                        const unsigned int live = (masks[i] >> 13) & 1u;
-                        PF_EVEN_BODY(PF_ST_GUARDED, PF_GRAD_BUF(i))
-                    }
-                }
-                if (rem) {  // the last rem cells: one whole vector ending at hi, its first lanes kept (lbm_row_tail)
-                    const long long c0 = row + hi - (LBM_VEC - 1);
-                    pf_fluid_masks(flags, c0, LBM_VEC, sy, sz, masks, scratch);
-                    pf_gradient_chunk<PF_NB_MASK>(c0, LBM_VEC, phi, flags, sy, sz, masks, gbx, gby, gbz);
-                    for (int i = 0; i < LBM_VEC - rem; ++i) masks[i] &= ~(1u << 13);  // done: kept
-                    CK_PRAGMA(omp simd)
-                    for (int i = 0; i < LBM_VEC; ++i) {
                         const long long c = c0 + i;
                         const unsigned int live = (masks[i] >> 13) & 1u;
                         PF_EVEN_BODY(PF_ST_GUARDED, PF_GRAD_BUF(i))
