@@ -721,11 +721,15 @@ def memory_estimate(scene: Scene) -> dict[str, float]:
         # fluid mixture inputs (fluid_fraction, sand_velocity, force) and the coupler's fields
         flags = set(retention_flags(scene))
         retention, mixed = True in flags, len(flags) > 1  # mixed: + retentive fraction grid and flags
-        # padded: the fluid's ε, sand velocity and force (7), the coupler's last ε (1; its exchange velocity
-        # shares the sand velocity's buffer, the sand and water fractions are recomputed, SandFluidCoupler),
-        # the cells of Eq. 39's slip term (1 byte); interior: with retention the bound water R, R', dR
-        # (+ the retentive sand's fraction with per-body retention)
-        out["coupling"] = padded * (4.0 * (7 + 1) + 1) + cells * 4.0 * ((3 + mixed) if retention else 0)
+        # padded: the fluid's ε, sand velocity and force (7), the coupler's last ε (1, unless it lives in the
+        # source term's buffer, counted with the fluid; its exchange velocity shares the sand velocity's buffer,
+        # the sand and water fractions are recomputed, SandFluidCoupler), the cells of Eq. 39's slip term
+        # (1 byte); interior: with retention the bound water R, R', dR (+ the retentive sand's fraction with
+        # per-body retention)
+        shared = scene.fluid.phases == 2 and scene.effects.source_term
+        out["coupling"] = padded * (4.0 * (7 + (0 if shared else 1)) + 1) + cells * 4.0 * (
+            (3 + mixed) if retention else 0
+        )
         out["particles"] += 4.0 * count * ((1 + mixed) if retention else 0)
         if scene.scheduler.kind == "multirate" and scene.scheduler.sand_every > 1:
             out["scheduler"] = 4.0 * padded * 3  # the exchange velocity's own buffer (own_fluid_velocity)

@@ -26,7 +26,9 @@ EFFECT_BYTES = {
     "phase_field": (F32 * (7 + 1), 0, 0),
     "surface_tension": (0, 0, 0),  # mu_phi: computed inside the flow collide from phi (lbm_laplacian_sum)
     "volume_controller": (0, 0, 0),
-    "source_term": (F32 * 1, 0, 0),  # S_phi (coupled two-phase scenes; compiled out otherwise, CK_PF_SOURCE=0)
+    # S_phi (coupled two-phase scenes; compiled out otherwise, CK_PF_SOURCE=0) lives in the buffer of last step's
+    # porosity, which the coupling counts (SandFluidCoupler.share_source_buffer)
+    "source_term": (0, 0, 0),
     # ε, u_s (which also holds the exchange's fluid u), force, ε_prev, slip (the sand and water fractions are
     # recomputed where they are read: SandFluidCoupler)
     "coupling": (F32 * (1 + 3 + 3 + 1) + 1, 0, 0),

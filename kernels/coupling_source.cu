@@ -62,13 +62,16 @@
 #define CPL_ROW_CHUNK 256
 
 // n = nx * ny * nz.  Without retention d_bound is not read (pass a 1-element array).
+// eps_prev and source may be one array (no RESTRICT on either): each cell's eps_prev is read before that cell's
+// source is written, and no other cell's eps_prev is read, so the schedulers keep S_phi in last step's porosity
+// buffer (SandFluidCoupler.share_source_buffer, 4 B per cell).
 KERNEL void coupling_phase_source(const long long n, const float* RESTRICT eps /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
-                                  const float* RESTRICT eps_prev /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                                  const float* eps_prev /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                                   const float* RESTRICT phi /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                                   const float* RESTRICT u /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
                                   const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                                   const float* RESTRICT d_bound /* size >= 1 */,
-                                  float* RESTRICT source /* size: (nx + 2) * (ny + 2) * (nz + 2) */, const int nx,
+                                  float* source /* size: (nx + 2) * (ny + 2) * (nz + 2) */, const int nx,
                                   const int ny, const int nz) {
     const int PX = nx + 2;
     const long long PXY = (long long)PX * (ny + 2);

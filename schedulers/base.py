@@ -118,6 +118,11 @@ class Scheduler:
             raise ValueError("a coupler needs both a fluid and a sand solver")
         self.fluid, self.sand, self.coupler = fluid, sand, coupler
         self.source_term = bool(source_term)
+        if coupler is not None:
+            # every scheduler computes S_φ before each fluid step and ends it with coupler.finish(): last step's
+            # porosity can live in S_φ's buffer (SandFluidCoupler.share_source_buffer); without the source term
+            # it needs a buffer of its own, and S_φ stays 0
+            coupler.share_source_buffer(self.source_term)
         self.timing = bool(timing)
         self.warm_up_steps = int(warm_up_steps)
         self.backend = (fluid or sand).backend

@@ -76,8 +76,10 @@ def test_validate_prints_the_memory_of_each_effect():
         capture_output=True, text=True, timeout=60,
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr
-    # the source term's S_phi field costs 4 B per cell; surface tension none (mu_phi is computed in the collide)
-    assert re.search(r"source_term\s+on\s+this costs 4", proc.stdout)
+    # the coupling costs its fields (33 B per padded cell); the source term none (S_phi lives in last step's porosity
+    # buffer, SandFluidCoupler.share_source_buffer), surface tension none (mu_phi is computed in the collide)
+    assert re.search(r"coupling\s+on\s+this costs \d+\.\d bytes per cell", proc.stdout)
+    assert re.search(r"source_term\s+on\s+no fields of its own", proc.stdout)
     assert re.search(r"surface_tension\s+on\s+no fields of its own", proc.stdout)
     # what fp16 storage of f and h would save (27 + 7 populations, 2 B each, per padded cell)
     assert "fp16_storage       off  this saves" in proc.stdout and "fluid.storage = 'fp16'" in proc.stdout

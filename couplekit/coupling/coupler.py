@@ -33,6 +33,13 @@ streaming; with it a strong drag over a sand block makes the LBM blow up within 
 :meth:`couplekit.fluid.solver.FluidSolver.current_velocity`, a fluid kernel on every backend (checked
 against an independent NumPy read of the populations in tests/coupling/test_coupling_fluid_velocity.py).
 
+Where last step's porosity lives (:attr:`SandFluidCoupler.eps_prev`): with the source term applied, in the fluid's
+``source_term`` buffer (:meth:`SandFluidCoupler.share_source_buffer`, set up by the schedulers), 4 B per cell
+not stored twice.  ε̃_prev is last read by :meth:`phase_source` (and before it by :meth:`fractions` with
+retention), whose kernel reads it at a cell before it writes S_φ there; S_φ is read by the fluid step; then
+:meth:`finish` writes this step's porosity into the buffer.  Between steps it holds ε̃_prev (what a checkpoint
+saves under both names).
+
 Where Σ f c lives (:attr:`SandFluidCoupler.fluid_u`): in the fluid's ``sand_velocity`` buffer, 12 B per cell
 that are not stored twice.  The two are never alive at once in a step: Σ f c is written by
 :meth:`fluid_velocity` and last read by :meth:`exchange` (and :meth:`phase_source`), the sand velocity is
@@ -101,7 +108,7 @@ class SandFluidCoupler:
         shape = tuple(fluid.shape)
         padded = tuple(s + 2 for s in shape)
         self._fluid_u = None  # own buffer of the exchange velocity (own_fluid_velocity); else fluid.sand_velocity
-        self.eps_prev = xp.ones(padded, dtype=np.float32)
+        self._eps_prev = xp.ones(padded, dtype=np.float32)  # None while it lives in fluid.source_term
         self.retention = bool(self.params.retention)
         if self.retention:
             self.bound_in = xp.zeros(shape, dtype=np.float32)
@@ -129,6 +136,36 @@ class SandFluidCoupler:
         """The exchange velocity Σ_j f_j c_j (padded, lattice units): the fluid's ``sand_velocity`` buffer, or
         a buffer of its own after :meth:`own_fluid_velocity` (module docstring)."""
         return self.fluid.sand_velocity if self._fluid_u is None else self._fluid_u
+
+    @property
+    def eps_prev(self):
+        """Last step's porosity ε̃_prev (padded): a buffer of its own, or the fluid's ``source_term`` buffer
+        after :meth:`share_source_buffer` (module docstring)."""
+        return self.fluid.source_term if self._eps_prev is None else self._eps_prev
+
+    @property
+    def shares_source_buffer(self) -> bool:
+        """Whether ε̃_prev and S_φ are one buffer (:meth:`share_source_buffer`)."""
+        return self._eps_prev is None
+
+    def share_source_buffer(self, share: bool) -> None:
+        """Keep ε̃_prev in the fluid's S_φ buffer (``share``), 4 B per padded cell less, or in one of its own.
+
+        Sharing is for a scheduler that calls :meth:`phase_source` before every fluid step and :meth:`finish`
+        after it (every scheduler that applies the source term): the porosity's last reader is the source
+        term's kernel itself, which reads ε̃_prev at a cell before it writes S_φ there, and the first
+        writer after the fluid step is :meth:`finish`. A scheduler that does not apply the source term
+        (``source_term=False``, paper Fig. 14's ablation) calls it with False, so that the fluid sees S_φ = 0.
+        The values carry over either way; a no-op without a source buffer (one-phase fluid, S_φ compiled out)."""
+        f = self.fluid
+        if f.source_term is None or share == self.shares_source_buffer:
+            return
+        if share:
+            f.source_term[...] = self._eps_prev
+            self._eps_prev = None
+        else:
+            self._eps_prev = f.source_term.copy()
+            f.source_term[...] = 0.0
 
     def own_fluid_velocity(self) -> None:
         """Give :attr:`fluid_u` a buffer of its own (12 B per padded cell), for a scheduler that computes
