@@ -182,15 +182,18 @@ def _shapes_of(scene: Scene, kind: str) -> Union | None:
     return Union(shapes) if shapes else None
 
 
-def _water_shape(scene: Scene) -> Union | None:
+def _water_shape(scene: Scene, periodic: tuple[bool, bool, bool] = (False, False, False)) -> Union | None:
     """Water bodies for the initial φ. A box face, or a height field's side or base, lying on the domain
     boundary is pushed out by 10 cells, so water that fills the shape up to a wall has no interface (a tanh
-    drop) along that wall."""
+    drop) along that wall. On a ``periodic`` (x, y, z) axis only a shape that reaches both ends is pushed out (it
+    continues across the wrap); one that reaches one end has its interface there, across the wrap from the
+    cells at the other end (:func:`_periodic_images`)."""
     from .scene.geometry import Box
     from .scene.mesh import HeightField, load_heights
 
     dom = scene.domain
     size, pad = np.asarray(dom.size), 10 * dom.dx
+    wraps = np.asarray(periodic, bool)
     shapes = []
     for b in scene.bodies:
         if b.kind != "water":
@@ -200,8 +203,10 @@ def _water_shape(scene: Scene) -> Union | None:
             lo = np.asarray(g.params["min"], float) + np.asarray(g.translate)
             hi = np.asarray(g.params["max"], float) + np.asarray(g.translate)
             tol = 1e-9 * size.max()
-            lo = np.where(lo <= tol, lo - pad, lo)
-            hi = np.where(hi >= size - tol, hi + pad, hi)
+            at_lo, at_hi = lo <= tol, hi >= size - tol
+            spans = at_lo & at_hi
+            lo = np.where(at_lo & (spans | ~wraps), lo - pad, lo)
+            hi = np.where(at_hi & (spans | ~wraps), hi + pad, hi)
             shapes.append(Box(lo, hi))
         elif g.type == "heightfield" and g.scale == 1.0 and not any(g.rotate) and not any(g.translate) and not g.invert:
             p = g.params
@@ -214,18 +219,56 @@ def _water_shape(scene: Scene) -> Union | None:
             # height field's samples are evenly spaced), for at least `pad`
             sx, sy = (x1 - x0) / (h.shape[1] - 1), (y1 - y0) / (h.shape[0] - 1)
             nx_pad, ny_pad = int(np.ceil(pad / sx)), int(np.ceil(pad / sy))
-            if x0 <= tol:
+            push_x = not wraps[0] or (x0 <= tol and x1 >= size[0] - tol)
+            push_y = not wraps[1] or (y0 <= tol and y1 >= size[1] - tol)
+            if x0 <= tol and push_x:
                 h, x0 = np.concatenate([np.repeat(h[:, :1], nx_pad, axis=1), h], axis=1), x0 - nx_pad * sx
-            if x1 >= size[0] - tol:
+            if x1 >= size[0] - tol and push_x:
                 h, x1 = np.concatenate([h, np.repeat(h[:, -1:], nx_pad, axis=1)], axis=1), x1 + nx_pad * sx
-            if y0 <= tol:
+            if y0 <= tol and push_y:
                 h, y0 = np.concatenate([np.repeat(h[:1], ny_pad, axis=0), h], axis=0), y0 - ny_pad * sy
-            if y1 >= size[1] - tol:
+            if y1 >= size[1] - tol and push_y:
                 h, y1 = np.concatenate([h, np.repeat(h[-1:], ny_pad, axis=0)], axis=0), y1 + ny_pad * sy
             shapes.append(HeightField(h, (x0, x1), (y0, y1), base, 0.25 * dom.dx))
         else:
             shapes.append(g.shape(dom, 0.25 * dom.dx))
     return Union(shapes) if shapes else None
+
+
+def _periodic_images(d: np.ndarray, shape, scene: Scene, periodic: tuple[bool, bool, bool]) -> np.ndarray:
+    """The water's signed distance ``d`` (cells, (nz, ny, nx)) with the shape's periodic images: on a periodic
+    axis the copies shifted by ± the domain's length, whose surfaces are the interfaces across the wrap.
+
+    Why: without them water that reaches one end of a periodic axis met the air at the other end as a
+    one-cell jump of φ across the wrap, which goes non-finite within a few steps at 800:1 (a box of water from
+    x = 0 in a 13 × 13 × 21 box periodic in x: NaN at step 6). The union of the images is the minimum of their
+    distances. An image changes φ only within a few interface widths of the end it lies beyond: it is
+    evaluated on the ``5 ξ + 2`` cells there (beyond 5 ξ the profile differs from 0 or 1 by < 1e-8), and on
+    their intersections for the images shifted along two or three axes."""
+    import itertools
+
+    dom = scene.domain
+    res = np.asarray(dom.resolution)  # (nx, ny, nz)
+    band = int(np.ceil(5 * scene.fluid.interface_width)) + 2
+    axes = [a for a in range(3) if periodic[a]]
+    out = d.copy()
+    for signs in itertools.product((-1, 0, 1), repeat=len(axes)):
+        if not any(signs):
+            continue
+        shift = np.zeros(3)
+        ranges = [np.arange(n) for n in res]
+        for a, sgn in zip(axes, signs, strict=True):
+            if sgn == 0:
+                continue
+            shift[a] = sgn * dom.size[a]
+            # the image beyond the high end (+L) is near the last cells, the one beyond the low end near the first
+            ranges[a] = np.arange(max(res[a] - band, 0), res[a]) if sgn > 0 else np.arange(min(band, res[a]))
+        z, y, x = np.meshgrid(ranges[2], ranges[1], ranges[0], indexing="ij")
+        pts = (np.stack([x.ravel(), y.ravel(), z.ravel()], axis=1) + 0.5) * dom.dx
+        img = (shape.sdf(pts - shift) / dom.dx).reshape(z.shape)
+        sub = np.ix_(ranges[2], ranges[1], ranges[0])
+        out[sub] = np.minimum(out[sub], img)
+    return out
 
 
 def fluid_params(scene: Scene, units: Units) -> FluidParams:
@@ -387,11 +430,14 @@ def build_fluid(scene: Scene, backend: Backend, units: Units, coupled: bool, log
     boundaries, solid = fluid_boundaries(scene, units)
     phi = velocity = None
     if two:
-        water = _water_shape(scene)
+        periodic = tuple(boundaries.face(a + "-").kind == "periodic" for a in "xyz")
+        water = _water_shape(scene, periodic)
         if water is None:
             phi = np.zeros(dom.shape, np.float32)
         else:
             d_cells = sdf_on_grid(water, dom.resolution, dom.dx).astype(np.float64) / dom.dx
+            if any(periodic):
+                d_cells = _periodic_images(d_cells, water, scene, periodic)
             phi = (0.5 * (1.0 - np.tanh(2.0 * d_cells / fl.interface_width))).astype(np.float32)  # after Eq. 48
         for b in scene.bodies:
             if b.kind == "water" and any(b.velocity):

@@ -259,14 +259,20 @@ SHARP_RATIO = 100.0
 """Density ratio ρ_h/ρ_l above which :data:`SHARP_JUMP` is checked."""
 
 
-def _max_phi_jump(phi: np.ndarray, fluid: np.ndarray) -> float:
+def _max_phi_jump(phi: np.ndarray, fluid: np.ndarray, periodic: tuple[bool, bool, bool] = (False,) * 3) -> float:
     """Largest |φ(x) − φ(x + e_a)| over face-neighbouring interior cells that are both fluid (``fluid``: interior
-    boolean mask), along the three axes."""
+    boolean mask), along the three axes; across the wrap too on the ``periodic`` (x, y, z) axes, where the last
+    layer's neighbour is the first."""
     jump = 0.0
     for axis in range(3):
-        both = np.logical_and(np.delete(fluid, 0, axis=axis), np.delete(fluid, -1, axis=axis))
+        wrap = periodic[2 - axis]  # arrays are (z, y, x)
+        nxt_phi = np.roll(phi, -1, axis=axis) if wrap else np.delete(phi, 0, axis=axis)
+        nxt_fluid = np.roll(fluid, -1, axis=axis) if wrap else np.delete(fluid, 0, axis=axis)
+        here_phi = phi if wrap else np.delete(phi, -1, axis=axis)
+        here_fluid = fluid if wrap else np.delete(fluid, -1, axis=axis)
+        both = here_fluid & nxt_fluid
         if both.any():
-            jump = max(jump, float(np.abs(np.diff(phi, axis=axis))[both].max()))
+            jump = max(jump, float(np.abs(nxt_phi - here_phi)[both].max()))
     return jump
 
 
@@ -439,7 +445,8 @@ class FluidSolver:
         ratio = self.params.rho_h / self.params.rho_l if self.params.rho_l > 0 else math.inf
         if ratio <= SHARP_RATIO:
             return
-        jump = _max_phi_jump(np.clip(phi0.astype(np.float64), 0.0, 1.0), fluid)
+        periodic = tuple(self.boundaries.face(a + "-").kind == "periodic" for a in "xyz")
+        jump = _max_phi_jump(np.clip(phi0.astype(np.float64), 0.0, 1.0), fluid, periodic)
         if jump > SHARP_JUMP:
             warnings.warn(
                 SharpInterfaceWarning(

@@ -248,7 +248,9 @@ def render() -> str:
             parts.append(_SAND_WALLS + _table(SAND_WALL_KEYS) + "\n")
     parts.append(
         "## [[bodies]]\n\nAny number of bodies; each has a `kind` and a `[bodies.geometry]` table (below).\n"
-        "Water bodies set the initial liquid (φ = 1 inside, a tanh profile of width ξ across the surface); sand\n"
+        "Water bodies set the initial liquid (φ = 1 inside, a tanh profile of width ξ across the surface; water\n"
+        "filling a shape up to a wall has no interface along the wall, and water that reaches one end of a\n"
+        "periodic axis but not the other meets the air through the wrap with the same profile); sand\n"
         "bodies are seeded with particles; obstacles are fixed solids for the fluid (bounce-back) and colliders\n"
         f"for the sand.\n\n{_table(BODY_KEYS)}\n"
     )
