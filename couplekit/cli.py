@@ -77,14 +77,24 @@ def _cmd_info(args: argparse.Namespace) -> int:
     return 0 if all(r.ok for r in results) else 1
 
 
-def _with_sets(scene, args: argparse.Namespace):
-    """``scene`` with the ``--set KEY=VALUE`` options of ``args`` applied (``with_settings``; relative files
-    resolve against the scene file's folder); unchanged without any."""
+def _with_sets(scene, args: argparse.Namespace, scheduler: str | None = None):
+    """``scene`` with ``scheduler`` (``run --scheduler``: its ``[scheduler]`` table replaced by
+    :func:`couplekit.schedulers.spec_table`'s) and the ``--set KEY=VALUE`` options of ``args`` applied, then
+    validated once, as a whole (``with_settings``; relative files resolve against the scene file's folder):
+    the scheduler's limits are checked with the sand the ``--set`` values give, not the file's. A ``--set
+    scheduler.<key>`` applies on top of ``--scheduler``'s table (``--scheduler subcycle:auto --set
+    scheduler.max_substeps=128``). Unchanged without either."""
     from .simulation import parse_setting, with_settings
 
-    if not args.set:
+    if not args.set and scheduler is None:
         return scene
-    return with_settings(scene, dict(parse_setting(s) for s in args.set), base_dir=Path(args.scene).parent)
+    settings: dict = {}
+    if scheduler is not None:
+        from .schedulers import spec_table
+
+        settings["scheduler"] = spec_table(scheduler)  # first: with_settings applies the keys in order
+    settings.update(parse_setting(s) for s in args.set)
+    return with_settings(scene, settings, base_dir=Path(args.scene).parent)
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
@@ -173,7 +183,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from .io.checkpoint import CheckpointError
     from .io.outputs import OutputFolderError, default_output, prepare_output
     from .scene import Scene, SceneError
-    from .simulation import CouplingUnavailableError, InsufficientMemoryError, Simulation, with_scheduler
+    from .simulation import CouplingUnavailableError, InsufficientMemoryError, Simulation
     from .sweep.keys import KeyPathError
 
     for name in ("frames", "threads"):
@@ -182,17 +192,16 @@ def _cmd_run(args: argparse.Namespace) -> int:
             return 2
     try:
         scene = Scene.load(args.scene)
-        if args.scheduler is not None:
-            if args.resume:
-                print("error: --scheduler cannot change the scheduler of a resumed run (the checkpoint keeps its own)",
-                      file=sys.stderr)  # fmt: skip
-                return 2
-            scene = with_scheduler(scene, args.scheduler)
-        if args.set:
-            if args.resume:
-                print("error: --set cannot change a resumed run (the checkpoint keeps its scene)", file=sys.stderr)
-                return 2
-            scene = _with_sets(scene, args)
+        if args.scheduler is not None and args.resume:
+            print("error: --scheduler cannot change the scheduler of a resumed run (the checkpoint keeps its own)",
+                  file=sys.stderr)  # fmt: skip
+            return 2
+        if args.set and args.resume:
+            print("error: --set cannot change a resumed run (the checkpoint keeps its scene)", file=sys.stderr)
+            return 2
+        # --scheduler and --set together, validated once: each alone may be refused where the pair is valid
+        # (multirate:2 with a softer sand.youngs_modulus), so neither is checked against the file's other half
+        scene = _with_sets(scene, args, scheduler=args.scheduler)
         # the output folder before anything is allocated: a used one is refused unless resumed or overwritten
         out = prepare_output(
             args.out or scene.outputs.directory or default_output(scene.name),

@@ -518,7 +518,11 @@ class Simulation:
                     where = "cell (x, y, z)"
                 raise SimulationDiverged(self.step_count, solver, name, index, value, where)
 
-    def _states(self) -> dict[str, dict[str, np.ndarray]]:
+    def _states(self, statistics: bool = False) -> dict[str, dict[str, np.ndarray]]:
+        """{solver: state} of every solver and the scheduler: what an exact restart needs (and the sand's grid
+        of the last step, :meth:`couplekit.sand.solver.SandSolver.state`); ``statistics``: also the frame's
+        sand-step statistics (:meth:`couplekit.schedulers.base.Scheduler.state`), as :meth:`save` and the run
+        loop's last good state keep them, so that a loaded simulation's :meth:`diagnostics` are the saver's."""
         out = {}
         if self.fluid is not None:
             out["fluid"] = self.fluid.state()
@@ -528,7 +532,7 @@ class Simulation:
             out["coupler"] = self.coupler.state()
         if self.emitter is not None:
             out["emission"] = self.emitter.state()
-        sched = self.scheduler.state()
+        sched = self.scheduler.state(statistics=statistics)
         if sched:
             out["scheduler"] = sched
         return out
@@ -582,14 +586,18 @@ class Simulation:
 
     # ------------------------------------------------------------------------------------ checkpoints
     def save(self, path: str | Path) -> Path:
-        """Write an HDF5 checkpoint (scene, solver states, counters) for an exact restart."""
+        """Write an HDF5 checkpoint (scene, solver states, counters) for an exact restart. It also holds what
+        the restart does not need but :meth:`fields` and :meth:`diagnostics` report, so that a loaded
+        simulation reports what the saving one did: the sand grid of the last step (``sand_fraction``,
+        ``sand_velocity``; :meth:`couplekit.sand.solver.SandSolver.state`, sparse) and the frame's sand-step
+        statistics (:meth:`couplekit.schedulers.base.Scheduler.state`). Stage timings are not kept."""
         from .io.checkpoint import save_checkpoint
 
         meta = {"step": self.step_count, "time": self.time, "backend": self.backend.name, "couplekit": __version__}
         if self.fluid is not None:
             # also in the stored scene (fluid.storage) and in the dtype of fluid/f and fluid/h
             meta["fluid_storage"] = self.fluid.storage
-        return save_checkpoint(path, self.scene.to_dict(), self._states(), meta)
+        return save_checkpoint(path, self.scene.to_dict(), self._states(statistics=True), meta)
 
     @classmethod
     def load(
@@ -798,7 +806,7 @@ class Simulation:
                 return result
             if self.step_count == 0:
                 self.write_frame(out, indexes, log_file)
-            good, good_step = self._states(), self.step_count
+            good, good_step = self._states(statistics=True), self.step_count
             while self.frame < total:
                 target = (self.frame + 1) * self.steps_per_frame
                 while self.step_count < target:
@@ -824,8 +832,10 @@ class Simulation:
                     self._log("\n" + report.strip())
                     result.update(status="diverged", checkpoint=str(path), error=str(first))
                     return result
-                good, good_step = self._states(), self.step_count
                 self.write_frame(out, indexes, log_file)
+                # after the frame is written: its sand-step statistics are closed, so that a resume from
+                # last_good.h5 starts the next frame's as checkpoint.h5 does (write_frame changes no solver)
+                good, good_step = self._states(statistics=True), self.step_count
                 every = sc.outputs.checkpoint_every
                 if every and self.frame % every == 0 and self.frame < total:
                     result["checkpoint"] = str(self.save(out / "checkpoint.h5"))

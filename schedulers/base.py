@@ -262,15 +262,42 @@ class Scheduler:
         return out
 
     # ------------------------------------------------------------------ checkpoint
-    def state(self) -> dict[str, np.ndarray]:
+    def state(self, statistics: bool = False) -> dict[str, np.ndarray]:
         """What a bitwise restart needs of the scheduler beyond its step count (host arrays; empty for the
-        lockstep scheduler). Solver states are the solvers' own; the step count is the simulation's
-        (:meth:`restart_at`)."""
-        return {}
+        lockstep and multi-rate schedulers). Solver states are the solvers' own; the step count is the
+        simulation's (:meth:`restart_at`).
+
+        ``statistics`` (a checkpoint, :meth:`couplekit.simulation.Simulation.save`): with a sand solver, also
+        the sand-step statistics of the current frame (:meth:`sand_steps`' ``frame_mean``, ``frame_min``,
+        ``frame_max``: the diagnostics' ``sand_steps_per_step``, ``substeps_min``, ``substeps_max``). The
+        restart does not need them (they are bookkeeping of the frames, so two runs of the same steps but
+        other frame boundaries keep equal states without them), but without them a loaded simulation reported
+        0 until its first step and a multi-rate frame's mean restarted counting. Stored as
+        ``last_sand_steps`` and a histogram of the frame's steps, ``frame_sand_values`` (the distinct
+        sand-step counts, float64) and ``frame_sand_counts`` (int64): a few numbers however long the frame.
+        The sand-step counts are whole numbers, so the order the histogram drops does not change their mean
+        (float64 sums of whole numbers are exact). ``total`` and ``mean`` count from the restart
+        (:meth:`restart_at`); the stage timings are wall-clock and are not stored."""
+        if not statistics or self.sand is None:
+            return {}
+        values, counts = np.unique(np.asarray(self._frame_sand, np.float64), return_counts=True)
+        return {
+            "last_sand_steps": np.array(float(self.last_sand_steps)),
+            "frame_sand_values": values,
+            "frame_sand_counts": counts.astype(np.int64),
+        }
 
     def load_state(self, st: dict) -> None:
-        """Restore a :meth:`state` (a checkpoint of another scheduler, or written before schedulers had a
-        state, restores nothing)."""
+        """Restore a :meth:`state`; what it lacks (a checkpoint written before the statistics were saved, or
+        before schedulers had a state) stays as built."""
+        if "last_sand_steps" in st:
+            self.last_sand_steps = float(np.asarray(st["last_sand_steps"]))
+        if "frame_sand_values" in st and "frame_sand_counts" in st:
+            values = np.asarray(st["frame_sand_values"], np.float64).reshape(-1)
+            counts = np.asarray(st["frame_sand_counts"]).reshape(-1)
+            if values.shape != counts.shape or counts.dtype.kind not in "iu" or (counts < 0).any():
+                raise ValueError("scheduler state: frame_sand_values and frame_sand_counts do not match")
+            self._frame_sand = [float(x) for x in np.repeat(values, counts)]
 
     def restart_at(self, steps: int) -> None:
         """A restart from a checkpoint written after ``steps`` steps: :attr:`step_index` continues from there (a

@@ -218,9 +218,10 @@ class SubcycleScheduler(Scheduler):
         self.last_sand_steps = float(k)
 
     # ------------------------------------------------------------------ checkpoint
-    def state(self) -> dict[str, np.ndarray]:
-        """With linear interpolation, last step's u0 (the sand's Δt is in the sand's own state)."""
-        st = super().state()
+    def state(self, statistics: bool = False) -> dict[str, np.ndarray]:
+        """With linear interpolation, last step's u0 (the sand's Δt is in the sand's own state); ``statistics``:
+        :meth:`~couplekit.schedulers.base.Scheduler.state`."""
+        st = super().state(statistics)
         if self._u_prev is not None:
             st["u_prev"] = self.backend.to_host(self._u_prev)
             st["have_prev"] = np.array(self._have_prev)

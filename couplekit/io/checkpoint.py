@@ -3,7 +3,8 @@
 Layout: attribute ``format`` = "couplekit-checkpoint", ``version`` = 3, ``scene`` (the scene dict as JSON),
 ``meta`` (JSON: step, frame, time, backend, ...), ``checksum`` (SHA-256 of the scene and meta text); one group
 per solver (``fluid``, ``sand``, ``coupler``, ``emission`` for the accumulators of sand-carrying inflows,
-:mod:`couplekit.sand.emission`, and ``scheduler`` for a multi-rate scheduler's state) holding its
+:mod:`couplekit.sand.emission`, and ``scheduler`` for the scheduler's state: the sub-cycling scheduler's last
+fluid velocity and, in a scene with sand, the frame's sand-step statistics) holding its
 :meth:`state` arrays as datasets, stored without compression or conversion so a restart is bitwise, each with
 a ``sha256`` attribute of its dtype, shape and bytes. The sand group's particle count is the one at the
 checkpoint (jets add particles as a run goes on). The file is written to a temporary name and renamed, so a

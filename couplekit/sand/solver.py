@@ -389,13 +389,30 @@ class SandSolver:
 
     # ------------------------------------------------------------------ checkpoint
     def state(self) -> dict[str, np.ndarray]:
-        """Everything needed for a bitwise restart (host arrays; scalars as 0-d arrays)."""
+        """Everything needed for a bitwise restart (host arrays; scalars as 0-d arrays), and the grid of the
+        last step.
+
+        The grid (``grid_m``, ``grid_vol``, ``grid_v``) is not needed by the restart (the next P2G overwrites
+        it), but :meth:`fields` and the coupler's ``sand_fraction`` read it: without it a loaded solver
+        reported ε = 0 and no grid velocity until its first step. It is stored sparsely, as the flat indexes
+        of the nodes where any of the three is not +0.0 bit for bit (``grid_nodes``, int32 or int64) and the
+        values there (``grid_m``, ``grid_vol`` (N,), ``grid_v`` (3, N)): 24 bytes per node the sand touches
+        (28 beyond 2³¹ nodes), where a dense copy would cost 20 bytes per cell of the domain. Every other node
+        is +0.0, as :meth:`load_state` restores it, so the grid comes back bit for bit."""
         st = {k: self.backend.to_host(getattr(self, k)) for k in self._fields()}
         st["time"] = np.array(self.time)
         st["steps"] = np.array(self.steps)
         st["dt"] = np.array(self.dt)
         st["min_density"] = np.array(self.min_density)
         st["collider_centres"] = np.array([c.centre for c in self.colliders]).reshape(-1, 3)
+        to_host = self.backend.to_host
+        m = np.ascontiguousarray(to_host(self.grid_m), np.float32).reshape(-1)
+        vol = np.ascontiguousarray(to_host(self.grid_vol), np.float32).reshape(-1)
+        v = np.ascontiguousarray(to_host(self.grid_v), np.float32).reshape(3, -1)
+        touched = (m.view(np.uint32) != 0) | (vol.view(np.uint32) != 0) | (v.view(np.uint32) != 0).any(axis=0)
+        nodes = np.flatnonzero(touched)
+        st["grid_nodes"] = nodes.astype(np.int32 if m.size < 2**31 else np.int64)
+        st["grid_m"], st["grid_vol"], st["grid_v"] = m[nodes], vol[nodes], v[:, nodes]
         return st
 
     def load_state(self, st: dict, resize: bool = False) -> None:
@@ -428,6 +445,33 @@ class SandSolver:
         self._upload_colliders()
         if self.sdf_collider is not None:
             self._sample_sdf()
+        self._load_grid(st)
+
+    def _load_grid(self, st: dict) -> None:
+        """The grid of :meth:`state` (sparse: ``grid_nodes`` and the values there), +0.0 elsewhere; a state
+        written before the grid was saved sets the whole grid to +0.0, as a fresh solver holds it (the restart
+        is the same: the next P2G overwrites the grid)."""
+        size = int(np.prod(self.shape))
+        m, vol, v = np.zeros(size, np.float32), np.zeros(size, np.float32), np.zeros((3, size), np.float32)
+        if "grid_nodes" in st:
+            nodes = np.asarray(st["grid_nodes"]).reshape(-1)
+            n = nodes.shape[0]
+            given = {k: np.asarray(st.get(k, np.zeros(0, np.float32))) for k in ("grid_m", "grid_vol", "grid_v")}
+            if (
+                nodes.dtype.kind not in "iu"
+                or (n and (int(nodes.min()) < 0 or int(nodes.max()) >= size))
+                or given["grid_m"].shape != (n,)
+                or given["grid_vol"].shape != (n,)
+                or given["grid_v"].shape != (3, n)
+            ):
+                raise ValueError(
+                    f"state's sand grid (grid_nodes, grid_m, grid_vol, grid_v) does not fit this solver's grid "
+                    f"{self.shape}"
+                )
+            m[nodes], vol[nodes], v[:, nodes] = given["grid_m"], given["grid_vol"], given["grid_v"]
+        self.grid_m[...] = self.backend.asarray(m.reshape(self.shape), np.float32)
+        self.grid_vol[...] = self.backend.asarray(vol.reshape(self.shape), np.float32)
+        self.grid_v[...] = self.backend.asarray(v.reshape((3, *self.shape)), np.float32)  # grid_v is grid_mv
 
     # ------------------------------------------------------------------ helpers
     def _fields(self) -> tuple[str, ...]:
