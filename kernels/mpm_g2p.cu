@@ -7,9 +7,9 @@
 //   tau_p   = Kirchhoff stress of the new F_p (for the next P2G)
 //   x_p    += dt v_p
 //
-// Safety net: positions are clamped to [dx, (n - 1) dx) per axis so the 3x3x3 stencil of the next P2G
-// stays inside the grid (the domain walls keep sand well inside this band; the clamp only matters for a
-// broken setup). A particle whose position is not finite, or whose stencil would leave the grid, gathers
+// Safety net: positions are clamped to [dx (1 + 1e-6), (n - 1) dx (1 - 1e-6)] per axis so the 3x3x3 stencil of
+// the next P2G stays inside the grid (the domain walls keep sand inside this band; a bed on a wall with
+// sand.wall_layers = 1 rests on its bound, otherwise the clamp only matters for a broken setup). A particle whose position is not finite, or whose stencil would leave the grid, gathers
 // nothing (no memory outside the grid is read, whatever the values): its velocity and affine matrix become NaN
 // and its position stays NaN (the clamp lets NaN through), so the simulation's finiteness check names it;
 // clamping NaN into the domain once hid a diverged particle in a corner.  n = number of particles.  CUDA: one thread per particle.  Host: batches of
@@ -54,7 +54,10 @@ MPM_INLINE int mpm_bspline_g(const float X, float w[3], float& f) {
 
 // clamp with selects (fminf / fmaxf do not vectorise, and they turn NaN into the bound): NaN passes through
 MPM_INLINE float mpm_clamp_axis(const float p, const int ncell, const float dx) {
-    const float lo = dx;
+    // lo a little above dx, as hi a little below (n - 1) dx: at x = dx itself the float32 product x / dx - 0.5
+    // rounds to just under 0.5, the stencil test fails and the particle was poisoned as lost (a bed at a floor
+    // with sand.wall_layers = 1: NaN at step 377)
+    const float lo = dx * (1.f + 1e-6f);
     const float hi = ((float)ncell - 1.f) * dx * (1.f - 1e-6f);
     const float a = p < lo ? lo : p;
     return a > hi ? hi : a;

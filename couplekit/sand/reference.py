@@ -253,7 +253,9 @@ class ReferenceOps:
         v[...] = v_new.T
         x_new = x.astype(np.float64) + dt * v_new.T  # x_p += Δt v_p
         for a, n_ax in enumerate((nx, ny, nz)):
-            x_new[a] = np.clip(x_new[a], dx, (n_ax - 1.0) * dx * (1.0 - 1e-6))
+            # [dx (1 + 1e-6), (n - 1) dx (1 − 1e-6)]: at x = dx itself the float32 position's x/dx − ½ falls just
+            # under ½ and inside_grid took the particle for lost (kernels/mpm_g2p.cu mpm_clamp_axis)
+            x_new[a] = np.clip(x_new[a], dx * (1.0 + 1e-6), (n_ax - 1.0) * dx * (1.0 - 1e-6))
         x[...] = x_new
 
     # ------------------------------------------------------------------ constitutive pieces alone
