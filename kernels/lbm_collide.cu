@@ -352,7 +352,8 @@ LBM_INLINE void lbm_collide_cell(const long long c, ck_store_t* RESTRICT f, cons
     {
         // viscous correction F_mu = nu grad^sym u . [grad rho + (rho/eps) grad eps]   (Eq. 16), with
         // grad^sym u ~ -3 r_s dev(kappa_2) + (2/3)(1 - m0) I from the pre-collision central moments
-        // (nu and r_s include the subgrid viscosity)
+        // (nu and r_s include the subgrid viscosity); the acceleration is F_mu / rho, Eq. 15's
+        // (nu / (eps rho)) grad^sym u . grad(eps rho): Eq. 16 already holds the 1 / eps (reference.py forces)
         const float kxx = vkxx, kyy = vkyy, kzz = vkzz, kxy = vkxy, kxz = vkxz, kyz = vkyz, tr3 = vtr3;
         const float iso = (-2.f / 3.f) * dm0;  // (2/3)(1 - m0)
         const float s = -3.f * rs;
@@ -371,7 +372,7 @@ LBM_INLINE void lbm_collide_cell(const long long c, ck_store_t* RESTRICT f, cons
         g1 += rho / e * ge[1];
         g2 += rho / e * ge[2];
 #endif
-        const float k = (tau - 0.5f) * (1.f / 3.f) / (e * rho);
+        const float k = (tau - 0.5f) * (1.f / 3.f) / rho;
         ax += k * (sxx * g0 + sxy * g1 + sxz * g2);
         ay += k * (sxy * g0 + syy * g1 + syz * g2);
         az += k * (sxz * g0 + syz * g1 + szz * g2);

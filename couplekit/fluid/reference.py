@@ -472,9 +472,13 @@ class ReferenceOps:
     ):
         """Acceleration a (3, ...) of Eq. 15 and the shifted velocity u = Σ f c + a/2, for populations fi.
 
-        a = F_μ/(ερ) − ∇p̄/ρ + F_s/ρ + g + F_ext/(ερ), with F_s = μ_φ ∇φ (Eq. 20; μ_φ of Eq. 22 from φ with
+        a = F_μ/ρ − ∇p̄/ρ + F_s/ρ + g + F_ext/(ερ), with F_s = μ_φ ∇φ (Eq. 20; μ_φ of Eq. 22 from φ with
         ``chem`` = (β, κ), :func:`chemical_potential`) and the viscous correction
-        F_μ = ν ∇^sym u · [∇ρ + (ρ/ε)∇ε] (Eq. 16). ∇^sym u is estimated from the pre-collision
+        F_μ = ν ∇^sym u · [∇ρ + (ρ/ε)∇ε] = (ν/ε) ∇^sym u · ∇(ερ) (Eq. 16). F_μ/ρ is Eq. 15's bracket term
+        (ν/(ερ)) ∇^sym u · ∇(ερ), what the normalised LBM's ∇·[ν ∇^sym u] lacks of Eq. 3's ∇·[εμ ∇^sym u]/(ερ);
+        Eq. 16 already holds the 1/ε, so F_μ is divided by ρ, not by ερ as Eq. 3's F_μ (another quantity) is.
+        Until session 20 it was divided by ερ: 1/ε too strong in the sand's pores, where at a water lattice
+        viscosity above ~0.2 the explicit term went unstable (docs/fluid-stability.md). ∇^sym u is estimated from the pre-collision
         non-equilibrium central second moments, ∇^sym u ≈ −3 r_s dev(κ_2) + (2/3)(1 − Σf) I (note §1a), about
         the velocity shifted by the other forces. Returns (a, u, r_s).
 
@@ -521,7 +525,7 @@ class ReferenceOps:
             if self.mixture:
                 g = g + (rho / e) * isotropic_gradient(eps, flags)
             f_mu = nu * np.einsum("ik...,k...->i...", sym_grad, g)
-            a = a + f_mu / (e * rho)
+            a = a + f_mu / rho  # Eq. 15: (ν/(ερ)) ∇^sym u · ∇(ερ) = F_μ/ρ
         return a, m + 0.5 * a, r_s
 
     @staticmethod

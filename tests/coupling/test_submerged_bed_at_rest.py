@@ -9,9 +9,16 @@ bed settles (its top drops 2 mm), then decaying, 6.3e-4 at step 6000 and 4.9e-4 
 next to a bottom corner of the box, the tank's own corner current (4.8e-4 without the sand in a smaller
 variant; docs/fluid-stability.md).
 
-Bounds: below 1e-3 at step 10,000 (twice the measured value; 19× below what the floor current reached) and not
-growing over the last 4000 steps (at most 1.2× the speed at step 6000; measured 0.77×); the fluid volume within
-0.5 % (measured: at most 0.19 %, 0.08 % at the end).
+Session 20 divided the mixture's viscous force F_μ by ρ instead of ερ (Eq. 15; it had counted 1/ε twice, 2.5×
+too strong in the bed: docs/fluid-stability.md, last section). That extra damping at the bed's porosity gradients
+had held the residual current at 4.9e-4; without it (measured every 500 steps to 16,000) the speed wanders
+between 6e-4 and 2.0e-3 (peak 1.98e-3 at step 7000, in the water beside the bed's edge), 1.48e-3 at 10,000,
+and decays to 7.6e-4 at 15,000: bounded, no growth, the fluid volume within 3e-6.
+
+Bounds: below 2.5e-3 at every 1000th step and below 2e-3 at step 10,000 (measured 1.98e-3 and 1.48e-3; the floor
+current reached 1.9e-2, 8× more), not growing over the last 4000 steps (at most 1.2× the speed at step 6000;
+measured 0.82×); the fluid volume within 0.5 %. Before session 20 the bound at step 10,000 was 1e-3 (measured
+4.9e-4), widened for the reason above.
 """
 
 from __future__ import annotations
@@ -33,6 +40,7 @@ def test_scene_built_bed_under_still_water_stays_at_rest():
         d = sim.diagnostics()
         assert np.isfinite(d["max_lattice_speed"]), f"non-finite at step {step}"
         speeds[step] = d["max_lattice_speed"]
-    assert speeds[10_000] < 1e-3, speeds
+    assert max(speeds.values()) < 2.5e-3, speeds
+    assert speeds[10_000] < 2e-3, speeds
     assert speeds[10_000] <= 1.2 * speeds[6000], speeds
     assert abs(sim.diagnostics()["fluid_volume_drift"]) < 5e-3
