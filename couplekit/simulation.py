@@ -97,14 +97,33 @@ def parse_setting(text: str) -> tuple[str, Any]:
         raise ValueError(f"--set {key}: the value is nested too deeply to be a scene value") from None
 
 
-def with_settings(scene: Scene, settings: Mapping[str, Any], base_dir: str | Path = ".") -> Scene:
+def _count(name: str, value: Any) -> int:
+    """``value`` as a whole number ≥ 0, else TypeError / ValueError naming ``name`` (``True`` and ``2.5`` are not
+    counts; a float or NumPy integer with a whole value is)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer, float, np.floating)):
+        raise TypeError(f"{name} must be a whole number of steps or frames, got {value!r} ({type(value).__name__})")
+    if not float(value).is_integer():
+        raise ValueError(f"{name} must be a whole number, got {value!r}")
+    if value < 0:
+        raise ValueError(f"{name} must be 0 or more, got {value!r}")
+    return int(value)
+
+
+def with_settings(scene: Scene | str | Path, settings: Mapping[str, Any], base_dir: str | Path | None = None) -> Scene:
     """``scene`` with the dotted keys of ``settings`` (``{"outputs.preview": False, "bodies[1].density": 900}``,
     the keys of a sweep: docs/sweeps.md) set, and validated again; a relative mesh or height file among the
     values resolves against ``base_dir`` (``couplekit run --set`` gives the scene file's folder). A key the
     scene format does not have raises :class:`~couplekit.sweep.KeyPathError` (a ValueError) naming the nearest
-    key; a value it refuses raises :class:`~couplekit.scene.SceneError`."""
+    key; a value it refuses raises :class:`~couplekit.scene.SceneError`. ``scene`` may be a scene file's path
+    (then ``base_dir`` defaults to its folder)."""
     from .sweep.keys import check_key, set_key
 
+    if isinstance(scene, (str, Path)):
+        base_dir = Path(scene).parent if base_dir is None else base_dir
+        scene = Scene.load(scene)
+    elif not isinstance(scene, Scene):
+        raise TypeError(f"scene must be a Scene or a scene file's path, got {type(scene).__name__}")
+    base_dir = "." if base_dir is None else base_dir
     if not isinstance(settings, Mapping):
         raise TypeError(f"settings must be a mapping of dotted keys to values, got {type(settings).__name__}")
     data = scene.to_dict()
@@ -266,8 +285,10 @@ class Simulation:
         }
 
     def step(self, n: int = 1) -> None:
-        """Advance ``n`` time steps of ``time.dt`` (every solver in the scene) through :attr:`scheduler`."""
-        n = int(n)
+        """Advance ``n`` time steps of ``time.dt`` (every solver in the scene) through :attr:`scheduler`; ``n`` a
+        whole number ≥ 0 (anything else is refused: a negative count once moved the step and the time backwards
+        and every output after it carried the wrong time)."""
+        n = _count("n", n)
         if self.emitter is None:
             self.scheduler.step(n)
             self.step_count += n
@@ -760,7 +781,7 @@ class Simulation:
         from .io.progress import ProgressBar
 
         sc = self.scene
-        total = int(frames if frames is not None else sc.time.frames)
+        total = _count("frames", frames) if frames is not None else int(sc.time.frames)
         if total < 1:
             raise ValueError(f"frames must be 1 or more, got {frames!r}")
         resumed = self.step_count > 0 or self._resumed

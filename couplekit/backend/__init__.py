@@ -174,6 +174,11 @@ def get_backend(name: str | None = "auto", threads: int | None = None) -> Backen
     ``None`` or ``"auto"`` defer to ``$COUPLEKIT_BACKEND`` when it is set. ``threads``: OpenMP threads of
     the cpu and cpu-device backends (default: ``$OMP_NUM_THREADS``, else all cores).
     """
+    if name is not None and not isinstance(name, str):
+        raise TypeError(
+            f"backend must be a name ({', '.join(repr(b) for b in ('auto', *BACKENDS, 'cpu-device'))}) or a "
+            f"Backend, got {name!r} ({type(name).__name__})"
+        )
     source = "argument"
     if name in (None, "auto") and os.environ.get("COUPLEKIT_BACKEND"):
         name, source = os.environ["COUPLEKIT_BACKEND"].strip().lower(), "COUPLEKIT_BACKEND"
