@@ -361,14 +361,36 @@ class SandSolver:
 
     def fields(self) -> dict[str, np.ndarray]:
         """Host copies of the grid fields of the last step: sand_fraction ε = min(ε_max, ΣV_p w_ip / V_cell)
-        (Eq. 25), velocity (3, nz, ny, nx), mass, sand_volume."""
-        vol = self.backend.to_host(self.grid_vol)
-        return {
-            "sand_fraction": np.minimum(EPS_MAX, vol / self.dx**3),
-            "velocity": self.backend.to_host(self.grid_v),
-            "mass": self.backend.to_host(self.grid_m),
-            "sand_volume": vol,
-        }
+        (Eq. 25), velocity (3, nz, ny, nx), mass, sand_volume. Before the first step (no P2G has run; a run's
+        frame 0) those of the seeded particles (:meth:`seeded_grid`)."""
+        if self.steps == 0:
+            mass, mv, vol = self.seeded_grid()
+            v = np.divide(mv, mass, out=np.zeros_like(mv), where=mass > 0).astype(np.float32)
+            mass, vol = mass.astype(np.float32), vol.astype(np.float32)
+        else:
+            vol = self.backend.to_host(self.grid_vol)
+            v, mass = self.backend.to_host(self.grid_v), self.backend.to_host(self.grid_m)
+        return {"sand_fraction": np.minimum(EPS_MAX, vol / self.dx**3), "velocity": v, "mass": mass, "sand_volume": vol}
+
+    def seeded_grid(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Grid mass, momentum (3, ...) and sand volume of the particles as they are (Eq. 24's P2G without the
+        stress impulse and the affine term; host float64): what a run's frame 0 shows of the sand before its
+        first step computes the grid (else ε = 0 and no sand velocity there, beside particles that exist)."""
+        from .reference import _stencil
+
+        x = self.backend.to_host(self.x).astype(np.float64)
+        index, w, _ = _stencil(x, self.dx, self.shape)
+        size = int(np.prod(self.shape))
+
+        def scatter(q: np.ndarray) -> np.ndarray:
+            out = np.zeros(size)
+            np.add.at(out, index.ravel(), (w * q[:, None]).ravel())
+            return out.reshape(self.shape)
+
+        m = self.backend.to_host(self.mass).astype(np.float64)
+        v = self.backend.to_host(self.v).astype(np.float64)
+        mv = np.stack([scatter(m * v[a]) for a in range(3)])
+        return scatter(m), mv, scatter(self.backend.to_host(self.volume).astype(np.float64))
 
     def diagnostics(self) -> dict[str, float]:
         """Float64 sums over particles: mass, momentum_x/y/z, kinetic_energy (½ Σ m v²), max_speed; time, step."""
