@@ -350,7 +350,8 @@ SECTIONS: dict[str, list[Key]] = {
             "controller_eta",
             "float",
             2.0,
-            "volume-controller bound η of Eq. 52 (Table 1: 1 or 2); 0 = off",
+            "volume-controller bound η of Eq. 52 (Table 1: 1 or 2); 0 = off. It scales the source term S_φ, so it "
+            "acts in scenes with sand; without sand the phase field conserves the water by itself",
             "",
             lo=0.0,
             hi=10.0,
