@@ -358,7 +358,9 @@ tests/fluid/test_two_phase_validation.py, 1000:1; the paper's scenes are 800:1).
 
 def _input_cautions(scene: Scene) -> list[str]:
     """Cautions about what a scene asks of the fluid beyond what was measured or what can have a steady state:
-    a density ratio beyond :data:`MEASURED_DENSITY_RATIO`; a single-phase fluid let in through an inflow with no
+    a density ratio beyond :data:`MEASURED_DENSITY_RATIO`; a water outlet in an outflow face (the zero-gradient
+    outflow cells around it copy the jet's inward velocity and let water in too: a 4 × 4-cell outlet delivered
+    1.4-1.9× its flux, exactly its flux in a wall face); a single-phase fluid let in through an inflow with no
     outflow face (the liquid has nowhere to go: its pressure rises for as long as the inflow runs)."""
     fl, out = scene.fluid, []
     if fl.phases == 2 and fl.water_density / fl.air_density > MEASURED_DENSITY_RATIO:
@@ -367,6 +369,14 @@ def _input_cautions(scene: Scene) -> list[str]:
             f"{MEASURED_DENSITY_RATIO:g}:1 the two-phase validations ran at (the paper's scenes: 800:1): the "
             "interface may not hold; check it on a small variant first"
         )
+    for i, inf in enumerate(scene.inflows):
+        if inf.shape != "face" and inf.kind == "water" and scene.domain.boundary.get(inf.face) == "outflow":
+            out.append(
+                f"inflows[{i}] is a water outlet in the {inf.face} face, which is an outflow: the outflow cells "
+                "around the jet copy its inward velocity and let water in with it (measured 1.4-1.9x the outlet's "
+                f"flux u A, tests/scene/test_stability_cautions.py); make domain.boundary.{inf.face} a wall and "
+                "put the outflow on another face"
+            )
     if fl.phases == 1 and scene.inflows and "outflow" not in scene.domain.boundary.values():
         out.append(
             "a single-phase fluid enters through inflows[0] but no face is an outflow: the liquid has nowhere to "
