@@ -55,6 +55,8 @@ KERNEL_TRAFFIC: dict[str, Traffic] = {
         "x read+write, v write, C write, F read+write, tau write, q read+write, vc read+write, saturation",
     ),
     "mpm_grid_update": Traffic(F4 + 3 * F4 + 3 * F4, "cell", "m, mv read, v written over mv"),
+    # x read (+ written where a particle is inside); the 8 SDF nodes around it mostly from cache
+    "mpm_sdf_project": Traffic(3 * F4 + 3 * F4, "particle", "x read+write"),
     "mpm_clear_grid": Traffic(F4 + 3 * F4 + F4, "cell", "m, mv, volume written"),
 }
 

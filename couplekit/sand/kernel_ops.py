@@ -157,6 +157,13 @@ class KernelOps:
             np.float32(model.plastic_fraction(dt)),
         )
 
+    def sdf_project(self, x, sdf, dx: float, depth: float) -> None:
+        """Particles deeper than ``depth`` in the grid SDF collider pulled back to it (kernels/mpm_sdf_project.cu)."""
+        nz, ny, nx = sdf.shape
+        self._module("mpm_sdf_project.cu").function("mpm_sdf_project")(
+            x.shape[1], x, sdf, np.int32(nx), np.int32(ny), np.int32(nz), np.float32(dx), np.float32(depth)
+        )
+
     def svd3(self, A):
         """A (9, P) -> U (9, P), σ (3, P), V (9, P), signed SVD (float32 kernel)."""
         xp = self.backend.xp

@@ -258,6 +258,40 @@ class ReferenceOps:
             x_new[a] = np.clip(x_new[a], dx * (1.0 + 1e-6), (n_ax - 1.0) * dx * (1.0 - 1e-6))
         x[...] = x_new
 
+    def sdf_project(self, x, sdf, dx: float, depth: float) -> None:
+        """Particles where the trilinear interpolation d of the node SDF (nodes at (i + ½) dx) is below −``depth``
+        move along its gradient to d = −depth, x_p −= (d + depth) ∇d/|∇d| (in place; positions only). Particles
+        outside the nodes' hull or not finite stay. Why: kernels/mpm_sdf_project.cu."""
+        nz, ny, nx = sdf.shape
+        X = x.astype(np.float64)
+        g = X / dx - 0.5  # grid coordinates (3, P)
+        n = np.array([nx, ny, nz], np.float64)[:, None]
+        with np.errstate(invalid="ignore"):
+            ok = np.all((g >= 0.0) & (g <= n - 1.0), axis=0)
+        g = np.where(ok, g, 0.0)
+        c = np.minimum(np.floor(g), n - 2.0).astype(np.int64)  # the cell of nodes around the particle
+        f = g - c
+        s = sdf.astype(np.float64)
+        corner = {
+            (a, b, e): s[c[2] + e, c[1] + b, c[0] + a] for a in (0, 1) for b in (0, 1) for e in (0, 1)
+        }  # fmt: skip
+        wx = (1.0 - f[0], f[0])
+        wy = (1.0 - f[1], f[1])
+        wz = (1.0 - f[2], f[2])
+        dwx, dwy, dwz = (-1.0, 1.0), (-1.0, 1.0), (-1.0, 1.0)
+        d = sum(wx[a] * wy[b] * wz[e] * v for (a, b, e), v in corner.items())
+        grad = np.stack(
+            [
+                sum(dwx[a] * wy[b] * wz[e] * v for (a, b, e), v in corner.items()),
+                sum(wx[a] * dwy[b] * wz[e] * v for (a, b, e), v in corner.items()),
+                sum(wx[a] * wy[b] * dwz[e] * v for (a, b, e), v in corner.items()),
+            ]
+        )
+        length = np.sqrt((grad**2).sum(axis=0))
+        move = ok & (d < -depth) & (length > 0.0)
+        step = np.where(move, -(d + depth) / np.where(length > 0.0, length, 1.0), 0.0)
+        x[...] = np.where(move, X + step * grad, x)
+
     # ------------------------------------------------------------------ constitutive pieces alone
     def svd3(self, A: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """A (9, P) -> U (9, P), σ (3, P), V (9, P), signed SVD."""

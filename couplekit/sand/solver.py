@@ -312,8 +312,14 @@ class SandSolver:
             sdf_friction=self._sdf_friction,
         )
 
+    SDF_DEPTH = 0.25
+    """How deep (in cells) a particle may lie inside the grid SDF collider after G2P before it is pulled back
+    (kernels/mpm_sdf_project.cu): sand at rest on a flat face settles 0.24 dx inside it."""
+
     def g2p(self) -> None:
-        """Stage 3: grid -> particles, plasticity, advection; then moving colliders advance."""
+        """Stage 3: grid -> particles, plasticity, advection; then moving colliders advance, and particles deeper
+        than :attr:`SDF_DEPTH` cells in the grid SDF collider are pulled back to that depth
+        (kernels/mpm_sdf_project.cu)."""
         self.ops.g2p(
             self.x,
             self.v,
@@ -337,8 +343,12 @@ class SandSolver:
                 moved = True
         if moved:
             self._upload_colliders()
-        if self.sdf_collider is not None and self.sdf_collider.changes_after(self._sdf_time):
-            self._sample_sdf()
+        if self.sdf_collider is not None:
+            if self.sdf_collider.changes_after(self._sdf_time):
+                self._sample_sdf()
+            # particles that G2P left deeper than a quarter cell inside the collider back to that depth, where sand
+            # resting on a flat face settles (kernels/mpm_sdf_project.cu)
+            self.ops.sdf_project(self.x, self._sdf, self.dx, self.SDF_DEPTH * self.dx)
 
     def step(self, n: int = 1) -> None:
         """Advance ``n`` MPM steps of Δt."""
