@@ -97,15 +97,15 @@ def parse_setting(text: str) -> tuple[str, Any]:
         raise ValueError(f"--set {key}: the value is nested too deeply to be a scene value") from None
 
 
-def _count(name: str, value: Any) -> int:
-    """``value`` as a whole number ≥ 0, else TypeError / ValueError naming ``name`` (``True`` and ``2.5`` are not
-    counts; a float or NumPy integer with a whole value is)."""
+def _count(name: str, value: Any, least: int = 0) -> int:
+    """``value`` as a whole number ≥ ``least``, else TypeError / ValueError naming ``name`` (``True`` and ``2.5``
+    are not counts; a float or NumPy integer with a whole value is)."""
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer, float, np.floating)):
         raise TypeError(f"{name} must be a whole number of steps or frames, got {value!r} ({type(value).__name__})")
     if not float(value).is_integer():
         raise ValueError(f"{name} must be a whole number, got {value!r}")
-    if value < 0:
-        raise ValueError(f"{name} must be 0 or more, got {value!r}")
+    if value < least:
+        raise ValueError(f"{name} must be {least} or more, got {value!r}")
     return int(value)
 
 
@@ -781,9 +781,7 @@ class Simulation:
         from .io.progress import ProgressBar
 
         sc = self.scene
-        total = _count("frames", frames) if frames is not None else int(sc.time.frames)
-        if total < 1:
-            raise ValueError(f"frames must be 1 or more, got {frames!r}")
+        total = _count("frames", frames, least=1) if frames is not None else int(sc.time.frames)
         resumed = self.step_count > 0 or self._resumed
         scene_dict = sc.to_dict()
         out = prepare_output(
