@@ -10,7 +10,8 @@ before anything is allocated:
   entry needs an ``inflow`` face (an inflow on a periodic face is refused); inflow velocity pointing in;
   an outlet (an inflow with ``shape = "rect"`` or ``"disc"``) lies on a wall or outflow face, inside the
   face, covers at least one cell and overlaps no other outlet;
-* stirring: needs a [fluid]; its axis is not zero and its centre lies in the domain;
+* stirring: needs a [fluid]; its axis is not zero, its centre lies in the domain and its cylinder holds a cell
+  centre (else it forces nothing);
 * every number finite and in scale, no nesting deeper than :data:`~couplekit.scene.schema.MAX_DEPTH`
   (:mod:`couplekit.scene.schema`); a value that fails is None to every later check;
 * bodies: every shape builds as the solvers build it (any exception of a mesh or height-file reader is a
@@ -1580,6 +1581,17 @@ def _stirring(
     if len(problems) > n or None in (st["center"], st["radius"], st["acceleration"], st["axis"]):
         return None
     axis = np.asarray(st["axis"], np.float64)
+    if domain is not None and not _stirs_a_cell(np.asarray(st["center"], np.float64), axis, st, domain):
+        problems.append(
+            Problem(
+                "stirring.radius",
+                f"{st['radius']:g} m: the stirred cylinder holds no cell centre of the grid (dx = {domain.dx:g} m), "
+                "so the stirring would do nothing",
+                f"use a radius of at least {domain.dx:g} m (one cell), or move stirring.center (or lengthen "
+                "stirring.length)",
+            )
+        )
+        return None
     return Stirring(
         tuple(st["center"]),
         tuple((axis / np.linalg.norm(axis)).tolist()),
@@ -1589,6 +1601,26 @@ def _stirring(
         st["start"],
         st["duration"],
     )
+
+
+def _stirs_a_cell(center: np.ndarray, axis: np.ndarray, st: dict, domain: Domain) -> bool:
+    """Whether some cell centre lies in the stirred cylinder (r < radius, and |s| ≤ length/2 along the axis when a
+    length is given), the cells :class:`couplekit.scene.forces.StirringForce` forces; plane by plane in z, so a
+    large grid needs no grid-sized array."""
+    n = axis / np.linalg.norm(axis)
+    nz, ny, nx = domain.shape
+    dx = domain.dx
+    y, x = np.meshgrid((np.arange(ny) + 0.5) * dx - center[1], (np.arange(nx) + 0.5) * dx - center[0], indexing="ij")
+    for k in range(nz):
+        z = (k + 0.5) * dx - center[2]
+        s = n[0] * x + n[1] * y + n[2] * z
+        r2 = (x - s * n[0]) ** 2 + (y - s * n[1]) ** 2 + (z - s * n[2]) ** 2
+        inside = r2 < st["radius"] ** 2
+        if st["length"] is not None:
+            inside &= np.abs(s) <= 0.5 * st["length"]
+        if inside.any():
+            return True
+    return False
 
 
 def _error_text(exc: BaseException) -> str:

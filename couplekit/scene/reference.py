@@ -240,7 +240,8 @@ def render() -> str:
         "sand": 'Material of the sand bodies (used only when a body has `kind = "sand"`).',
         "outputs": "Optional. Files go to `directory`, frame by frame.",
         "effects": "Optional switches for ablations: an effect the scene does not need is off anyway (DESIGN 'Effects').",
-        "stirring": "Optional: a swirling body force on the water (paper Fig. 11), added to the drag in coupled scenes.",
+        "stirring": "Optional: a swirling body force on the water (paper Fig. 11), added to the drag in coupled scenes. "
+        "Its cylinder must hold at least one cell centre (a radius of one cell always does).",
     }
     for name, keys in SECTIONS.items():
         parts.append(f"## [{name}]\n\n{notes.get(name, '')}\n\n{_table(keys)}\n")

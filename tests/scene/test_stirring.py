@@ -247,3 +247,38 @@ def test_stirred_restart_is_bitwise(tmp_path):
     for k in ("velocity", "phi", "pressure"):
         np.testing.assert_array_equal(a[k], b[k], err_msg=k)
     assert np.abs(a["velocity"]).max() > 0
+
+
+@pytest.mark.parametrize(
+    ("center_cells", "axis", "radius_cells", "length_cells", "stirs"),
+    [
+        ((5.0, 5.0, 5.0), (0, 0, 1), 0.5, None, False),  # the axis on cell corners: centres 0.71 cells away
+        ((5.0, 5.0, 5.0), (0, 0, 1), 0.75, None, True),
+        ((5.0, 5.0, 5.0), (0, 0, 1), 1.0, None, True),  # the fix the message gives
+        ((5.5, 5.5, 5.0), (0, 0, 1), 0.1, None, True),  # the axis through cell centres
+        ((5.0, 5.0, 5.0), (1, 1, 1), 0.2, None, True),  # the diagonal from a corner runs through cell centres
+        ((5.0, 5.5, 5.0), (1, 0, 0), 0.4, None, False),  # 0.5 cells from the nearest centre row
+        ((5.5, 5.5, 5.0), (0, 0, 1), 0.5, 0.5, False),  # on a cell row, but shorter than the gap between centres
+    ],
+)
+def test_a_stirring_that_covers_no_cell_is_refused(center_cells, axis, radius_cells, length_cells, stirs):
+    """A cylinder that holds no cell centre forces nothing (a probe found radius 2.5 mm at dx = 5 mm accepted,
+    the water's angular momentum 3e-6 instead of 32.6): refused, naming stirring.radius and the one-cell fix;
+    whether it is refused agrees with the cells StirringForce actually forces."""
+    st = {
+        "center": [c * DX for c in center_cells],
+        "axis": list(axis),
+        "radius": radius_cells * DX,
+        "acceleration": 2.0,
+    }
+    if length_cells is not None:
+        st["length"] = length_cells * DX
+    d = _tank(st)
+    if stirs:
+        scene = Scene.from_dict(d)
+        assert StirringForce(scene.stirring, scene.domain, scene.units()).inside.any()
+    else:
+        with pytest.raises(SceneError) as e:
+            Scene.from_dict(d)
+        assert "stirring.radius" in e.value.keys
+        assert "holds no cell centre" in str(e.value)
