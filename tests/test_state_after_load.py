@@ -9,6 +9,7 @@ without them still loads and continues bitwise.
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -17,33 +18,12 @@ import pytest
 import couplekit as ck
 from couplekit.io.checkpoint import load_checkpoint, save_checkpoint
 
+sys.path.insert(0, str(Path(__file__).parent / "scene"))
+from sim_scenes import tiny_sand  # noqa: E402
+
 ROOT = Path(__file__).resolve().parents[1]
 FIG13 = ROOT / "examples" / "fig13_sand_drop_beaker_small.toml"
 FIG08 = ROOT / "examples" / "fig08_sand_densities_small.toml"
-
-SAND_ONLY = """
-[scene]
-name = "tiny_sand"
-[domain]
-size = [0.06, 0.06, 0.06]
-dx = 0.005
-[time]
-dt = 2e-4
-frame_duration = 1e-3
-frames = 2
-[sand]
-density = 1500.0
-youngs_modulus = 1e5
-[[bodies]]
-kind = "sand"
-velocity = [0.0, 0.0, -0.5]
-[bodies.geometry]
-type = "box"
-min = [0.02, 0.02, 0.03]
-max = [0.04, 0.04, 0.045]
-[outputs]
-preview = false
-"""
 
 CASES = {
     "lockstep": (FIG13, None),
@@ -60,7 +40,7 @@ NEW_SCHEDULER_KEYS = ("last_sand_steps", "frame_sand_values", "frame_sand_counts
 
 def _sim(case: str, **kw) -> ck.Simulation:
     path, scheduler = CASES[case]
-    scene = ck.Scene.loads(SAND_ONLY) if path is None else ck.Scene.load(path)
+    scene = ck.Scene.from_dict(tiny_sand()) if path is None else ck.Scene.load(path)
     return ck.Simulation(scene, "cpu", log=None, scheduler=scheduler, **kw)
 
 
