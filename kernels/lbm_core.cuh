@@ -357,6 +357,20 @@ LBM_INLINE int lbm_row_tail(const int lo, const int hi) {
     return span >= LBM_VEC ? span % LBM_VEC : 0;
 }
 
+// The next chunk of a row loop `for (int x0 = lo; x0 <= hi;)` with rem = lbm_row_tail(lo, hi): up to `chunk`
+// cells while x0 <= hi - rem, then the tail, one vector of LBM_VEC cells ending at hi.  Sets len and c0 (the
+// padded index of the chunk's first cell, `row` + its x), moves x0 on (past hi after the tail) and returns
+// whether this chunk is the tail (whose first LBM_VEC - rem lanes the caller keeps).  One place for the chunk
+// arithmetic of the collide, pressure, filter and phase-field row loops.
+LBM_INLINE int lbm_row_chunk(int& x0, const int hi, const int rem, const int chunk, const long long row, int& len,
+                             long long& c0) {
+    const int tail = x0 > hi - rem;
+    len = tail ? LBM_VEC : (hi - rem + 1 - x0 < chunk ? hi - rem + 1 - x0 : chunk);
+    c0 = row + (tail ? hi - (LBM_VEC - 1) : x0);
+    x0 = tail ? hi + 1 : x0 + len;
+    return tail;
+}
+
 // Host: link masks of the `len` cells starting at padded index c0.  The flags of the 9 rows around them are
 // first widened to one 32-bit word per cell in `scratch` (size >= 10 (len + 2)), so the mask loop itself
 // reads no byte data and vectorises with 16 lanes (built straight from the flags g++ left it scalar: 26

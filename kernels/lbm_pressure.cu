@@ -159,11 +159,9 @@ KERNEL void lbm_macro_pressure(const long long n, const ck_store_t* RESTRICT f /
 // the chunks of one row, MIX: the mixture's terms (1) or a sand-free row's (0, lbm_pressure_cell)
 #define LBM_P_CHUNKS(ODD, FSUM, MIX)                                                                      \
     for (int x0 = lo; x0 <= hi;) {                                                                        \
-        /* whole vectors to hi - rem, then the last rem cells as one vector ending at hi */                \
-        const int tail = x0 > hi - rem; /* (lbm_row_tail: its first lanes are kept) */                    \
-        const int len = tail ? LBM_VEC : (hi - rem + 1 - x0 < LBM_P_CHUNK ? hi - rem + 1 - x0 : LBM_P_CHUNK); \
-        const long long c0 = row + (tail ? hi - (LBM_VEC - 1) : x0);                                      \
-        x0 = tail ? hi + 1 : x0 + len;                                                                    \
+        int len;                                                                                          \
+        long long c0;                                                                                     \
+        const int tail = lbm_row_chunk(x0, hi, rem, LBM_P_CHUNK, row, len, c0);                           \
         if (MIX) {                                                                                        \
             CK_PRAGMA(omp simd)                                                                           \
             for (int i = 0; i < len; ++i) slipw[i] = slip_cells[c0 + i] != 0 ? 1u : 0u;                   \
@@ -293,12 +291,9 @@ KERNEL void lbm_pressure_filter(const long long n, const float* RESTRICT p /* si
             if (!bulk) lbm_row_fluid_span(flags, row, nx, lo, hi);
             const int rem = lbm_row_tail(lo, hi);
             for (int x0 = lo; x0 <= hi;) {
-                // whole vectors to hi - rem, then the last rem cells as one vector ending at hi, its first lanes
-                // kept (lbm_row_tail)
-                const int tail = x0 > hi - rem;
-                const int len = tail ? LBM_VEC : (hi - rem + 1 - x0 < LBM_P_CHUNK ? hi - rem + 1 - x0 : LBM_P_CHUNK);
-                const long long c0 = row + (tail ? hi - (LBM_VEC - 1) : x0);
-                x0 = tail ? hi + 1 : x0 + len;
+                int len;
+                long long c0;
+                const int tail = lbm_row_chunk(x0, hi, rem, LBM_P_CHUNK, row, len, c0);
                 if (bulk && !tail) {
                     CK_PRAGMA(omp simd)
                     for (int i = 0; i < len; ++i)

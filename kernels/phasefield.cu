@@ -832,12 +832,9 @@ KERNEL void phase_collide_stream(const long long n, ck_store_t* RESTRICT h /* si
                 if (!bulk9) lbm_row_fluid_span(flags, row, nx, lo, hi);
                 const int rem = lbm_row_tail(lo, hi);
                 for (int x0 = lo; x0 <= hi;) {
-                    // whole vectors to hi - rem, then the last rem cells as one vector ending at hi, its first
-                    // lanes kept (lbm_row_tail)
-                    const int tail = x0 > hi - rem;
-                    const int len = tail ? LBM_VEC : (hi - rem + 1 - x0 < PF_ROW_CHUNK ? hi - rem + 1 - x0 : PF_ROW_CHUNK);
-                    const long long c0 = row + (tail ? hi - (LBM_VEC - 1) : x0);
-                    x0 = tail ? hi + 1 : x0 + len;
+                    int len;
+                    long long c0;
+                    const int tail = lbm_row_chunk(x0, hi, rem, PF_ROW_CHUNK, row, len, c0);
                     if (bulk9 && !tail) {
                         pf_gradient_chunk<PF_NB_BULK>(c0, len, phi, flags, sy, sz, masks, gbx, gby, gbz);
                         CK_PRAGMA(omp simd)
