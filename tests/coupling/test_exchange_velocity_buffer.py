@@ -11,21 +11,12 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "scene"))
-from sim_scenes import tiny_coupled  # noqa: E402
+from sim_scenes import tiny_coupled_moving  # noqa: E402
 
 from couplekit.scene import Scene  # noqa: E402
 from couplekit.simulation import Simulation  # noqa: E402
 
-# a sand block half in the water layer and moving, so drag, the source term and the slip term all act
-_SAND = {"min": [0.006, 0.006, 0.006], "max": [0.013, 0.014, 0.013]}
-
-
-def _scene(scheduler: dict, retention: bool = False) -> dict:
-    d = tiny_coupled(retention=retention)
-    d["bodies"][-1]["geometry"].update(_SAND)
-    d["bodies"][-1]["velocity"] = [0.2, 0.0, -0.3]
-    d["scheduler"] = scheduler
-    return d
+_scene = tiny_coupled_moving  # a sand block half in the water layer and moving: drag, source and slip term act
 
 
 def _sim(scheduler: dict, own: bool, retention: bool = False) -> Simulation:

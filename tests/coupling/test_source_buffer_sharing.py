@@ -13,22 +13,17 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "scene"))
 from couplekit.schedulers import make_scheduler  # noqa: E402
-from sim_scenes import tiny_coupled  # noqa: E402
+from sim_scenes import tiny_coupled_moving  # noqa: E402
 
 from couplekit.bench.memory import allocated_summary  # noqa: E402
 from couplekit.scene import Scene  # noqa: E402
 from couplekit.simulation import Simulation  # noqa: E402
 
-# a sand block half in the water layer and moving: ε̃ changes every step, so S_φ and ε̃_prev differ everywhere
-# the sand goes (test_exchange_velocity_buffer.py's block)
-_SAND = {"min": [0.006, 0.006, 0.006], "max": [0.013, 0.014, 0.013]}
-
 
 def _scene(scheduler: dict, retention: bool = False, storage: str = "fp32") -> dict:
-    d = tiny_coupled(retention=retention)
-    d["bodies"][-1]["geometry"].update(_SAND)
-    d["bodies"][-1]["velocity"] = [0.2, 0.0, -0.3]
-    d["scheduler"] = scheduler
+    """A sand block half in the water layer and moving: ε̃ changes every step, so S_φ and ε̃_prev differ
+    everywhere the sand goes."""
+    d = tiny_coupled_moving(scheduler, retention)
     d["fluid"]["storage"] = storage
     return d
 

@@ -56,6 +56,17 @@ def tiny_coupled(retention: bool = True) -> dict:
     return d
 
 
+def tiny_coupled_moving(scheduler: dict, retention: bool = False) -> dict:
+    """tiny_coupled with the sand block half in the water layer and moving (0.2, 0, -0.3) m/s under ``scheduler``
+    (a [scheduler] table): drag, the source term and the slip term all act from the first step (the buffer-sharing
+    tests of the coupling)."""
+    d = tiny_coupled(retention=retention)
+    d["bodies"][-1]["geometry"].update({"min": [0.006, 0.006, 0.006], "max": [0.013, 0.014, 0.013]})
+    d["bodies"][-1]["velocity"] = [0.2, 0.0, -0.3]
+    d["scheduler"] = scheduler
+    return d
+
+
 def tiny_jet() -> dict:
     """tiny_coupled with a water jet carrying sand through an outlet in the x_min wall (particle emission: the
     first particle layer leaves the outlet after ~60 steps)."""
