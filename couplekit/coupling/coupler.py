@@ -305,14 +305,14 @@ class SandFluidCoupler:
         be = self.fluid.backend
         phi = be.to_host(self.fluid.phi) if self.two_phase else None
         if self._started:
-            grid_vol = be.to_host(self.sand.grid_vol)
+            eps_sand = sand_fraction(be.to_host(self.sand.grid_vol), self.sand.dx, self.params.eps_max)
             eps_fluid = be.to_host(self.fluid.fluid_fraction)
             bound = be.to_host(self.bound) if self.retention else None
         else:
             # before the first step (a run's frame 0): the seeded particles' sand fraction, and the porosity
             # Eq. 54 gives it with the bound water of their initial moisture (Eq. 53) and no uptake yet; the
             # fields above would be 0 and 1 beside particles that exist
-            grid_vol = self.sand.seeded_grid()[2]
+            eps_sand = sand_fraction(self.sand.seeded_volume(), self.sand.dx, self.params.eps_max)
             bound = None
             if self.retention:
                 bound = np.zeros(self.sand.shape)
@@ -322,11 +322,11 @@ class SandFluidCoupler:
                 ReferenceOps(self.params, self.two_phase).bound_water_p2g(
                     be.to_host(self.sand.x), r, be.to_host(self.sand.volume), bound, self.sand.dx
                 )
-            eps = 1.0 - sand_fraction(grid_vol, self.sand.dx, self.params.eps_max) - (0.0 if bound is None else bound)
+            eps = 1.0 - eps_sand - (0.0 if bound is None else bound)
             eps_fluid = np.pad(np.maximum(eps, 0.0), 1, mode="edge").astype(np.float32)
             bound = None if bound is None else bound.astype(np.float32)
         out = {
-            "sand_fraction": sand_fraction(grid_vol, self.sand.dx, self.params.eps_max).astype(np.float32),
+            "sand_fraction": eps_sand.astype(np.float32),
             "fluid_fraction": eps_fluid[1:-1, 1:-1, 1:-1],
             "water": water_fraction(eps_fluid, phi, bound).astype(np.float32),
         }

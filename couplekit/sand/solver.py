@@ -386,10 +386,22 @@ class SandSolver:
         """Grid mass, momentum (3, ...) and sand volume of the particles as they are (Eq. 24's P2G without the
         stress impulse and the affine term; host float64): what a run's frame 0 shows of the sand before its
         first step computes the grid (else ε = 0 and no sand velocity there, beside particles that exist)."""
+        scatter = self._seeded_scatter()
+        m = self.backend.to_host(self.mass).astype(np.float64)
+        v = self.backend.to_host(self.v).astype(np.float64)
+        mv = np.stack([scatter(m * v[a]) for a in range(3)])
+        return scatter(m), mv, scatter(self.backend.to_host(self.volume).astype(np.float64))
+
+    def seeded_volume(self) -> np.ndarray:
+        """The sand volume of :meth:`seeded_grid` alone (one scatter instead of five)."""
+        return self._seeded_scatter()(self.backend.to_host(self.volume).astype(np.float64))
+
+    def _seeded_scatter(self):
+        """A function scattering a per-particle quantity onto the grid with the particles' B-spline weights
+        (host float64), for :meth:`seeded_grid`."""
         from .reference import _stencil
 
-        x = self.backend.to_host(self.x).astype(np.float64)
-        index, w, _ = _stencil(x, self.dx, self.shape)
+        index, w, _ = _stencil(self.backend.to_host(self.x).astype(np.float64), self.dx, self.shape)
         size = int(np.prod(self.shape))
 
         def scatter(q: np.ndarray) -> np.ndarray:
@@ -397,10 +409,7 @@ class SandSolver:
             np.add.at(out, index.ravel(), (w * q[:, None]).ravel())
             return out.reshape(self.shape)
 
-        m = self.backend.to_host(self.mass).astype(np.float64)
-        v = self.backend.to_host(self.v).astype(np.float64)
-        mv = np.stack([scatter(m * v[a]) for a in range(3)])
-        return scatter(m), mv, scatter(self.backend.to_host(self.volume).astype(np.float64))
+        return scatter
 
     def diagnostics(self) -> dict[str, float]:
         """Float64 sums over particles: mass, momentum_x/y/z, kinetic_energy (½ Σ m v²), max_speed; time, step."""
