@@ -424,7 +424,7 @@ def check_odd_ramp_gaps(scene: Scene) -> None:
 
     boundaries, solid = fluid_boundaries(scene, scene.units())
     flags = build_flags(scene.domain.shape, boundaries, solid)[0]
-    periodic = tuple(boundaries.face(a + "-").kind == "periodic" for a in "xyz")
+    periodic = boundaries.periodic_axes
     check_gaps(flags, periodic, scene.fluid.odd_ramp)
 
 
@@ -440,7 +440,7 @@ def build_fluid(scene: Scene, backend: Backend, units: Units, coupled: bool, log
     boundaries, solid = fluid_boundaries(scene, units)
     phi = velocity = None
     if two:
-        periodic = tuple(boundaries.face(a + "-").kind == "periodic" for a in "xyz")
+        periodic = boundaries.periodic_axes
         water = _water_shape(scene, periodic)
         if water is None:
             phi = np.zeros(dom.shape, np.float32)

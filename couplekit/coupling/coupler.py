@@ -103,7 +103,7 @@ class SandFluidCoupler:
         self.params = params or CouplingParams()
         self.two_phase = bool(fluid.two_phase)
         self.ops = make_coupling_ops(fluid.backend, self.params, self.two_phase)
-        self.periodic = tuple(fluid.boundaries.face(a + "-").kind == "periodic" for a in "xyz")
+        self.periodic = fluid.boundaries.periodic_axes
         xp = fluid.backend.xp
         shape = tuple(fluid.shape)
         padded = tuple(s + 2 for s in shape)

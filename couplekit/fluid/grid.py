@@ -124,6 +124,11 @@ class Boundaries:
         """The face called ``name`` (``x_min`` … or ``x-`` …; periodic unless set)."""
         return self.faces.get(solver_face(name), Face())
 
+    @property
+    def periodic_axes(self) -> tuple[bool, bool, bool]:
+        """Whether the x, y and z axes are periodic (both faces of an axis are, or neither)."""
+        return tuple(self.face(a + "-").kind == "periodic" for a in "xyz")  # type: ignore[return-value]
+
     def scene_faces(self) -> dict[str, Face]:
         """All six faces by their public names ``x_min, x_max, …`` (periodic where not set)."""
         return {name: self.face(name) for name in SCENE_FACES}

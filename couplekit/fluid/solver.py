@@ -369,7 +369,7 @@ class FluidSolver:
         ghost, image = periodic_lists(self.shape, self.boundaries)
         out_ghost, out_src = outflow_lists(self.shape, flags)
         self.flags = backend.asarray(flags)
-        periodic_axes = tuple(self.boundaries.face(a + "-").kind == "periodic" for a in "xyz")
+        periodic_axes = self.boundaries.periodic_axes
         # the weights of rate 1 of the ramped odd-rate floor (FluidParams.odd_ramp), refused in narrow gaps
         self.odd_ramp = None
         if self.ops.odd_ramp:
@@ -419,9 +419,10 @@ class FluidSolver:
             from . import phasefield as pf  # only two-phase scenes need (and load) the phase field
 
             self._pf = pf
-            periodic = tuple(self.boundaries.face(a + "-").kind == "periodic" for a in "xyz")
             has_source = bool(mixture if source_term is None else source_term)
-            self.pf_ops = pf.make_phase_field_ops(backend, periodic, self.surface_tension, has_source, self.storage)
+            self.pf_ops = pf.make_phase_field_ops(
+                backend, periodic_axes, self.surface_tension, has_source, self.storage
+            )
             self.beta, self.kappa = pf.chemical_potential_coefficients(params.sigma, params.width)
             phi0 = np.asarray(phi, np.float32)
             if phi0.shape != self.shape:
@@ -445,7 +446,7 @@ class FluidSolver:
         ratio = self.params.rho_h / self.params.rho_l if self.params.rho_l > 0 else math.inf
         if ratio <= SHARP_RATIO:
             return
-        periodic = tuple(self.boundaries.face(a + "-").kind == "periodic" for a in "xyz")
+        periodic = self.boundaries.periodic_axes
         jump = _max_phi_jump(np.clip(phi0.astype(np.float64), 0.0, 1.0), fluid, periodic)
         if jump > SHARP_JUMP:
             warnings.warn(
