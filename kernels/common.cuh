@@ -216,6 +216,11 @@ static inline __attribute__((always_inline)) unsigned short ck_float_to_half_(co
 #define CK_MAX_THREADS 1024
 
 #define CK_PRAGMA(x) _Pragma(#x)
+// host loops that widen flag bytes to 32-bit words (a row chunk's masks): 8 lanes. Left to pick its own width,
+// g++ 12 (AVX-512) takes 32 byte lanes, more than the 28 cells of a 26-cell row plus its two neighbours, and
+// runs every such loop scalar: a byte compare, a setcc and a store per cell, 45 % of the source term's time in
+// Fig. 13 small (perf) and a share of the collide, pressure, filter and phase-field stages
+#define CK_SIMD_WIDEN CK_PRAGMA(omp simd simdlen(8))
 #define CK_PER_ITEM(v) (v)
 
 #define FOR_EACH(i, n) CK_PRAGMA(omp parallel for schedule(static)) for (long long i = 0; i < (long long)(n); ++i)
@@ -316,15 +321,44 @@ float ck_select(const unsigned int c, const float a, const float b) {
 // host: whether every cell of the 9 padded rows around `row` (the row and its y, z neighbours; x in xa .. xb)
 // holds exactly `v` in `s` (a row with no sand around it: fluid fraction 1, sand velocity 0; the row schemes of
 // lbm_macro_pressure and coupling_phase_source take such rows without their mixture stencils)
+// Host OR reductions over a short run of a row (9 rows of nx + 2 cells per row of a stage; 28 cells in Fig. 13
+// small).  Written as 8-lane blocks and a scalar remainder of < 8: g++'s own vector loops (and `omp simd
+// reduction`) take 16 or 32 lanes with a scalar epilogue, which ran a 28-cell run entirely scalar (perf: the
+// flag scans were 10-20 % of the collide's and the filter's time, the float scan 80 % of the source term's).
+// The bytes of a run OR-ed as 8-byte words.
+static inline uint64_t ck_or_bytes(const unsigned char* RESTRICT r, const int n) {
+    uint64_t any = 0;
+    int i = 0;
+    for (; i + 8 <= n; i += 8) {
+        uint64_t w;
+        __builtin_memcpy(&w, r + i, 8);
+        any |= w;
+    }
+    for (; i < n; ++i) any |= r[i];
+    return any;
+}
+// Floats compared with v as bit patterns (an integer OR): for v != 0 exactly one pattern equals v (a NaN
+// equals nothing either way); for v = 0 the sign bit is masked (-0 == 0).  Nonzero when some r[i] != v.
+static inline uint32_t ck_differs_bits(const float a, const uint32_t vbits, const uint32_t mask) {
+    return (__builtin_bit_cast(uint32_t, a) & mask) ^ vbits;
+}
+static inline uint32_t ck_any_differs(const float* RESTRICT r, const int n, const float v) {
+    const uint32_t mask = v == 0.f ? 0x7fffffffu : 0xffffffffu, vbits = __builtin_bit_cast(uint32_t, v) & mask;
+    uint32_t acc[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+    int i = 0;
+    for (; i + 8 <= n; i += 8)
+        for (int k = 0; k < 8; ++k) acc[k] |= ck_differs_bits(r[i + k], vbits, mask);
+    uint32_t any = 0;
+    for (; i < n; ++i) any |= ck_differs_bits(r[i], vbits, mask);
+    for (int k = 0; k < 8; ++k) any |= acc[k];
+    return any;
+}
 static inline bool ck_rows_equal(const float* RESTRICT s, const long long row, const int xa, const int xb,
                                  const int px, const long long pxy, const float v) {
-    unsigned int any = 0;
+    uint32_t any = 0;
     for (int dz = -1; dz <= 1; ++dz)
-        for (int dy = -1; dy <= 1; ++dy) {
-            const float* r = s + row + (long long)dy * px + (long long)dz * pxy;
-            CK_PRAGMA(omp simd reduction(| : any))
-            for (int x = xa; x <= xb; ++x) any |= r[x] != v;
-        }
+        for (int dy = -1; dy <= 1; ++dy)
+            any |= ck_any_differs(s + row + (long long)dy * px + (long long)dz * pxy + xa, xb - xa + 1, v);
     return any == 0;
 }
 

@@ -289,13 +289,10 @@ LBM_INLINE unsigned int lbm_link_mask(const unsigned char* RESTRICT flags, const
 // is a fluid cell whose neighbours are all fluid (LBM_NB_BULK applies).  9 (xb - xa + 1) byte reads.
 LBM_INLINE bool lbm_rows_all_fluid(const unsigned char* RESTRICT flags, const long long row, const int xa,
                                    const int xb, const int px, const long long pxy) {
-    unsigned int any = 0;
+    uint64_t any = 0;
     for (int dz = -1; dz <= 1; ++dz)
-        for (int dy = -1; dy <= 1; ++dy) {
-            const unsigned char* r = flags + row + (long long)dy * px + (long long)dz * pxy;
-            CK_PRAGMA(omp simd reduction(| : any))
-            for (int x = xa; x <= xb; ++x) any |= r[x];
-        }
+        for (int dy = -1; dy <= 1; ++dy)
+            any |= ck_or_bytes(flags + row + (long long)dy * px + (long long)dz * pxy + xa, xb - xa + 1);
     return any == 0;  // FLAG_FLUID == 0
 }
 
@@ -306,16 +303,13 @@ LBM_INLINE bool lbm_rows_all_fluid(const unsigned char* RESTRICT flags, const lo
 #if !CK_ON_GPU
 LBM_INLINE bool lbm_rows_sand_free(const float* RESTRICT eps, const float* RESTRICT sand_v, const long long row,
                                    const int nx, const int px, const long long pxy, const long long N) {
-    // one loop over the four fields (four ck_rows_equal calls, one per field, made the pressure update of Fig. 13
-    // small 1.4x slower: 0.57 -> 0.85 ms per call on one thread, measured against the commit before 8851ab3)
+    // per field and row an 8-lane scan of the bit patterns (ck_any_differs): eps exactly 1, sand_v exactly +-0
     unsigned int any = 0;
     for (int dz = -1; dz <= 1; ++dz)
         for (int dy = -1; dy <= 1; ++dy) {
             const long long r = row + (long long)dy * px + (long long)dz * pxy;
-            CK_PRAGMA(omp simd reduction(| : any))
-            for (int x = 0; x <= nx + 1; ++x)
-                any |= (eps[r + x] != 1.f) | (sand_v[r + x] != 0.f) | (sand_v[N + r + x] != 0.f) |
-                       (sand_v[2 * N + r + x] != 0.f);
+            any |= ck_any_differs(eps + r, nx + 2, 1.f) | ck_any_differs(sand_v + r, nx + 2, 0.f) |
+                   ck_any_differs(sand_v + N + r, nx + 2, 0.f) | ck_any_differs(sand_v + 2 * N + r, nx + 2, 0.f);
         }
     return any == 0;
 }
@@ -336,11 +330,7 @@ LBM_INLINE void lbm_row_fluid_span(const unsigned char* RESTRICT flags, const lo
 
 // Host: true when the cells xa..xb of padded row `row` (index of x = 0) are all FLUID (xb - xa + 1 byte reads)
 LBM_INLINE bool lbm_row_fluid(const unsigned char* RESTRICT flags, const long long row, const int xa, const int xb) {
-    unsigned int any = 0;
-    const unsigned char* r = flags + row;
-    CK_PRAGMA(omp simd reduction(| : any))
-    for (int x = xa; x <= xb; ++x) any |= r[x];
-    return any == 0;  // FLAG_FLUID == 0
+    return ck_or_bytes(flags + row + xa, xb - xa + 1) == 0;  // FLAG_FLUID == 0
 }
 
 // Host: the vector tail of a row's x loop.  An `omp simd` loop runs its last (len mod vector width) iterations
@@ -381,11 +371,11 @@ LBM_INLINE void lbm_link_masks(const unsigned char* RESTRICT flags, const long l
     for (int r = 0; r < 9; ++r) {  // r = (c_y + 1) * 3 + (c_z + 1)
         const unsigned char* fr = flags + c0 - 1 + (long long)(r / 3 - 1) * px + (long long)(r % 3 - 1) * pxy;
         unsigned int* sr = scratch + r * w;
-        CK_PRAGMA(omp simd)
+        CK_SIMD_WIDEN
         for (int i = 0; i < w; ++i) sr[i] = LBM_STENCIL_CELL(fr[i]) ? 1u : 0u;
     }
     unsigned int* fluid = scratch + 9 * w;
-    CK_PRAGMA(omp simd)
+    CK_SIMD_WIDEN
     for (int i = 0; i < len; ++i) fluid[i] = flags[c0 + i] == FLAG_FLUID ? 1u : 0u;
     CK_PRAGMA(omp simd)
     for (int i = 0; i < len; ++i) {

@@ -163,7 +163,7 @@ KERNEL void lbm_macro_pressure(const long long n, const ck_store_t* RESTRICT f /
         long long c0;                                                                                     \
         const int tail = lbm_row_chunk(x0, hi, rem, LBM_P_CHUNK, row, len, c0);                           \
         if (MIX) {                                                                                        \
-            CK_PRAGMA(omp simd)                                                                           \
+            CK_SIMD_WIDEN                                                                                 \
             for (int i = 0; i < len; ++i) slipw[i] = slip_cells[c0 + i] != 0 ? 1u : 0u;                   \
         }                                                                                                 \
         if (bulk && !tail) {                                                                              \

@@ -107,7 +107,7 @@ static inline __attribute__((always_inline)) void pf_fluid_masks(const unsigned 
     for (int r = 0; r < 9; ++r) {  // r = (dz + 1) * 3 + (dy + 1)
         const unsigned char* fr = flags + c0 - 1 + (long long)(r % 3 - 1) * sy + (long long)(r / 3 - 1) * sz;
         unsigned int* sr = scratch + r * w;
-        CK_PRAGMA(omp simd)
+        CK_SIMD_WIDEN
         for (int i = 0; i < w; ++i) sr[i] = fr[i] == PF_FLUID ? 1u : 0u;
     }
     CK_PRAGMA(omp simd)

@@ -74,3 +74,37 @@ def test_pressure_update_with_a_sand_blob_is_the_same_skipping_or_not(kernel_bac
     KernelOps(kernel_backend, **effects).macro_pressure(*args, p_every, parity, 1.0, 0.00125)
     assert p_skip.tobytes() == p_every.tobytes()
     assert np.abs(p_skip - s["p"]).max() > 1e-5
+
+
+_SHAPE = (9, 10, 27)  # nz, ny, nx: 29-cell padded rows, scanned as three 8-lane blocks and a remainder of 5
+
+
+@pytest.mark.parametrize("x", [0, 1, 7, 8, 15, 16, 23, 24, 27, 28])
+@pytest.mark.parametrize("field", ["eps", "sand_v"])
+def test_one_sandy_cell_anywhere_in_a_row_is_seen(kernel_backend, field, x, monkeypatch):
+    """The host's sand-free row scan (an 8-lane scan of bit patterns and a scalar remainder,
+    kernels/common.cuh ck_any_differs) must see a single cell of sand at any padded x, in a block or in the
+    remainder, ghosts included: p bitwise the same skipping or not, and (a porosity cell) different from a state
+    with no sand. A sand velocity where ε = 1 changes no term of Eq. 39 ((1 − ε) div v and (u − v)·∇ε), so there
+    only the first holds."""
+    effects = {"two_phase": True, "surface_tension": True, "mixture": True, "external_force": True}
+    s = random_state(7, BOUNDARY_SETS["periodic"], shape=_SHAPE, obstacle=False)
+    eps, v = s["eps"], s["sand_v"]
+    eps[...] = 1.0
+    v[...] = -0.0  # a negative zero is no sand (as the float comparison it replaced said)
+    z, y = _SHAPE[0] // 2 + 1, _SHAPE[1] // 2 + 1
+    if field == "eps":
+        eps[z, y, x] = 0.7
+    else:
+        v[2, z, y, x] = 0.01
+    args = (s["f"], s["flags"], s["velocity"], s["phi"], eps, v, s["slip"])
+    p_skip, p_every, p_clean = s["p"].copy(), s["p"].copy(), s["p"].copy()
+    KernelOps(kernel_backend, **effects).macro_pressure(*args, p_skip, 0, 1.0, 0.00125)
+    monkeypatch.setattr(_KernelOps, "skip_sand_free_rows", False)
+    KernelOps(kernel_backend, **effects).macro_pressure(*args, p_every, 0, 1.0, 0.00125)
+    assert p_skip.tobytes() == p_every.tobytes()
+    if field == "sand_v":
+        return
+    clean = (s["f"], s["flags"], s["velocity"], s["phi"], np.ones_like(eps), np.zeros_like(v), s["slip"])
+    KernelOps(kernel_backend, **effects).macro_pressure(*clean, p_clean, 0, 1.0, 0.00125)
+    assert p_every.tobytes() != p_clean.tobytes()
