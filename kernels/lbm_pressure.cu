@@ -411,7 +411,7 @@ KERNEL void lbm_momentum(const long long n, const ck_store_t* RESTRICT f /* size
                 const int len = tail ? LBM_VEC                                                     \
                                      : (hi - rem + 1 - x0 < LBM_P_CHUNK ? hi - rem + 1 - x0 : LBM_P_CHUNK); \
                 const long long c0 = row + (tail ? hi - (LBM_VEC - 1) : x0);                       \
-                CK_PRAGMA(omp simd)                                                                \
+                CK_SIMD_WIDEN                                                                      \
                 for (int i = 0; i < len; ++i)                                                      \
                     live[i] = flags[c0 + i] == FLAG_FLUID && i >= tail ? 1u : 0u;                  \
                 CK_PRAGMA(omp simd)                                                                \
