@@ -20,6 +20,7 @@
 //                                        adds sum_i(...) in double to *out.  On the host the per-thread
 //                                        partials are combined in thread order, so for a fixed thread count
 //                                        the result is bitwise reproducible.
+//   REDUCE_SUM2_BEGIN(i, n, a, b) ... REDUCE_SUM2_END(out, a, b): two such sums in one loop, into out[0], out[1].
 // CK_PER_ITEM(v): v, hidden from the GPU compiler's common-subexpression and loop-invariant optimisations
 // (register pressure; see the CUDA section).
 // Atomics: atomic_add(float*|double*|int*|unsigned int*, value).
@@ -162,6 +163,20 @@ DEVICE double ck_warp_sum(double v) {
         acc = ck_warp_sum(acc);                              \
         if ((threadIdx.x & 31u) == 0u) atomicAdd((out), acc); \
     }
+// two sums in one loop: REDUCE_SUM2_BEGIN(i, n, a, b) { a += ...; b += ...; } REDUCE_SUM2_END(out, a, b) adds
+// them to out[0] and out[1]
+#define REDUCE_SUM2_BEGIN(i, n, a, b) \
+    {                                 \
+        double a = 0.0, b = 0.0;      \
+        FOR_EACH(i, n)
+#define REDUCE_SUM2_END(out, a, b)                                 \
+        a = ck_warp_sum(a);                                        \
+        b = ck_warp_sum(b);                                        \
+        if ((threadIdx.x & 31u) == 0u) {                           \
+            atomicAdd((out), a);                                   \
+            atomicAdd((out) + 1, b);                               \
+        }                                                          \
+    }
 
 #else
 // ---------------------------------------------------------------------------------------------- host
@@ -282,6 +297,31 @@ DEVICE void atomic_add(unsigned int* addr, unsigned int v) {
         double ck_total_ = 0.0;                                      \
         for (int t = 0; t < ck_nthreads_; ++t) ck_total_ += ck_partial_[t]; \
         *(out) += ck_total_;                                         \
+    }
+
+// two sums in one loop (the GPU section's comment); each combined in thread order like REDUCE_SUM
+#define REDUCE_SUM2_BEGIN(i, n, a, b)                            \
+    {                                                            \
+        double ck_partial_[2 * CK_MAX_THREADS];                  \
+        int ck_nthreads_ = 1;                                    \
+        CK_PRAGMA(omp parallel num_threads(ck_reduce_threads_())) \
+        {                                                        \
+            double a = 0.0, b = 0.0;                             \
+            CK_PRAGMA(omp for schedule(static))                  \
+            for (long long i = 0; i < (long long)(n); ++i)
+
+#define REDUCE_SUM2_END(out, a, b)                                   \
+            ck_partial_[2 * omp_get_thread_num()] = a;               \
+            ck_partial_[2 * omp_get_thread_num() + 1] = b;           \
+            CK_PRAGMA(omp single) ck_nthreads_ = omp_get_num_threads(); \
+        }                                                            \
+        double ck_total_a_ = 0.0, ck_total_b_ = 0.0;                 \
+        for (int t = 0; t < ck_nthreads_; ++t) {                     \
+            ck_total_a_ += ck_partial_[2 * t];                       \
+            ck_total_b_ += ck_partial_[2 * t + 1];                   \
+        }                                                            \
+        (out)[0] += ck_total_a_;                                     \
+        (out)[1] += ck_total_b_;                                     \
     }
 
 DEVICE int ck_reduce_threads_() {

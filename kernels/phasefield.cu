@@ -943,6 +943,36 @@ KERNEL void phase_collide_stream(const long long n, ck_store_t* RESTRICT h /* si
 #undef PF_GRAD
 }
 
+// Both sums of a mixture's volume controller (Eq. 52) in one pass, float64 over interior FLUID cells:
+//   out[0] += sum eps phi,  out[1] += sum eps S_phi  (n = ny*nz, one work item per x row).
+// Each row sums in x order and the rows combine as in phase_volume_sums_eps, so the two are bitwise what two
+// calls of that kernel (phi, then S_phi in its place) give; one read of the flags and the porosity instead of
+// two, and no unused sum S_phi (the two calls computed it twice and dropped it).  The two add chains of a row
+// run side by side: the separate calls were four float64 chains one after the other (latency-bound).
+KERNEL void phase_volume_sums_mixture(const long long n,
+                                      const float* RESTRICT phi /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                                      const float* RESTRICT eps /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                                      const float* RESTRICT source /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                                      const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                                      double* RESTRICT out /* size: 2 */, const int nx, const int ny,
+                                      const int nz) {
+    const long long sy = (long long)(nx + 2), sz = (long long)(nx + 2) * (ny + 2);
+    (void)nz;
+    REDUCE_SUM2_BEGIN(row, n, acc_v, acc_s) {
+        const long long c0 = 1 + sy * (row % ny + 1) + sz * (row / ny + 1);
+        double v = 0.0, s = 0.0;
+        for (int x = 0; x < nx; ++x) {
+            const bool fluid = flags[c0 + x] == PF_FLUID;
+            const double e = (double)eps[c0 + x];
+            v += fluid ? e * (double)phi[c0 + x] : 0.0;
+            s += fluid ? e * (double)source[c0 + x] : 0.0;
+        }
+        acc_v += v;
+        acc_s += s;
+    }
+    REDUCE_SUM2_END(out, acc_v, acc_s)
+}
+
 // Global volume sums for the volume controller (Eq. 52), in float64 over interior FLUID cells:
 //   out[0] += sum phi,  out[1] += sum S_phi.  n = ny*nz (one work item per x row).
 KERNEL void phase_volume_sums(const long long n, const float* RESTRICT phi /* size: (nx + 2) * (ny + 2) * (nz + 2) */,

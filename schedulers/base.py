@@ -46,6 +46,7 @@ _FLUID_OPS = {
 }
 _PHASE_OPS = {
     "volume_sums": "volume_controller",
+    "mixture_sums": "volume_controller",
     "collide_stream": "phase_field_collide_stream",
     "macroscopic": "phase_field_macroscopic",
     "gradients": "phase_field_macroscopic",

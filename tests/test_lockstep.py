@@ -77,7 +77,7 @@ def test_coupled_step_runs_algorithm_1_in_order(cpu1):
         "coupler.",
     )
     _record(fl.ops, ["macro_pressure", "pressure_filter", "collide_stream"], log, "lbm.")
-    _record(fl.pf_ops, ["volume_sums", "collide_stream", "macroscopic"], log, "pf.")
+    _record(fl.pf_ops, ["mixture_sums", "collide_stream", "macroscopic"], log, "pf.")
     sched = LockstepScheduler(fl, sd, cp)
     sched.step(1)  # the first step also sets the controller's V0 (one more volume sum)
     log.clear()
@@ -85,10 +85,10 @@ def test_coupled_step_runs_algorithm_1_in_order(cpu1):
     expected = [
         "sand.p2g", "coupler.fluid_velocity", "coupler.fractions", "coupler.phase_source", "coupler.exchange",
         "sand.grid_update", "coupler.moisture", "sand.g2p", "coupler.sand_velocity", "lbm.macro_pressure",
-        "lbm.pressure_filter", "lbm.collide_stream", "pf.volume_sums", "pf.collide_stream", "pf.macroscopic",
+        "lbm.pressure_filter", "lbm.collide_stream", "pf.mixture_sums", "pf.collide_stream", "pf.macroscopic",
         "coupler.finish",
     ]  # fmt: skip
-    # the controller calls volume_sums twice in a row (Σ ε φ and Σ ε S)
+    # the controller's Σ ε φ and Σ ε S: one mixture_sums pass
     dedup = [e for i, e in enumerate(log) if i == 0 or e != log[i - 1]]
     assert dedup == expected, dedup
     times = sched.stage_times()

@@ -11,7 +11,8 @@ Stages (one kernel each in ``kernels/phasefield.cu``; NumPy twin :class:`PhaseFi
 ``collide_stream``   Eq. 48 with the interface term (Eqs. 49–50, with the (1 - omega/2) factor), the source
                      term (Eq. 51) scaled by the volume controller gamma, in-place streaming, no-flux walls;
 ``volume_sums``      sum phi (or sum eps phi) and sum S_phi in float64, for the controller (Eq. 52,
-                     :func:`volume_controller_gamma`).
+                     :func:`volume_controller_gamma`);
+``mixture_sums``     a mixture's two: sum eps phi and sum eps S_phi, in one pass.
 
 Per step, in this order: ``macroscopic(h, phi, u, flags, t)`` -> (flow stages) -> ``volume_sums`` +
 ``volume_controller_gamma`` (only when a source is present) -> ``collide_stream(h, phi, u, source, flags, t,
@@ -64,7 +65,7 @@ Numerical choices
   float32 rounding per cell and step (plain float32 sums drifted ~50x more in steady states, where the
   same rounding repeats every step).  The reference computes in float64 and rounds each h* once.
 * Volume V (Eq. 52): Sigma phi over interior FLUID cells, or Sigma eps phi with the mixture's fluid
-  fraction (``volume_sums(..., eps=...)``); gamma from :func:`volume_controller_gamma` (eta = 0: off).
+  fraction (``volume_sums(..., eps=...)``, or ``mixture_sums`` with Σ ε S_φ); gamma from :func:`volume_controller_gamma` (eta = 0: off).
 """
 
 from __future__ import annotations
@@ -210,6 +211,16 @@ class PhaseFieldKernelOps:
             self._fn("phase_volume_sums")(ny * nz, phi, source, flags, out, nx, ny, nz)
         else:
             self._fn("phase_volume_sums_eps")(ny * nz, phi, eps, source, flags, out, nx, ny, nz)
+        host = self.backend.to_host(out)
+        return float(host[0]), float(host[1])
+
+    def mixture_sums(self, phi, eps, source, flags) -> tuple[float, float]:
+        """(Σ ε φ, Σ ε S_φ) over interior FLUID cells in float64, in one pass: the two sums of a mixture's volume
+        controller (Eq. 52), bitwise ``volume_sums(phi, ., flags, eps)[0]`` and ``volume_sums(source, ., flags,
+        eps)[0]``."""
+        nz, ny, nx = interior_shape(flags.shape)
+        out = self.xp.zeros(2, dtype=np.float64)
+        self._fn("phase_volume_sums_mixture")(ny * nz, phi, eps, source, flags, out, nx, ny, nz)
         host = self.backend.to_host(out)
         return float(host[0]), float(host[1])
 

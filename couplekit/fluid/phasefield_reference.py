@@ -310,3 +310,7 @@ class PhaseFieldReferenceOps:
             p = p * eps[1:-1, 1:-1, 1:-1].astype(np.float64)
         s = self._source(source, flags)[1:-1, 1:-1, 1:-1].astype(np.float64)
         return float(p[fluid].sum()), float(s[fluid].sum())
+
+    def mixture_sums(self, phi, eps, source, flags) -> tuple[float, float]:
+        """(Σ ε φ, Σ ε S_φ) over interior FLUID cells in float64 (Eq. 52's two sums in a mixture)."""
+        return self.volume_sums(phi, source, flags, eps)[0], self.volume_sums(source, source, flags, eps)[0]

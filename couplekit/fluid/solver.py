@@ -658,11 +658,10 @@ class FluidSolver:
         if not self.mixture:
             return self.pf_ops.volume_sums(self.phi, self.source_term, self.flags)
         eps = self.fluid_fraction
-        volume = self.pf_ops.volume_sums(self.phi, self.source_term, self.flags, eps)[0] + self.held_volume
         if self.source_term is None:  # S_φ compiled out: nothing for the controller to scale
-            return volume, 0.0
-        weighted_source = self.pf_ops.volume_sums(self.source_term, self.source_term, self.flags, eps)[0]
-        return volume, weighted_source
+            return self.pf_ops.volume_sums(self.phi, self.source_term, self.flags, eps)[0] + self.held_volume, 0.0
+        volume, weighted_source = self.pf_ops.mixture_sums(self.phi, eps, self.source_term, self.flags)
+        return volume + self.held_volume, weighted_source
 
     INTERFACE_CORRECTION_MAX = 0.01
     """Largest β of :meth:`_interface_correction`: at most 0.25 β = 0.0025 of φ per step at the interface's

@@ -217,6 +217,28 @@ def test_volume_sums_match_reference(cpu, with_eps):
     assert kernel.volume_sums(phi, s["source"], s["flags"], eps)[0] == pytest.approx(vk, rel=1e-12)
 
 
+def test_mixture_sums_are_the_two_volume_sums(kernel_backend):
+    """The volume controller's one-pass (Σ ε φ, Σ ε S_φ) of a mixture: bitwise the two ε-weighted volume sums
+    it replaced (φ, then S_φ in φ's place) on the kernel backends, to float64 round-off on the reference; ghost
+    and solid cells excluded."""
+    s = random_state(51, (False, True, False))
+    kernel, ref = (
+        PhaseFieldKernelOps(kernel_backend, (False, True, False)),
+        PhaseFieldReferenceOps((False, True, False)),
+    )
+    phi, eps, src, flags = s["phi"], s["eps"], s["source"], s["flags"]
+    v, w = kernel.mixture_sums(phi, eps, src, flags)
+    assert v == kernel.volume_sums(phi, src, flags, eps)[0]
+    assert w == kernel.volume_sums(src, src, flags, eps)[0]
+    vr, wr = ref.mixture_sums(phi, eps, src, flags)
+    assert v == pytest.approx(vr, rel=1e-12) and w == pytest.approx(wr, rel=1e-12, abs=1e-15)
+    assert abs(w) > 0 and v > 0
+    masked = [a.copy() for a in (phi, eps, src)]
+    for a in masked:
+        a[flags != FLUID] = 1e6
+    assert kernel.mixture_sums(*masked, flags) == (v, w)
+
+
 @pytest.mark.parametrize("parity", [0, 1])
 def test_source_compiled_out_matches_the_reference_and_a_zero_source(cpu, parity):
     """CK_PF_SOURCE=0 (no S_φ: fluid-only scenes, the Fig. 14 ablation): collide_stream and the volume sums
