@@ -142,9 +142,14 @@ class KernelOps:
         self, f, flags, velocity, phi, eps, sand_v, slip, p, parity: int, rho_h: float, rho_l: float, fsum=None
     ) -> None:
         """Eq. 39 pressure update in place (see ReferenceOps.macro_pressure; ``fsum``: Σ_j (f_j − w_j) of these
-        populations from :meth:`momentum`, read instead of f)."""
+        populations from :meth:`momentum`, read instead of f).
+
+        An odd step's wall links are prefilled here for the collide that follows (its ``prefilled``), unless
+        ``fsum`` is given: then :meth:`momentum` ran on these same populations and wall velocities at this step
+        (FluidSolver's kept-sum contract: nothing writes f in between, and the coupling stages between them write
+        no fluid velocity) and prefilled them already; a second prefill wrote the same values again."""
         n, nx, ny, nz = self._interior(flags)
-        if parity & 1:
+        if parity & 1 and fsum is None:
             self._wall_call(self._prefill, f, flags, velocity)
         self._macro(
             n,
