@@ -357,10 +357,23 @@ float ck_select(const unsigned int c, const float a, const float b) {
 #endif
 }
 
+// fminf / fmaxf.  On the host as blends that give what glibc's x86-64 fminf / fmaxf return (minss / maxss:
+// x < y ? x : y, so min(-0, +0) = +0; the other argument when one is NaN): g++ calls libm for fminf / fmaxf
+// unless math is finite-only, and a call leaves the loop around it scalar (the coupling kernels: 1 % of Fig. 13
+// small's step in __fminf alone).  The GPU takes its own fminf / fmaxf (NaN: the other argument as well).
+#if CK_ON_GPU
+#define ck_fminf fminf
+#define ck_fmaxf fmaxf
+#else
+static inline __attribute__((always_inline)) float ck_fminf(const float x, const float y) {
+    return ck_select((unsigned int)((x < y) | (y != y)), x, y);
+}
+static inline __attribute__((always_inline)) float ck_fmaxf(const float x, const float y) {
+    return ck_select((unsigned int)((x > y) | (y != y)), x, y);
+}
+#endif
+
 #if !CK_ON_GPU
-// host: whether every cell of the 9 padded rows around `row` (the row and its y, z neighbours; x in xa .. xb)
-// holds exactly `v` in `s` (a row with no sand around it: fluid fraction 1, sand velocity 0; the row schemes of
-// lbm_macro_pressure and coupling_phase_source take such rows without their mixture stencils)
 // Host OR reductions over a short run of a row (9 rows of nx + 2 cells per row of a stage; 28 cells in Fig. 13
 // small).  Written as 8-lane blocks and a scalar remainder of < 8: g++'s own vector loops (and `omp simd
 // reduction`) take 16 or 32 lanes with a scalar epilogue, which ran a 28-cell run entirely scalar (perf: the
@@ -393,6 +406,9 @@ static inline uint32_t ck_any_differs(const float* RESTRICT r, const int n, cons
     for (int k = 0; k < 8; ++k) any |= acc[k];
     return any;
 }
+// host: whether every cell of the 9 padded rows around `row` (the row and its y, z neighbours; x in xa .. xb)
+// holds exactly `v` in `s` (a row with no sand around it: fluid fraction 1, sand velocity 0; the row schemes of
+// lbm_macro_pressure and coupling_phase_source take such rows without their mixture stencils)
 static inline bool ck_rows_equal(const float* RESTRICT s, const long long row, const int xa, const int xb,
                                  const int px, const long long pxy, const float v) {
     uint32_t any = 0;

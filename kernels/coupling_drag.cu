@@ -45,6 +45,64 @@ DEVICE float coupling_drag_fraction(const float kr) {
     return 4.f * kr / (q * q);
 }
 
+// one interior cell (x, y, z) of coupling_drag_buoyancy (both paths)
+DEVICE void coupling_drag_cell(
+    const int x, const int y, const int z, const float* RESTRICT grid_m, float* RESTRICT grid_mv,
+    float* RESTRICT force, const float* RESTRICT u, const float* RESTRICT phi, const float* RESTRICT grid_vol,
+    const float* RESTRICT eps_fluid, const unsigned char* RESTRICT flags, const int nx, const int ny,
+    const int nz, const float dt, const float dt_lattice, const float gx, const float gy, const float gz,
+    const float mass_scale, const float velocity_scale, const float rho_h, const float rho_l, const float c_drag,
+    const float chi, const float grain_diameter, const float inv_cell_volume, const float eps_max) {
+    const long long ncell = (long long)nx * ny * nz;
+    const int PX = nx + 2;
+    const long long PXY = (long long)PX * (ny + 2);
+    const long long N = PXY * (nz + 2);
+    const float momentum_scale = mass_scale * velocity_scale;
+    const long long i = x + (long long)nx * (y + (long long)ny * z);
+    const long long c = (x + 1) + PX * (long long)(y + 1) + PXY * (z + 1);
+    const float m = grid_m[i];
+    float fbx = 0.f, fby = 0.f, fbz = 0.f, Jx = 0.f, Jy = 0.f, Jz = 0.f;
+    if (m > 0.f && flags[c] == 0) {
+#if CK_TWO_PHASE
+        const float rho = rho_l + (rho_h - rho_l) * coupling_water_phase(phi[c]);
+#else
+        const float rho = rho_h;
+#endif
+        const float es = coupling_sand_fraction(grid_vol[i], inv_cell_volume, eps_max);  // Eq. 25
+        const float ef = eps_fluid[c];
+        // buoyancy, Eq. 31: -V_cell eps_s rho g in newtons (rho mass_scale = rho_SI V_cell)
+        const float b = -es * rho * mass_scale;
+        fbx = b * gx;
+        fby = b * gy;
+        fbz = b * gz;
+        // sand velocity after the explicit forces (SI), then lattice units
+        const float inv_m = 1.f / m;
+        const float inv_vs = 1.f / velocity_scale;
+        const float vx = ((grid_mv[i] + dt * fbx) * inv_m + dt * gx) * inv_vs;
+        const float vy = ((grid_mv[ncell + i] + dt * fby) * inv_m + dt * gy) * inv_vs;
+        const float vz = ((grid_mv[2 * ncell + i] + dt * fbz) * inv_m + dt * gz) * inv_vs;
+        const float ms = m / mass_scale;
+        const float mf = rho * ef;
+        const float rx = u[c] - vx, ry = u[N + c] - vy, rz = u[2 * N + c] - vz;
+        const float rn = sqrtf(rx * rx + ry * ry + rz * rz);
+        const float area = grain_diameter > 0.f ? 1.5f * es / grain_diameter
+                                                : CK_PI_F * powf(3.f * es / (4.f * CK_PI_F), 2.f / 3.f);
+        const float beta = 0.5f * c_drag * powf(ck_fmaxf(1.f - es, 1e-6f), -chi) * rho * area;
+        const float k = dt_lattice * beta * (1.f / ms + 1.f / mf);
+        const float s = (ms * mf / (ms + mf)) * coupling_drag_fraction(k * rn);
+        Jx = s * rx;
+        Jy = s * ry;
+        Jz = s * rz;
+    }
+    const float inv_dtl = 1.f / dt_lattice;
+    force[c] = -Jx * inv_dtl;
+    force[N + c] = -Jy * inv_dtl;
+    force[2 * N + c] = -Jz * inv_dtl;
+    grid_mv[i] += Jx * momentum_scale + dt * fbx;
+    grid_mv[ncell + i] += Jy * momentum_scale + dt * fby;
+    grid_mv[2 * ncell + i] += Jz * momentum_scale + dt * fbz;
+}
+
 KERNEL void coupling_drag_buoyancy(
     const long long n, const float* RESTRICT grid_m /* size: nx * ny * nz */,
     float* RESTRICT grid_mv /* size: 3 * nx * ny * nz */,
@@ -61,51 +119,39 @@ KERNEL void coupling_drag_buoyancy(
     const long long PXY = (long long)PX * (ny + 2);
     const long long N = PXY * (nz + 2);
     const float momentum_scale = mass_scale * velocity_scale;
-    FOR_EACH_CELL(x, y, z, nx, ny, nz) {
-        const long long i = x + (long long)nx * (y + (long long)ny * z);
-        const long long c = (x + 1) + PX * (long long)(y + 1) + PXY * (z + 1);
-        const float m = grid_m[i];
-        float fbx = 0.f, fby = 0.f, fbz = 0.f, Jx = 0.f, Jy = 0.f, Jz = 0.f;
-        if (m > 0.f && flags[c] == 0) {
-#if CK_TWO_PHASE
-            const float rho = rho_l + (rho_h - rho_l) * coupling_water_phase(phi[c]);
+#define CPL_DRAG_ARGS                                                                                      \
+    x, y, z, grid_m, grid_mv, force, u, phi, grid_vol, eps_fluid, flags, nx, ny, nz, dt, dt_lattice, gx, gy, gz, \
+        mass_scale, velocity_scale, rho_h, rho_l, c_drag, chi, grain_diameter, inv_cell_volume, eps_max
+#if CK_ON_GPU
+    FOR_EACH_CELL(x, y, z, nx, ny, nz) coupling_drag_cell(CPL_DRAG_ARGS);
 #else
-            const float rho = rho_h;
-#endif
-            const float es = coupling_sand_fraction(grid_vol[i], inv_cell_volume, eps_max);  // Eq. 25
-            const float ef = eps_fluid[c];
-            // buoyancy, Eq. 31: -V_cell eps_s rho g in newtons (rho mass_scale = rho_SI V_cell)
-            const float b = -es * rho * mass_scale;
-            fbx = b * gx;
-            fby = b * gy;
-            fbz = b * gz;
-            // sand velocity after the explicit forces (SI), then lattice units
-            const float inv_m = 1.f / m;
-            const float inv_vs = 1.f / velocity_scale;
-            const float vx = ((grid_mv[i] + dt * fbx) * inv_m + dt * gx) * inv_vs;
-            const float vy = ((grid_mv[ncell + i] + dt * fby) * inv_m + dt * gy) * inv_vs;
-            const float vz = ((grid_mv[2 * ncell + i] + dt * fbz) * inv_m + dt * gz) * inv_vs;
-            const float ms = m / mass_scale;
-            const float mf = rho * ef;
-            const float rx = u[c] - vx, ry = u[N + c] - vy, rz = u[2 * N + c] - vz;
-            const float rn = sqrtf(rx * rx + ry * ry + rz * rz);
-            const float area = grain_diameter > 0.f ? 1.5f * es / grain_diameter
-                                                    : CK_PI_F * powf(3.f * es / (4.f * CK_PI_F), 2.f / 3.f);
-            const float beta = 0.5f * c_drag * powf(fmaxf(1.f - es, 1e-6f), -chi) * rho * area;
-            const float k = dt_lattice * beta * (1.f / ms + 1.f / mf);
-            const float s = (ms * mf / (ms + mf)) * coupling_drag_fraction(k * rn);
-            Jx = s * rx;
-            Jy = s * ry;
-            Jz = s * rz;
+    // host: rows in parallel.  A row whose nodes hold no sand mass (most rows: the sand fills a small part of
+    // the grid) takes the empty cell's arithmetic as a vector loop (J = F_b = 0: force -0 and mv + 0, what the
+    // per-cell code writes there); a row with sand the per-cell code (its branch, sqrtf and powf run scalar)
+    CK_PRAGMA(omp parallel for collapse(2) schedule(static))
+    for (int z = 0; z < nz; ++z)
+        for (int y = 0; y < ny; ++y) {
+            const long long i0 = (long long)nx * (y + (long long)ny * z);
+            if (ck_any_differs(grid_m + i0, nx, 0.f)) {
+                for (int x = 0; x < nx; ++x) coupling_drag_cell(CPL_DRAG_ARGS);
+                continue;
+            }
+            const long long c0 = 1 + PX * (long long)(y + 1) + PXY * (z + 1);
+            const float inv_dtl = 1.f / dt_lattice, zero = 0.f;
+            CK_PRAGMA(omp simd)
+            for (int x = 0; x < nx; ++x) {
+                const long long i = i0 + x, c = c0 + x;
+                force[c] = -zero * inv_dtl;
+                force[N + c] = -zero * inv_dtl;
+                force[2 * N + c] = -zero * inv_dtl;
+                grid_mv[i] += zero * momentum_scale + dt * zero;
+                grid_mv[ncell + i] += zero * momentum_scale + dt * zero;
+                grid_mv[2 * ncell + i] += zero * momentum_scale + dt * zero;
+            }
         }
-        const float inv_dtl = 1.f / dt_lattice;
-        force[c] = -Jx * inv_dtl;
-        force[N + c] = -Jy * inv_dtl;
-        force[2 * N + c] = -Jz * inv_dtl;
-        grid_mv[i] += Jx * momentum_scale + dt * fbx;
-        grid_mv[ncell + i] += Jy * momentum_scale + dt * fby;
-        grid_mv[2 * ncell + i] += Jz * momentum_scale + dt * fbz;
-    }
+    (void)n;
+#endif
+#undef CPL_DRAG_ARGS
 #if !CK_TWO_PHASE
     (void)phi;
     (void)rho_l;

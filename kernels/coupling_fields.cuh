@@ -9,10 +9,10 @@
 #pragma once
 
 DEVICE float coupling_sand_fraction(const float volume, const float inv_cell_volume, const float eps_max) {
-    return fminf(eps_max, volume * inv_cell_volume);
+    return ck_fminf(eps_max, volume * inv_cell_volume);
 }
 
-DEVICE float coupling_water_phase(const float phi) { return fminf(fmaxf(phi, 0.f), 1.f); }
+DEVICE float coupling_water_phase(const float phi) { return ck_fminf(ck_fmaxf(phi, 0.f), 1.f); }
 
 DEVICE float coupling_water(const float bound, const float eps_fluid, const float phase) {
     return bound + eps_fluid * phase;

@@ -73,40 +73,63 @@ KERNEL void coupling_fractions(const long long n, const float* RESTRICT grid_vol
                                const int masked) {
     const int PX = nx + 2;
     const long long PXY = (long long)PX * (ny + 2);
+    // padded cell (X, Y, Z) from source node (ix, iy, iz)
+#if CK_RETENTION
+#if CK_TWO_PHASE
+#define CPL_PHASE(image) coupling_water_phase(phi[image])
+#else
+#define CPL_PHASE(image) 1.f
+#endif
+#define CPL_FRACTION_CELL(X, Y, Z, ix, iy, iz)                                                                 \
+    {                                                                                                          \
+        const long long node = (ix) + (long long)nx * ((iy) + (long long)ny * (iz));                           \
+        const long long cell = (X) + PX * (long long)(Y) + PXY * (Z);                                          \
+        const long long image = ((ix) + 1) + PX * (long long)((iy) + 1) + PXY * ((iz) + 1);                    \
+        const float es = coupling_sand_fraction(grid_vol[node], inv_cell_volume, eps_max); /* Eq. 25 */        \
+        const float ph = CPL_PHASE(image);                                                                     \
+        const float R = bound_in[node];                                                                        \
+        const float cap = r_max * (masked ? ck_fminf(es, retentive[node]) : es); /* retention capacity */     \
+        const float free_water = free_share * (ck_fmaxf(ck_fminf(1.f - es - R, eps_prev[image]), 0.f) * ph);  \
+        const float dR = ck_fminf(free_water, ck_fminf(absorption * cap * ph, cap - R)); /* Eq. 55 */         \
+        const float Rn = R + dR;                                                /* Eq. 56 */                   \
+        eps_fluid[cell] = 1.f - es - Rn;                                        /* Eq. 54 */                   \
+        if ((X) >= 1 && (X) <= nx && (Y) >= 1 && (Y) <= ny && (Z) >= 1 && (Z) <= nz) {                        \
+            d_bound[node] = dR;                                                                                \
+            bound_out[node] = Rn;                                                                              \
+        }                                                                                                      \
+    }
+#else
+#define CPL_FRACTION_CELL(X, Y, Z, ix, iy, iz)                                                                 \
+    {                                                                                                          \
+        const long long node = (ix) + (long long)nx * ((iy) + (long long)ny * (iz));                           \
+        const float es = coupling_sand_fraction(grid_vol[node], inv_cell_volume, eps_max); /* Eq. 25 */        \
+        eps_fluid[(X) + PX * (long long)(Y) + PXY * (Z)] = 1.f - es;                       /* Eq. 33 */        \
+    }
+#endif
+#if CK_ON_GPU
     FOR_EACH_CELL(X, Y, Z, nx + 2, ny + 2, nz + 2) {
         const int ix = coupling_source_index(X, nx, px);
         const int iy = coupling_source_index(Y, ny, py);
         const int iz = coupling_source_index(Z, nz, pz);
-        const long long node = ix + (long long)nx * (iy + (long long)ny * iz);
-        const long long cell = X + PX * (long long)Y + PXY * Z;
-        const long long image = (ix + 1) + PX * (long long)(iy + 1) + PXY * (iz + 1);
-        const float es = coupling_sand_fraction(grid_vol[node], inv_cell_volume, eps_max);  // Eq. 25
-#if CK_RETENTION
-#if CK_TWO_PHASE
-        const float ph = coupling_water_phase(phi[image]);
-#else
-        const float ph = 1.f;
-#endif
-        const float R = bound_in[node];
-        const float cap = r_max * (masked ? fminf(es, retentive[node]) : es);           // retention capacity
-        const float free_water = free_share * (fmaxf(fminf(1.f - es - R, eps_prev[image]), 0.f) * ph);
-        const float dR = fminf(free_water, fminf(absorption * cap * ph, cap - R));  // Eq. 55, rate x phi
-        const float Rn = R + dR;                                                        // Eq. 56
-        const float ef = 1.f - es - Rn;                                                 // Eq. 54
-#else
-        const float ef = 1.f - es;  // Eq. 33
-#endif
-        eps_fluid[cell] = ef;
-#if !CK_RETENTION
-        (void)image;
-#else
-        const int inside = X >= 1 && X <= nx && Y >= 1 && Y <= ny && Z >= 1 && Z <= nz;
-        if (inside) {
-            d_bound[node] = dR;
-            bound_out[node] = Rn;
-        }
-#endif
+        CPL_FRACTION_CELL(X, Y, Z, ix, iy, iz)
     }
+#else
+    // host: padded rows in parallel; a row's interior cells read consecutive nodes (a vector loop, the source
+    // index of y and z taken once per row), its two ghost cells their x source node (per cell, the GPU's form
+    // took the three source indices' branches in every cell and ran scalar)
+    CK_PRAGMA(omp parallel for collapse(2) schedule(static))
+    for (int Z = 0; Z < nz + 2; ++Z)
+        for (int Y = 0; Y < ny + 2; ++Y) {
+            const int iy = coupling_source_index(Y, ny, py), iz = coupling_source_index(Z, nz, pz);
+            CPL_FRACTION_CELL(0, Y, Z, coupling_source_index(0, nx, px), iy, iz)
+            CPL_FRACTION_CELL(nx + 1, Y, Z, coupling_source_index(nx + 1, nx, px), iy, iz)
+            CK_PRAGMA(omp simd)
+            for (int X = 1; X <= nx; ++X) CPL_FRACTION_CELL(X, Y, Z, X - 1, iy, iz)
+        }
+    (void)n;
+#endif
+#undef CPL_FRACTION_CELL
+#undef CPL_PHASE
 #if !CK_RETENTION
     (void)phi;
     (void)bound_in;
@@ -135,13 +158,31 @@ KERNEL void coupling_sand_velocity(const long long n, const float* RESTRICT grid
     const int PX = nx + 2;
     const long long PXY = (long long)PX * (ny + 2);
     const long long N = PXY * (nz + 2);
-    FOR_EACH_CELL(X, Y, Z, nx + 2, ny + 2, nz + 2) {
-        const long long node = coupling_source_index(X, nx, px) +
-                               (long long)nx * (coupling_source_index(Y, ny, py) +
-                                                (long long)ny * coupling_source_index(Z, nz, pz));
-        const long long cell = X + PX * (long long)Y + PXY * Z;
-        sand_v[cell] = grid_v[node] * inv_velocity_scale;
-        sand_v[N + cell] = grid_v[ncell + node] * inv_velocity_scale;
-        sand_v[2 * N + cell] = grid_v[2 * ncell + node] * inv_velocity_scale;
+#define CPL_SAND_V_CELL(X, Y, Z, ix, iy, iz)                                          \
+    {                                                                                 \
+        const long long node = (ix) + (long long)nx * ((iy) + (long long)ny * (iz));  \
+        const long long cell = (X) + PX * (long long)(Y) + PXY * (Z);                 \
+        sand_v[cell] = grid_v[node] * inv_velocity_scale;                             \
+        sand_v[N + cell] = grid_v[ncell + node] * inv_velocity_scale;                 \
+        sand_v[2 * N + cell] = grid_v[2 * ncell + node] * inv_velocity_scale;         \
     }
+#if CK_ON_GPU
+    FOR_EACH_CELL(X, Y, Z, nx + 2, ny + 2, nz + 2) {
+        CPL_SAND_V_CELL(X, Y, Z, coupling_source_index(X, nx, px), coupling_source_index(Y, ny, py),
+                        coupling_source_index(Z, nz, pz))
+    }
+#else
+    // host: padded rows, their interior cells a vector loop over consecutive nodes (coupling_fractions)
+    CK_PRAGMA(omp parallel for collapse(2) schedule(static))
+    for (int Z = 0; Z < nz + 2; ++Z)
+        for (int Y = 0; Y < ny + 2; ++Y) {
+            const int iy = coupling_source_index(Y, ny, py), iz = coupling_source_index(Z, nz, pz);
+            CPL_SAND_V_CELL(0, Y, Z, coupling_source_index(0, nx, px), iy, iz)
+            CPL_SAND_V_CELL(nx + 1, Y, Z, coupling_source_index(nx + 1, nx, px), iy, iz)
+            CK_PRAGMA(omp simd)
+            for (int X = 1; X <= nx; ++X) CPL_SAND_V_CELL(X, Y, Z, X - 1, iy, iz)
+        }
+    (void)n;
+#endif
+#undef CPL_SAND_V_CELL
 }

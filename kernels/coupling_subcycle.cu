@@ -45,7 +45,7 @@ KERNEL void coupling_fluid_view(const long long n, const float* RESTRICT u0 /* s
         float ux = u0[c], uy = u0[N + c], uz = u0[2 * N + c];
         if (flags[c] == 0) {
 #if CK_TWO_PHASE
-            const float rho = rho_l + (rho_h - rho_l) * fminf(fmaxf(phi[c], 0.f), 1.f);
+            const float rho = rho_l + (rho_h - rho_l) * ck_fminf(ck_fmaxf(phi[c], 0.f), 1.f);
 #else
             const float rho = rho_h;
 #endif
