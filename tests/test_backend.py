@@ -73,3 +73,36 @@ def test_threads_from_argument_and_environment(monkeypatch, cpu_backend):
     assert be.module("selfcheck.cu").num_threads() == 2
     with pytest.raises(ValueError, match="threads must be >= 1"):
         get_backend("cpu", threads=0)
+
+
+def test_data_pointer_is_remembered_only_while_the_array_lives():
+    """HostFunction passes each array's data pointer, remembered per live array (couplekit.backend.host.
+    data_pointer): the same value as ``a.ctypes.data``, for views too; the entry goes with its array, so an
+    array born at a dead one's address (the same id) gets its own pointer."""
+    import gc
+
+    from couplekit.backend import host
+
+    a = np.zeros((4, 5), np.float32)
+    assert host.data_pointer(a) == a.ctypes.data
+    assert host.data_pointer(a) == a.ctypes.data  # remembered
+    view = a[1:]
+    assert host.data_pointer(view) == view.ctypes.data != a.ctypes.data
+    key = id(a)
+    del a, view
+    gc.collect()
+    assert key not in host._POINTERS
+    for _ in range(200):  # new arrays, some of them at a freed id: each gets its own pointer
+        b = np.empty(7, np.float64)
+        assert host.data_pointer(b) == b.ctypes.data
+        del b
+
+
+def test_kernel_sees_a_new_array_at_a_reused_id(cpu1):
+    """A kernel writes into the array it is given, also when that array reuses the id of one that has died."""
+    fn = cpu1.module("coupling_moisture.cu", {"CK_RETENTION": 0, "CK_TWO_PHASE": 1}).function("coupling_clear")
+    for k in range(50):
+        a = np.full(16 + 8 * k, k + 1.0, np.float32)  # a new size each time: new memory, ids reused
+        fn(a.size, a)
+        assert not a.any()
+        del a
