@@ -179,6 +179,22 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def _note_scene_file(path: str, stored, checkpoint: str) -> None:
+    """A note when the scene file given with --resume is not the checkpoint's scene (changed, invalid or gone):
+    the stored scene is the one resumed either way."""
+    from .scene import Scene, SceneError
+
+    try:
+        same = Scene.load(path).to_dict() == stored.to_dict()
+    except (SceneError, OSError, ValueError) as exc:
+        lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()] or [type(exc).__name__]
+        why = lines[0].rstrip(":") + (f"; {lines[1].lstrip('- ')}" if len(lines) > 1 else "")
+        print(f"note: {path} does not load ({why}); resuming the scene stored in {checkpoint}")
+        return
+    if not same:
+        print(f"note: {path} differs from the scene stored in {checkpoint}; resuming the stored one")
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
     from .io.checkpoint import CheckpointError
     from .io.outputs import OutputFolderError, default_output, prepare_output
@@ -191,7 +207,6 @@ def _cmd_run(args: argparse.Namespace) -> int:
             print(f"error: --{name} must be 1 or more, got {getattr(args, name)}", file=sys.stderr)
             return 2
     try:
-        scene = Scene.load(args.scene)
         if args.scheduler is not None and args.resume:
             print("error: --scheduler cannot change the scheduler of a resumed run (the checkpoint keeps its own)",
                   file=sys.stderr)  # fmt: skip
@@ -199,21 +214,28 @@ def _cmd_run(args: argparse.Namespace) -> int:
         if args.set and args.resume:
             print("error: --set cannot change a resumed run (the checkpoint keeps its scene)", file=sys.stderr)
             return 2
-        # --scheduler and --set together, validated once: each alone may be refused where the pair is valid
-        # (multirate:2 with a softer sand.youngs_modulus), so neither is checked against the file's other half
-        scene = _with_sets(scene, args, scheduler=args.scheduler)
-        # the output folder before anything is allocated: a used one is refused unless resumed or overwritten
-        out = prepare_output(
-            args.out or scene.outputs.directory or default_output(scene.name),
-            resume=args.resume is not None,
-            overwrite=args.overwrite,
-        )
         if args.resume:
+            # the checkpoint's own scene is resumed: the file need not exist or validate any more (it was edited
+            # since, say), and the default output folder is the stored scene's, not the file's
             sim = Simulation.load(args.resume, backend=args.backend, threads=args.threads)
-            if sim.scene.to_dict() != scene.to_dict():
-                print(f"note: {args.scene} differs from the scene stored in {args.resume}; resuming the stored one")
+            _note_scene_file(args.scene, sim.scene, args.resume)
+            out = prepare_output(
+                args.out or sim.scene.outputs.directory or default_output(sim.scene.name),
+                resume=True,
+                overwrite=args.overwrite,
+            )
             print(f"resumed from {args.resume} at step {sim.step_count} (frame {sim.frame})")
         else:
+            scene = Scene.load(args.scene)
+            # --scheduler and --set together, validated once: each alone may be refused where the pair is valid
+            # (multirate:2 with a softer sand.youngs_modulus), so neither is checked against the file's other half
+            scene = _with_sets(scene, args, scheduler=args.scheduler)
+            # the output folder before anything is allocated: a used one is refused unless overwritten
+            out = prepare_output(
+                args.out or scene.outputs.directory or default_output(scene.name),
+                resume=False,
+                overwrite=args.overwrite,
+            )
             sim = Simulation(scene, backend=args.backend, threads=args.threads)
     except SceneError as exc:
         print(exc, file=sys.stderr)

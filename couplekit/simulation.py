@@ -48,7 +48,9 @@ from .assembly import CouplingUnavailableError, assemble, check_run, memory_esti
 from .backend import Backend, get_backend
 from .fluid.hydrostatic import hydrostatic_pressure
 from .lattice import CS2
+from .sand.solver import TimeStepError
 from .scene import Scene
+from .schedulers import SubstepLimitError
 
 __all__ = [
     "Simulation",
@@ -171,7 +173,8 @@ def _gib(b: float) -> str:
 # ---------------------------------------------------------------------------------------------- results
 class RunResult(dict):
     """What :meth:`Simulation.run` did: ``status`` ("done", "interrupted", "diverged"), ``frames``,
-    ``steps``, ``out`` (folder), ``checkpoint`` (last checkpoint written), ``error`` (for "diverged")."""
+    ``steps``, ``out`` (folder), ``checkpoint`` (last checkpoint written), ``error`` (for "diverged": the first
+    non-finite value, or the sand time-step limit that stopped the run before it went non-finite)."""
 
     @property
     def status(self) -> str:
@@ -835,7 +838,22 @@ class Simulation:
                         result.update(status="interrupted", checkpoint=str(path))
                         return result
                     n = min(chunk, target - self.step_count)
-                    self.step(n)
+                    try:
+                        self.step(n)
+                    except (TimeStepError, SubstepLimitError) as exc:
+                        # the sand would outrun its step (particle CFL) or the substep cap: refused before it
+                        # could go non-finite; kept like a divergence, so the run's outputs are not lost
+                        at = self.step_count
+                        path = self._keep_last_good(out, good, good_step)
+                        report = (
+                            f"stopped at step {at}: {exc}\n(a stability limit of the sand's time step: the run "
+                            f"was stopped before it could go non-finite)\nlast good state: step {good_step} "
+                            f"(frame {good_step // self.steps_per_frame}), saved to {path}\n"
+                        )
+                        (out / "diverged.txt").write_text(report)
+                        self._log("\n" + report.strip())
+                        result.update(status="diverged", checkpoint=str(path), error=str(exc))
+                        return result
                     steps_done += n
                     if bar is not None and steps_done == n:  # the first steps loaded or compiled the kernels
                         bar.warmed(steps_done)
@@ -843,9 +861,7 @@ class Simulation:
                     self.check_finite()
                 except SimulationDiverged as exc:
                     first = self._locate_divergence(good, good_step, exc)
-                    self._rebuild()
-                    self._load_states(good, good_step)
-                    path = self.save(out / "last_good.h5")
+                    path = self._keep_last_good(out, good, good_step)
                     report = f"{first}\nlast good state: step {good_step} (frame {good_step // self.steps_per_frame}), saved to {path}\n"
                     (out / "diverged.txt").write_text(report)
                     self._log("\n" + report.strip())
@@ -876,6 +892,12 @@ class Simulation:
                     self._write_summary_plot(out)
             if previous is not None:
                 signal.signal(signal.SIGINT, previous)
+
+    def _keep_last_good(self, out: Path, good: dict, good_step: int) -> Path:
+        """Back to the last checked state (fresh solvers, its arrays) and save it as ``last_good.h5``."""
+        self._rebuild()
+        self._load_states(good, good_step)
+        return self.save(out / "last_good.h5")
 
     def _write_summary_plot(self, out: Path) -> None:
         """``summary.png`` of the run's diagnostics (:func:`couplekit.io.plots.plot_run`), also after a divergence

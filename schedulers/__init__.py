@@ -56,7 +56,7 @@ def spec_table(spec: str) -> dict:
     table: dict = {"kind": kind}
 
     def count(text: str, what: str) -> int:
-        if not text.isdigit() or int(text) < 1:
+        if not (text.isascii() and text.isdigit()) or int(text) < 1:
             raise ValueError(f"scheduler {spec!r}: {what} must be a whole number >= 1, got {text!r}; {usage}")
         return int(text)
 

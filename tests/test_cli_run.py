@@ -195,3 +195,26 @@ def test_demo_scene_loads(name):
 
     scene = Scene.load(ROOT / "examples" / name)
     assert scene.has_sand and not scene.has_fluid
+
+
+def test_resume_takes_the_stored_scene_when_the_file_changed_or_is_gone(tmp_path, capsys, monkeypatch):
+    """run --resume resumes the checkpoint's scene: the scene file may since have become invalid or been deleted
+    (a note says so; it was refused with exit 2), and without --out the run continues in the stored scene's
+    default folder, not in one named after whatever file was given (it wrote a fig16 run into
+    runs/<other scene>)."""
+    monkeypatch.chdir(tmp_path)
+    scene = _scene(tmp_path, frames=3)
+    assert main(["run", str(scene), "--frames", "1", "--no-progress", "--backend", "cpu"]) == 0
+    ckpt = tmp_path / "runs" / "tiny" / "checkpoint.h5"
+    assert ckpt.exists()
+    scene.write_text(scene.read_text().replace("dt = 2e-4", "dt = -1"))  # edited: no longer valid
+    assert main(["run", str(scene), "--frames", "2", "--resume", str(ckpt), "--no-progress", "--backend", "cpu"]) == 0
+    out = capsys.readouterr().out
+    assert "does not load" in out and "time.dt" in out and "resumed from" in out
+    other = _scene(tmp_path, name="other.toml")
+    other.write_text(other.read_text().replace('name = "tiny"', 'name = "other"'))
+    scene.unlink()
+    for path in (scene, other):  # gone, then another scene's file: the stored scene's folder either way
+        assert main(["run", str(path), "--resume", str(ckpt), "--no-progress", "--backend", "cpu"]) == 0
+    assert not (tmp_path / "runs" / "other").exists()
+    assert [e[1] for e in read_pvd(tmp_path / "runs" / "tiny" / "particles.pvd")][-1] == "particles_0003.vtp"

@@ -1553,6 +1553,24 @@ def _scheduler(sch: dict, raw: dict, fluid: Fluid | None, has_sand: bool, proble
                 "remove the [scheduler] table, or set scheduler.kind = 'lockstep'",
             )
         )
+    k, cap = sch["substeps"], sch["max_substeps"]
+    if kind == "subcycle" and "max_substeps" in raw and isinstance(k, int) and isinstance(cap, int) and k > cap:
+        problems.append(
+            Problem(
+                "scheduler.max_substeps",
+                f"= {cap} is below scheduler.substeps = {k} (the cap applies to substeps = 'auto'; a fixed count "
+                "above it would be ignored)",
+                f"remove scheduler.max_substeps, raise it to >= {k}, or set substeps = 'auto'",
+            )
+        )
+    if kind == "subcycle" and sch["interpolation"] == "linear" and fluid is None:
+        problems.append(
+            Problem(
+                "scheduler.interpolation",
+                "= 'linear' interpolates the fluid's velocity between its steps, but the scene has no fluid",
+                "remove scheduler.interpolation (or set it to 'hold')",
+            )
+        )
     if len(problems) > n or None in (sch["substeps"], sch["max_substeps"], sch["interpolation"]):
         return None
     return Scheduler(kind, sch["substeps"], sch["max_substeps"], sch["interpolation"], sch["sand_every"] or 1)

@@ -1023,7 +1023,8 @@ def _check_range(key: Key, value: int | float, path: str) -> Problem | None:
     if isinstance(value, float) and not math.isfinite(value):
         return Problem(path, f"must be a finite number, got {value}", f"set {path} to a finite number{allowed}")
     if key.kind in ("int", "ivec3", "int_or_auto") and abs(value) > MAX_INT:
-        return Problem(path, f"{show(value)} is too large (at most {MAX_INT})", f"set {path} to an integer{allowed}")
+        limit = f"{key.range_text()}" if key.range_text() else f"at most {MAX_INT}"
+        return Problem(path, f"{show(value)} is too large (must be {limit})", f"set {path} to an integer{allowed}")
     if value != 0 and not MIN_MAGNITUDE <= abs(value) <= MAX_MAGNITUDE:  # exact for integers of any size
         shown = f"{value:g}" if isinstance(value, float) else show(value)
         unit = f" {key.unit}" if key.unit else ""
@@ -1039,7 +1040,8 @@ def _check_range(key: Key, value: int | float, path: str) -> Problem | None:
     if key.hi is not None and (value > key.hi or (key.hi_open and value == key.hi)):
         bad = True
     if bad:
-        return Problem(path, f"must be {key.range_text()}, got {value:g}", f"set {path} to a value {key.range_text()}")
+        got = show(value) if isinstance(value, int) else f"{value:g}"  # an integer as written, not 1e+06
+        return Problem(path, f"must be {key.range_text()}, got {got}", f"set {path} to a value {key.range_text()}")
     return None
 
 

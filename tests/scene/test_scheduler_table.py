@@ -96,10 +96,26 @@ def test_scheduler_specs(spec, table):
     assert spec_table(spec) == table
 
 
-@pytest.mark.parametrize("spec", ["sub", "subcycle:0", "subcycle:x", "subcycle:2:cubic", "multirate", "lockstep:2"])
+@pytest.mark.parametrize(
+    "spec",
+    ["sub", "subcycle:0", "subcycle:x", "subcycle:2:cubic", "multirate", "lockstep:2", "subcycle:²", "multirate:٣"],
+)
 def test_bad_scheduler_specs_say_what_works(spec):
     with pytest.raises(ValueError, match="subcycle|whole number|interpolation|multirate|lockstep"):
         spec_table(spec)
+
+
+def test_a_fixed_count_above_its_cap_and_linear_data_without_fluid_are_refused():
+    """max_substeps below a fixed substeps count was silently ignored (the cap applies to 'auto'), and 'linear'
+    fluid data was accepted on a scene without a fluid: both now name the key and the fix."""
+    d = tiny_coupled()
+    d["scheduler"] = {"kind": "subcycle", "substeps": 10, "max_substeps": 2}
+    _refused(d, "scheduler.max_substeps", "substeps = 'auto'")
+    d["scheduler"] = {"kind": "subcycle", "substeps": 2, "max_substeps": 2}
+    Scene.from_dict(d)  # equal is fine
+    s = tiny_sand()
+    s["scheduler"] = {"kind": "subcycle", "substeps": 2, "interpolation": "linear"}
+    _refused(s, "scheduler.interpolation", "'hold'")
 
 
 def test_simulation_takes_a_scheduler_and_validates_it():

@@ -272,3 +272,34 @@ def test_failed_preview_disables_previews_but_not_the_run(tmp_path, monkeypatch)
     warnings = [m for m in messages if "PNG previews disabled" in m]
     assert len(warnings) == 1 and "no EGL display" in warnings[0] and "libegl1" in warnings[0]
     assert (tmp_path / "particles_0002.vtp").exists() and not list(tmp_path.glob("preview_*.png"))
+
+
+@pytest.mark.parametrize("case", ["substep cap", "particle CFL"])
+def test_a_sand_step_limit_mid_run_keeps_the_last_good_state(tmp_path, case, monkeypatch):
+    """Sand too fast for its step mid-run is refused before anything goes non-finite: by the sub-cycling
+    scheduler's substep cap (SubstepLimitError; the sand made fast by hand, 300 m/s = 2.4 cells per step) or by
+    the lockstep's particle-CFL re-check (TimeStepError; its speed reported as 10 km/s, checked every step).
+    Simulation.run keeps the run as for a divergence: the last checked state in last_good.h5, the refusal in
+    diverged.txt and the result's error, status "diverged"; it used to raise out of run() with nothing saved."""
+    capped = case == "substep cap"
+    d = tiny_coupled(retention=False)
+    d["time"]["frames"] = 3
+    if capped:
+        d["scheduler"] = {"kind": "subcycle", "substeps": "auto", "max_substeps": 2}
+    sim = _sim(d)
+    sim.step(3)
+    if capped:
+        v = sim.backend.to_host(sim.sand.v).copy()
+        v[0] = 300.0
+        sim.sand.v[...] = sim.backend.asarray(v, v.dtype)
+    else:
+        sim.sand.cfl_check_every = 1
+        monkeypatch.setattr(sim.sand, "_max_speed", lambda: 1e4)
+    result = sim.run(out=tmp_path, progress=False, summary=False)
+    assert result.status == "diverged", result
+    report = (tmp_path / "diverged.txt").read_text()
+    assert "stopped at step" in report and "before it could go non-finite" in report
+    assert ("max_substeps" in report) if capped else ("particle CFL" in report)
+    assert "last good state: step 3" in report and result["error"] in report
+    good = Simulation.load(tmp_path / "last_good.h5", backend="cpu", log=None)
+    assert good.step_count == 3 and all(np.isfinite(a).all() for a in good.particles().values())
