@@ -356,6 +356,34 @@ MEASURED_DENSITY_RATIO = 1000.0
 tests/fluid/test_two_phase_validation.py, 1000:1; the paper's scenes are 800:1)."""
 
 
+FP16_RESOLUTION = 2.0**-11
+"""Half a binary16 ulp relative to the value (fluid.storage = 'fp16' rounds each stored f − w to nearest)."""
+
+
+def _fp16_gravity_caution(scene: Scene) -> list[str]:
+    """fp16 storage rounds each stored f − w to ~2^-11 of itself every step (docs/precision.md). Gravity adds
+    ~3 w_q c_q·g to a population per step, while f_q − w_q ~ 3 w_q c_q·u where the fluid moves at lattice speed u:
+    above u ≈ g / 2^-11 the increment is under half a binary16 step and is rounded away, so gravity stops
+    accelerating the flow there (a body-force-driven channel at ν = 0.01, 16 cells across, stalled at 0.81× its
+    speed with fp16, 0.5 % off with fp32). A caution when the scene's fastest expected flow is above that speed."""
+    units = scene.units()
+    g_lat = float(np.linalg.norm(fluid_params(scene, units).gravity))  # the fluid's (fluid.gravity or domain's)
+    if g_lat <= 0:
+        return []
+    speed, _ = scene.expected_max_speed()
+    u_lat = units.to_lattice(speed, "velocity")
+    u_lost = g_lat / FP16_RESOLUTION
+    if u_lat <= u_lost:
+        return []
+    return [
+        f"fluid.storage = 'fp16': gravity adds {g_lat:.2g} (lattice units) to the flow's velocity per step, under "
+        f"half a binary16 step of the stored populations wherever the fluid moves faster than {u_lost:.2g} "
+        f"(this scene expects up to {u_lat:.2g}): there each step's gravity is rounded away, and slow gravity-driven "
+        "flow stalls (a body-forced channel reached 0.81x its speed); use fluid.storage = 'fp32' where that "
+        "matters (docs/precision.md)"
+    ]
+
+
 def _input_cautions(scene: Scene) -> list[str]:
     """Cautions about what a scene asks of the fluid beyond what was measured or what can have a steady state:
     a density ratio beyond :data:`MEASURED_DENSITY_RATIO`; a water outlet in an outflow face (the zero-gradient
@@ -363,6 +391,8 @@ def _input_cautions(scene: Scene) -> list[str]:
     1.4-1.9× its flux, exactly its flux in a wall face); a single-phase fluid let in through an inflow with no
     outflow face (the liquid has nowhere to go: its pressure rises for as long as the inflow runs)."""
     fl, out = scene.fluid, []
+    if fl.storage == "fp16":
+        out += _fp16_gravity_caution(scene)
     if fl.phases == 2 and fl.water_density / fl.air_density > MEASURED_DENSITY_RATIO:
         out.append(
             f"fluid.water_density / fluid.air_density = {fl.water_density / fl.air_density:.3g} is beyond the "

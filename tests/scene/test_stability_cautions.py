@@ -161,3 +161,18 @@ def test_a_water_outlet_in_an_outflow_face_is_named(face_kind):
         assert ratio == pytest.approx(1.0, abs=0.03)
     else:
         assert ratio > 1.3
+
+
+def test_fp16_storage_is_cautioned_where_gravity_would_be_rounded_away():
+    """fluid.storage = 'fp16' rounds each stored f − w to ~2^-11 of itself; gravity's per-step increment is lost
+    where the flow is faster than g_lattice / 2^-11 (tests/fluid/test_fp16_accuracy.py measures the stall). Fig.
+    13 at the paper's resolution (g = 2.8e-6, expected lattice speed 0.039 > 0.0058) is cautioned with fp16, not
+    with fp32; its small variant (g = 3.4e-5: 0.069, above what it expects) is not."""
+    from couplekit.simulation import with_settings
+
+    full = ROOT / "examples" / "fig13_sand_drop_beaker.toml"
+    fp16 = [c for c in stability_cautions(with_settings(full, {"fluid.storage": "fp16"})) if "fp16" in c]
+    assert len(fp16) == 1 and "rounded away" in fp16[0] and "0.0058" in fp16[0]
+    assert not [c for c in stability_cautions(Scene.load(full)) if "fp16" in c]
+    small = ROOT / "examples" / "fig13_sand_drop_beaker_small.toml"
+    assert not [c for c in stability_cautions(with_settings(small, {"fluid.storage": "fp16"})) if "fp16" in c]
