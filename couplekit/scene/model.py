@@ -1025,15 +1025,20 @@ def _sand(snd: dict, problems: list[Problem]) -> Sand | None:
     if h[2] < 0:
         problems.append(Problem("sand.hardening[2]", f"h2 must be >= 0, got {h[2]:g}", "the paper uses h2 = 0.2"))
     else:
-        # the friction angle phi_F(q) = h0 + (h1 q - h3) exp(-h2 q) of Klar et al. over q >= 0 (couplekit.sand):
-        # phi_F(0) = h0 - h3, and with h1, h2 > 0 its largest value at q* = 1/h2 + h3/h1
-        lo_angle = h[0] - h[3]
-        hi_angle = max(lo_angle, h[0])
-        if h[1] > 0 and h[2] > 0:
-            q = 1.0 / h[2] + max(h[3], 0.0) / h[1]
-            hi_angle = max(hi_angle, h[0] + (h[1] * q - h[3]) * math.exp(-h[2] * q))
-        elif h[1] > 0:  # h2 = 0: the angle grows without bound with the plastic strain
-            hi_angle = math.inf
+        # the friction angle phi_F(q) = h0 + (h1 q - h3) exp(-h2 q) of Klar et al. over q >= 0 (couplekit.sand),
+        # for any signs of h0, h1, h3: phi_F(0) = h0 - h3, the limit h0 as q grows (h2 > 0), and the one
+        # stationary point q* = 1/h2 + h3/h1 where it lies at q* > 0; with h2 = 0 a line, unbounded unless h1 = 0
+        # (it assumed h1, h3 >= 0: [10, -20, 0.2, 0] passed although the angle falls to -26.8 degrees)
+        values = [h[0] - h[3]]
+        if h[2] > 0:
+            values.append(h[0])
+            if h[1] != 0:
+                q = 1.0 / h[2] + h[3] / h[1]
+                if q > 0:
+                    values.append(h[0] + (h[1] * q - h[3]) * math.exp(-h[2] * q))
+        elif h[1] != 0:  # h2 = 0: the angle changes without bound with the plastic strain
+            values.append(math.copysign(math.inf, h[1]))
+        lo_angle, hi_angle = min(values), max(values)
         if not (0.0 < lo_angle and hi_angle < 90.0):
             problems.append(
                 Problem(

@@ -252,3 +252,29 @@ def test_heightfield_obstacle_from_scene(tmp_path):
     with pytest.raises(SceneError) as err:
         Scene.from_dict(d, base_dir=tmp_path)
     assert "bodies[1].geometry.heights" in err.value.keys  # heights and file both given
+
+
+@pytest.mark.parametrize(
+    ("h", "ok"),
+    [
+        ([35.0, 9.0, 0.2, 10.0], True),  # the paper's sand: 25 to 48 degrees
+        ([20.0, 0.0, 0.2, 0.0], True),  # constant 20 degrees
+        ([10.0, -20.0, 0.2, 0.0], False),  # falls to -26.8 degrees at q* = 5
+        ([-2.0, 0.0, 0.2, -5.0], False),  # rises from 3 to the limit -2 degrees
+        ([71.6, 9.0, 0.2, -5.0], False),  # peaks at 90.1 degrees
+        ([30.0, -1.0, 0.0, 0.0], False),  # h2 = 0: falls without bound
+        ([30.0, 1.0, 0.0, 0.0], False),  # h2 = 0: grows without bound
+    ],
+)
+def test_hardening_tables_keep_the_friction_angle_within_0_and_90_degrees(h, ok):
+    """phi_F(q) = h0 + (h1 q - h3) exp(-h2 q) over q >= 0 for any signs of its coefficients: its value at 0,
+    its limit h0 and its stationary point q* = 1/h2 + h3/h1 (the check assumed h1, h3 >= 0 and let the first
+    three bad tables through; found by a probe)."""
+    d = sand_scene()
+    d["sand"]["hardening"] = h
+    if ok:
+        Scene.from_dict(d)
+    else:
+        with pytest.raises(SceneError) as err:
+            Scene.from_dict(d)
+        assert "sand.hardening" in err.value.keys and "(0, 90) degrees" in str(err.value)
