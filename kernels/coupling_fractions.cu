@@ -57,6 +57,30 @@ DEVICE int coupling_source_index(const int X, const int n, const int periodic) {
     return X - 1;
 }
 
+// every padded cell (X, Y, Z) with its source node (ix, iy, iz): CELL(X, Y, Z, ix, iy, iz).  The GPU a thread per
+// cell; the host by padded rows in parallel, a row's interior cells a vector loop over consecutive nodes (the
+// source index of y and z taken once per row) and its two ghost cells their x source node (per cell, the GPU's
+// form took the three source indices' branches in every cell and ran scalar).  Uses nx..nz, px..pz, n.
+#if CK_ON_GPU
+#define CPL_FOR_PADDED_CELLS(CELL)                                                                     \
+    FOR_EACH_CELL(X, Y, Z, nx + 2, ny + 2, nz + 2) {                                                   \
+        CELL(X, Y, Z, coupling_source_index(X, nx, px), coupling_source_index(Y, ny, py),              \
+             coupling_source_index(Z, nz, pz))                                                        \
+    }
+#else
+#define CPL_FOR_PADDED_CELLS(CELL)                                                                     \
+    CK_PRAGMA(omp parallel for collapse(2) schedule(static))                                           \
+    for (int Z = 0; Z < nz + 2; ++Z)                                                                   \
+        for (int Y = 0; Y < ny + 2; ++Y) {                                                             \
+            const int iy = coupling_source_index(Y, ny, py), iz = coupling_source_index(Z, nz, pz);    \
+            CELL(0, Y, Z, coupling_source_index(0, nx, px), iy, iz)                                    \
+            CELL(nx + 1, Y, Z, coupling_source_index(nx + 1, nx, px), iy, iz)                          \
+            CK_PRAGMA(omp simd)                                                                        \
+            for (int X = 1; X <= nx; ++X) CELL(X, Y, Z, X - 1, iy, iz)                                 \
+        }                                                                                              \
+    (void)n;
+#endif
+
 // n = (nx + 2) * (ny + 2) * (nz + 2).  Arrays of switched-off effects (phi, bound_in, eps_prev, d_bound,
 // bound_out without retention; phi single-phase; retentive unless masked) are not read or written: pass a
 // 1-element array.
@@ -106,28 +130,7 @@ KERNEL void coupling_fractions(const long long n, const float* RESTRICT grid_vol
         eps_fluid[(X) + PX * (long long)(Y) + PXY * (Z)] = 1.f - es;                       /* Eq. 33 */        \
     }
 #endif
-#if CK_ON_GPU
-    FOR_EACH_CELL(X, Y, Z, nx + 2, ny + 2, nz + 2) {
-        const int ix = coupling_source_index(X, nx, px);
-        const int iy = coupling_source_index(Y, ny, py);
-        const int iz = coupling_source_index(Z, nz, pz);
-        CPL_FRACTION_CELL(X, Y, Z, ix, iy, iz)
-    }
-#else
-    // host: padded rows in parallel; a row's interior cells read consecutive nodes (a vector loop, the source
-    // index of y and z taken once per row), its two ghost cells their x source node (per cell, the GPU's form
-    // took the three source indices' branches in every cell and ran scalar)
-    CK_PRAGMA(omp parallel for collapse(2) schedule(static))
-    for (int Z = 0; Z < nz + 2; ++Z)
-        for (int Y = 0; Y < ny + 2; ++Y) {
-            const int iy = coupling_source_index(Y, ny, py), iz = coupling_source_index(Z, nz, pz);
-            CPL_FRACTION_CELL(0, Y, Z, coupling_source_index(0, nx, px), iy, iz)
-            CPL_FRACTION_CELL(nx + 1, Y, Z, coupling_source_index(nx + 1, nx, px), iy, iz)
-            CK_PRAGMA(omp simd)
-            for (int X = 1; X <= nx; ++X) CPL_FRACTION_CELL(X, Y, Z, X - 1, iy, iz)
-        }
-    (void)n;
-#endif
+    CPL_FOR_PADDED_CELLS(CPL_FRACTION_CELL)
 #undef CPL_FRACTION_CELL
 #undef CPL_PHASE
 #if !CK_RETENTION
@@ -166,23 +169,6 @@ KERNEL void coupling_sand_velocity(const long long n, const float* RESTRICT grid
         sand_v[N + cell] = grid_v[ncell + node] * inv_velocity_scale;                 \
         sand_v[2 * N + cell] = grid_v[2 * ncell + node] * inv_velocity_scale;         \
     }
-#if CK_ON_GPU
-    FOR_EACH_CELL(X, Y, Z, nx + 2, ny + 2, nz + 2) {
-        CPL_SAND_V_CELL(X, Y, Z, coupling_source_index(X, nx, px), coupling_source_index(Y, ny, py),
-                        coupling_source_index(Z, nz, pz))
-    }
-#else
-    // host: padded rows, their interior cells a vector loop over consecutive nodes (coupling_fractions)
-    CK_PRAGMA(omp parallel for collapse(2) schedule(static))
-    for (int Z = 0; Z < nz + 2; ++Z)
-        for (int Y = 0; Y < ny + 2; ++Y) {
-            const int iy = coupling_source_index(Y, ny, py), iz = coupling_source_index(Z, nz, pz);
-            CPL_SAND_V_CELL(0, Y, Z, coupling_source_index(0, nx, px), iy, iz)
-            CPL_SAND_V_CELL(nx + 1, Y, Z, coupling_source_index(nx + 1, nx, px), iy, iz)
-            CK_PRAGMA(omp simd)
-            for (int X = 1; X <= nx; ++X) CPL_SAND_V_CELL(X, Y, Z, X - 1, iy, iz)
-        }
-    (void)n;
-#endif
+    CPL_FOR_PADDED_CELLS(CPL_SAND_V_CELL)
 #undef CPL_SAND_V_CELL
 }
