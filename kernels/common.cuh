@@ -231,11 +231,12 @@ static inline __attribute__((always_inline)) unsigned short ck_float_to_half_(co
 #define CK_MAX_THREADS 1024
 
 #define CK_PRAGMA(x) _Pragma(#x)
-// host loops that widen flag bytes to 32-bit words (a row chunk's masks): 8 lanes. Left to pick its own width,
-// g++ 12 (AVX-512) takes 32 byte lanes, more than the 28 cells of a 26-cell row plus its two neighbours, and
-// runs every such loop scalar: a byte compare, a setcc and a store per cell, 45 % of the source term's time in
-// Fig. 13 small (perf) and a share of the collide, pressure, filter and phase-field stages
-#define CK_SIMD_WIDEN CK_PRAGMA(omp simd simdlen(8))
+// host loops over runs of a row that are often shorter than g++'s vector: 8 lanes. Left to pick its own width,
+// g++ 12 (AVX-512) takes 16 float / 32 byte lanes with a scalar epilogue, which ran every such loop on Fig. 13
+// small's 26-cell rows scalar (perf): the flag widening to 32-bit words (45 % of the source term's time), and the
+// phase field's odd bulk runs, chunk gradients and masks, which cannot re-run a cell as the row loops' tail vector
+// does (lbm_row_tail)
+#define CK_SIMD_SHORT CK_PRAGMA(omp simd simdlen(8))
 #define CK_PER_ITEM(v) (v)
 
 #define FOR_EACH(i, n) CK_PRAGMA(omp parallel for schedule(static)) for (long long i = 0; i < (long long)(n); ++i)

@@ -111,7 +111,7 @@ KERNEL void coupling_phase_source(const long long n, const float* RESTRICT eps /
                     for (int dz = -1; dz <= 1; ++dz) {
                         const unsigned char* r = flags + row + dy * (long long)PX + dz * PXY + x0;  // x = x0 - 1 + 1
                         unsigned int* w = fl + ((dy + 1) * 3 + (dz + 1)) * (CPL_ROW_CHUNK + 2);
-                        CK_SIMD_WIDEN
+                        CK_SIMD_SHORT
                         for (int i = 0; i < len + 2; ++i) w[i] = r[i] == 0 ? 1u : 0u;
                     }
                 const long long c0 = row + x0 + 1, d0 = x0 + (long long)nx * (y + (long long)ny * z);

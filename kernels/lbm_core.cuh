@@ -371,11 +371,11 @@ LBM_INLINE void lbm_link_masks(const unsigned char* RESTRICT flags, const long l
     for (int r = 0; r < 9; ++r) {  // r = (c_y + 1) * 3 + (c_z + 1)
         const unsigned char* fr = flags + c0 - 1 + (long long)(r / 3 - 1) * px + (long long)(r % 3 - 1) * pxy;
         unsigned int* sr = scratch + r * w;
-        CK_SIMD_WIDEN
+        CK_SIMD_SHORT
         for (int i = 0; i < w; ++i) sr[i] = LBM_STENCIL_CELL(fr[i]) ? 1u : 0u;
     }
     unsigned int* fluid = scratch + 9 * w;
-    CK_SIMD_WIDEN
+    CK_SIMD_SHORT
     for (int i = 0; i < len; ++i) fluid[i] = flags[c0 + i] == FLAG_FLUID ? 1u : 0u;
     CK_PRAGMA(omp simd)
     for (int i = 0; i < len; ++i) {

@@ -163,7 +163,7 @@ KERNEL void lbm_macro_pressure(const long long n, const ck_store_t* RESTRICT f /
         long long c0;                                                                                     \
         const int tail = lbm_row_chunk(x0, hi, rem, LBM_P_CHUNK, row, len, c0);                           \
         if (MIX) {                                                                                        \
-            CK_SIMD_WIDEN                                                                                 \
+            CK_SIMD_SHORT                                                                                 \
             for (int i = 0; i < len; ++i) slipw[i] = slip_cells[c0 + i] != 0 ? 1u : 0u;                   \
         }                                                                                                 \
         if (bulk && !tail) {                                                                              \
@@ -404,16 +404,15 @@ KERNEL void lbm_momentum(const long long n, const ck_store_t* RESTRICT f /* size
             int lo, hi;                                                                            \
             lbm_row_fluid_span(flags, row, nx, lo, hi);                                            \
             const int rem = lbm_row_tail(lo, hi);                                                  \
-            /* whole vectors to hi - rem, then the last rem cells as one vector ending at hi, */  \
-            /* its first LBM_VEC - rem lanes kept (lbm_row_tail) */                               \
             for (int x0 = lo; x0 <= hi;) {                                                         \
-                const int tail = x0 > hi - rem ? LBM_VEC - rem : 0;                                \
-                const int len = tail ? LBM_VEC                                                     \
-                                     : (hi - rem + 1 - x0 < LBM_P_CHUNK ? hi - rem + 1 - x0 : LBM_P_CHUNK); \
-                const long long c0 = row + (tail ? hi - (LBM_VEC - 1) : x0);                       \
-                CK_SIMD_WIDEN                                                                      \
+                int len;                                                                           \
+                long long c0;                                                                      \
+                /* the tail vector's first LBM_VEC - rem lanes are cells already done: kept */     \
+                const int tail = lbm_row_chunk(x0, hi, rem, LBM_P_CHUNK, row, len, c0);            \
+                const int kept = tail ? LBM_VEC - rem : 0;                                         \
+                CK_SIMD_SHORT                                                                      \
                 for (int i = 0; i < len; ++i)                                                      \
-                    live[i] = flags[c0 + i] == FLAG_FLUID && i >= tail ? 1u : 0u;                  \
+                    live[i] = flags[c0 + i] == FLAG_FLUID && i >= kept ? 1u : 0u;                  \
                 CK_PRAGMA(omp simd)                                                                \
                 for (int i = 0; i < len; ++i) {                                                    \
                     const long long c = c0 + i;                                                    \
@@ -426,7 +425,6 @@ KERNEL void lbm_momentum(const long long n, const ck_store_t* RESTRICT f /* size
                     out[2 * N + c] = ck_select(live[i], uz, out[2 * N + c]);                       \
                     if (FSUM) fsum[c] = ck_select(live[i], s0, fsum[c]);                           \
                 }                                                                                  \
-                x0 = tail ? hi + 1 : x0 + len;                                                     \
             }                                                                                      \
         }
     if (want_fsum) {

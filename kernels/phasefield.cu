@@ -107,10 +107,10 @@ static inline __attribute__((always_inline)) void pf_fluid_masks(const unsigned 
     for (int r = 0; r < 9; ++r) {  // r = (dz + 1) * 3 + (dy + 1)
         const unsigned char* fr = flags + c0 - 1 + (long long)(r % 3 - 1) * sy + (long long)(r / 3 - 1) * sz;
         unsigned int* sr = scratch + r * w;
-        CK_SIMD_WIDEN
+        CK_SIMD_SHORT
         for (int i = 0; i < w; ++i) sr[i] = fr[i] == PF_FLUID ? 1u : 0u;
     }
-    CK_PRAGMA(omp simd simdlen(8))
+    CK_SIMD_SHORT
     for (int i = 0; i < len; ++i) {
         unsigned int m = 0u;
         PF_UNROLL
@@ -335,7 +335,7 @@ static inline __attribute__((always_inline)) void pf_macro_run(const ck_store_t*
                                                               const long long row, const int xa, const int xb,
                                                               const long long ncell, const long long off[7]) {
     const long long o1 = off[1], o2 = off[2], o3 = off[3], o4 = off[4], o5 = off[5], o6 = off[6];
-    CK_PRAGMA(omp simd simdlen(8))
+    CK_SIMD_SHORT
     for (int X = xa; X <= xb; ++X) {
         const long long c = row + X;
         const float f0 = PF_LD(h, 0, c);
@@ -521,7 +521,7 @@ static inline __attribute__((always_inline)) void pf_gradient_chunk(const long l
                                                                     const unsigned int* RESTRICT masks,
                                                                     float* RESTRICT gx, float* RESTRICT gy,
                                                                     float* RESTRICT gz) {
-    CK_PRAGMA(omp simd simdlen(8))
+    CK_SIMD_SHORT
     for (int i = 0; i < len; ++i) {
         const PfGrad g = pf_gradient_sums<MODE>(c0 + i, phi, flags, sy, sz, MODE == PF_NB_MASK ? masks[i] : 0u);
         gx[i] = g.x;
@@ -859,7 +859,7 @@ KERNEL void phase_collide_stream(const long long n, ck_store_t* RESTRICT h /* si
     } else {
         // the bulk run's odd x loop (X = xa .. xb, the row's neighbour offsets o1..o6), gradient G
 #define PF_ODD_RUN(xa, xb, G)                                                                               \
-    CK_PRAGMA(omp simd simdlen(8))                                                                                 \
+    CK_SIMD_SHORT                                                                                           \
     for (int X = (xa); X <= (xb); ++X) {                                                                    \
         const long long c = row + X;                                                                        \
         PF_GRAD_FIRST(G)                                                                                    \
