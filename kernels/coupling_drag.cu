@@ -45,6 +45,19 @@ DEVICE float coupling_drag_fraction(const float kr) {
     return 4.f * kr / (q * q);
 }
 
+// the outputs of node i (padded cell c): force = -J / dt_lattice for the fluid, (mv)_i += J + dt F_b for the sand
+DEVICE void coupling_drag_store(float* RESTRICT force, float* RESTRICT grid_mv, const long long c, const long long i,
+                                const long long N, const long long ncell, const float Jx, const float Jy,
+                                const float Jz, const float fbx, const float fby, const float fbz,
+                                const float inv_dtl, const float momentum_scale, const float dt) {
+    force[c] = -Jx * inv_dtl;
+    force[N + c] = -Jy * inv_dtl;
+    force[2 * N + c] = -Jz * inv_dtl;
+    grid_mv[i] += Jx * momentum_scale + dt * fbx;
+    grid_mv[ncell + i] += Jy * momentum_scale + dt * fby;
+    grid_mv[2 * ncell + i] += Jz * momentum_scale + dt * fbz;
+}
+
 // one interior cell (x, y, z) of coupling_drag_buoyancy (both paths)
 DEVICE void coupling_drag_cell(
     const int x, const int y, const int z, const float* RESTRICT grid_m, float* RESTRICT grid_mv,
@@ -94,13 +107,8 @@ DEVICE void coupling_drag_cell(
         Jy = s * ry;
         Jz = s * rz;
     }
-    const float inv_dtl = 1.f / dt_lattice;
-    force[c] = -Jx * inv_dtl;
-    force[N + c] = -Jy * inv_dtl;
-    force[2 * N + c] = -Jz * inv_dtl;
-    grid_mv[i] += Jx * momentum_scale + dt * fbx;
-    grid_mv[ncell + i] += Jy * momentum_scale + dt * fby;
-    grid_mv[2 * ncell + i] += Jz * momentum_scale + dt * fbz;
+    coupling_drag_store(force, grid_mv, c, i, N, ncell, Jx, Jy, Jz, fbx, fby, fbz, 1.f / dt_lattice, momentum_scale,
+                        dt);
 }
 
 KERNEL void coupling_drag_buoyancy(
@@ -137,17 +145,11 @@ KERNEL void coupling_drag_buoyancy(
                 continue;
             }
             const long long c0 = 1 + PX * (long long)(y + 1) + PXY * (z + 1);
-            const float inv_dtl = 1.f / dt_lattice, zero = 0.f;
+            const float inv_dtl = 1.f / dt_lattice;
             CK_PRAGMA(omp simd)
-            for (int x = 0; x < nx; ++x) {
-                const long long i = i0 + x, c = c0 + x;
-                force[c] = -zero * inv_dtl;
-                force[N + c] = -zero * inv_dtl;
-                force[2 * N + c] = -zero * inv_dtl;
-                grid_mv[i] += zero * momentum_scale + dt * zero;
-                grid_mv[ncell + i] += zero * momentum_scale + dt * zero;
-                grid_mv[2 * ncell + i] += zero * momentum_scale + dt * zero;
-            }
+            for (int x = 0; x < nx; ++x)
+                coupling_drag_store(force, grid_mv, c0 + x, i0 + x, N, ncell, 0.f, 0.f, 0.f, 0.f, 0.f, 0.f, inv_dtl,
+                                    momentum_scale, dt);
         }
     (void)n;
 #endif
