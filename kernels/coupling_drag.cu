@@ -24,6 +24,8 @@
 //   backward Euler on the exchange, implicit in |u - v| too:   r' = r* / (1 + k |r'|),  k = dt beta (1/m_s + 1/m_f)
 //           |r'| = 2 |r*| / (1 + sqrt(1 + 4 k |r*|)),  r* = u* - v*
 //   J       = m_s m_f / (m_s + m_f) (r* - r')               (impulse on the sand; the fluid gets -J)
+// u and force may be one buffer (SandFluidCoupler.fold_sand_velocity: Σ f c lives in the force's buffer): each
+// cell reads its own u and nothing else of it before it writes its own force, so neither is RESTRICT.
 // Outputs: (mv)_i += J + dt F_b (SI; the grid update then divides by m_i and adds dt g), force = -J / dt_lattice
 // (lattice force density for the fluid's forcing term).  Nodes without sand mass, or whose cell is not a FLUID
 // cell (flags != 0), get force = 0 and keep their momentum: there is no fluid there to exchange momentum with (a reaction written
@@ -46,7 +48,8 @@ DEVICE float coupling_drag_fraction(const float kr) {
 }
 
 // the outputs of node i (padded cell c): force = -J / dt_lattice for the fluid, (mv)_i += J + dt F_b for the sand
-DEVICE void coupling_drag_store(float* RESTRICT force, float* RESTRICT grid_mv, const long long c, const long long i,
+// (force may be u's buffer: not RESTRICT, coupling_drag_buoyancy)
+DEVICE void coupling_drag_store(float* force, float* RESTRICT grid_mv, const long long c, const long long i,
                                 const long long N, const long long ncell, const float Jx, const float Jy,
                                 const float Jz, const float fbx, const float fby, const float fbz,
                                 const float inv_dtl, const float momentum_scale, const float dt) {
@@ -61,7 +64,7 @@ DEVICE void coupling_drag_store(float* RESTRICT force, float* RESTRICT grid_mv, 
 // one interior cell (x, y, z) of coupling_drag_buoyancy (both paths)
 DEVICE void coupling_drag_cell(
     const int x, const int y, const int z, const float* RESTRICT grid_m, float* RESTRICT grid_mv,
-    float* RESTRICT force, const float* RESTRICT u, const float* RESTRICT phi, const float* RESTRICT grid_vol,
+    float* force, const float* u, const float* RESTRICT phi, const float* RESTRICT grid_vol,
     const float* RESTRICT eps_fluid, const unsigned char* RESTRICT flags, const int nx, const int ny,
     const int nz, const float dt, const float dt_lattice, const float gx, const float gy, const float gz,
     const float mass_scale, const float velocity_scale, const float rho_h, const float rho_l, const float c_drag,
@@ -114,8 +117,8 @@ DEVICE void coupling_drag_cell(
 KERNEL void coupling_drag_buoyancy(
     const long long n, const float* RESTRICT grid_m /* size: nx * ny * nz */,
     float* RESTRICT grid_mv /* size: 3 * nx * ny * nz */,
-    float* RESTRICT force /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
-    const float* RESTRICT u /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */, const float* RESTRICT phi /* size >= 1 */,
+    float* force /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
+    const float* u /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */, const float* RESTRICT phi /* size >= 1 */,
     const float* RESTRICT grid_vol /* size: nx * ny * nz */,
     const float* RESTRICT eps_fluid /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
     const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */, const int nx, const int ny,

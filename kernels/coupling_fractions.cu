@@ -50,13 +50,6 @@
 #define CK_TWO_PHASE 1
 #endif
 
-// interior source index (0-based) of padded coordinate X (0 .. n + 1) along an axis of n interior cells
-DEVICE int coupling_source_index(const int X, const int n, const int periodic) {
-    if (X < 1) return periodic ? n - 1 : 0;
-    if (X > n) return periodic ? 0 : n - 1;
-    return X - 1;
-}
-
 // every padded cell (X, Y, Z) with its source node (ix, iy, iz): CELL(X, Y, Z, ix, iy, iz).  The GPU a thread per
 // cell; the host by padded rows in parallel, a row's interior cells a vector loop over consecutive nodes (the
 // source index of y and z taken once per row) and its two ghost cells their x source node (per cell, the GPU's

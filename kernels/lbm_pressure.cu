@@ -7,6 +7,7 @@
 #include "common.cuh"
 #include "lattice.cuh"
 #include "lbm_core.cuh"
+#include "lbm_sand_terms.cuh"
 
 #ifndef CK_TWO_PHASE
 #define CK_TWO_PHASE 0
@@ -19,9 +20,7 @@
 #define LBM_P_CHUNK 512
 
 // p <- p - cs2 rho [(1 - sum f) + (eps_s div v + (u - v).grad eps) / eps]   (Eq. 39, 1 - sum f ~ div u, Eq. 38;
-// u the velocity of Eq. 13 written by the last collision; the slip term (u - v).grad eps only in the cells
-// of slip_cells (couplekit.fluid.grid.slip_cells: not in the 1 or 3 layers next to a wall), and weighted by the water
-// fraction phi in two-phase flow).  One fluid cell c: ODD = parity & 1, MODE: how the four stencils learn the
+// the sand terms: lbm_pressure_sand_terms).  One fluid cell c: ODD = parity & 1, MODE: how the four stencils learn the
 // kind of a neighbour (lbm_gradient; `mask` = lbm_link_mask of c for LBM_NB_MASK), SCALAR: lbm_load's,
 // `slip_on`: slip_cells[c] != 0 (on the host taken from a widened copy: no byte read in the x loop).
 // GPU = 1 (the GPU loop): ODD is the runtime `odd` (a branch around the loads only), and the link mask and the
@@ -33,7 +32,9 @@
 // same order, so bitwise the same value) instead of summed from the 27 loads: the coupled step's pressure update
 // does not read f again (FluidSolver.current_velocity, keep_fsum).
 // MIX = 0 in a CK_MIXTURE build: a host row without sand around it (lbm_rows_sand_free), whose mixture terms are
-// exactly 0; the single-fluid arithmetic, bitwise the same result.
+// exactly 0, or a step whose sand terms coupling_pressure_sand_terms already took out of `fsum` (fsum = s0 - terms,
+// and 0 - (s0 - terms) is the (0 - s0) + terms computed here otherwise, bitwise: IEEE rounding is sign-symmetric);
+// the single-fluid arithmetic, bitwise the same result.
 template <int ODD, int MODE, int SCALAR, int GPU = 0, int GUARD = 0, int FSUM = 0, int MIX = CK_MIXTURE>
 LBM_INLINE void lbm_pressure_cell(const long long c, const ck_store_t* RESTRICT f, const unsigned char* RESTRICT flags,
                                   const float* RESTRICT vel, const float* RESTRICT phi, const float* RESTRICT eps,
@@ -61,36 +62,8 @@ LBM_INLINE void lbm_pressure_cell(const long long c, const ck_store_t* RESTRICT 
     float divergence = 0.f - s0;
 #if CK_MIXTURE
     if (MIX) {
-    // u: the fluid velocity of Eq. 13 (with its half-force shift) from the last collision, not sum f c:
-    // sum f c = u - a/2 puts -(a/2).grad eps / eps = (grad p - rho g).grad eps / (2 rho eps) into the
-    // update, which grows a grid-scale mode where eps changes next to a wall (reference docstring)
-    const float ux = vel[c], uy = vel[N + c], uz = vel[2 * N + c];
-    float ge[3], gvx[3], gvy[3], gvz[3];
-    if (GPU) mask = lbm_link_mask(flags, c, px, pxy);  // the neighbours' kinds once, for the four stencils
-    lbm_gradient<0, MODE>(eps, flags, c, px, pxy, ge, mask);
-    lbm_gradient<0, MODE>(sand_v, flags, c, px, pxy, gvx, mask);
-    lbm_gradient<0, MODE>(sand_v + N, flags, c, px, pxy, gvy, mask);
-    lbm_gradient<0, MODE>(sand_v + 2 * N, flags, c, px, pxy, gvz, mask);
-    const float e = eps[c];
-    const float div_v = gvx[0] + gvy[1] + gvz[2];
-    // the slip term only in the cells of slip_cells, not in the layers next to a wall (1, or 3 with the odd-rate
-    // floor): there a porosity step grows a grid-scale mode (reference docstring)
-    if (GPU) slip_on = slip_cells[c] != 0 ? 1u : 0u;
-#if CK_ON_GPU
-    const float slip = slip_on ? (ux - sand_v[c]) * ge[0] + (uy - sand_v[N + c]) * ge[1] +
-                                     (uz - sand_v[2 * N + c]) * ge[2]
-                               : 0.f;  // loads only where needed (as a blend: 124 -> 128 registers)
-#else
-    const float slip = ck_select(slip_on, (ux - sand_v[c]) * ge[0] + (uy - sand_v[N + c]) * ge[1] +
-                                               (uz - sand_v[2 * N + c]) * ge[2], 0.f);
-#endif
-#if CK_TWO_PHASE
-    // weighted by the water fraction: in the light phase the slip's pressure, accelerated by 1/rho, pumped
-    // the air through a sand ball at the interface upward (reference docstring)
-    divergence += ((1.f - e) * div_v + lbm_clamp01(phi[c]) * slip) / e;
-#else
-    divergence += ((1.f - e) * div_v + slip) / e;
-#endif
+        divergence += lbm_pressure_sand_terms<MODE, CK_TWO_PHASE, GPU>(c, flags, vel, phi, eps, px, pxy, N, sand_v, c,
+                                                                       px, pxy, N, mask, slip_on, slip_cells);
     } else {
         (void)vel, (void)eps, (void)sand_v, (void)slip_on, (void)slip_cells;
     }
@@ -108,7 +81,9 @@ LBM_INLINE void lbm_pressure_cell(const long long c, const ck_store_t* RESTRICT 
     p[c] = GUARD ? ck_select(mask & 1u, pn, pc) : pn;
 }
 
-// use_fsum != 0: s0 from `fsum` (padded, Σ_j (f_j - w_j) of these populations, lbm_momentum), f not read.
+// use_fsum != 0: s0 from `fsum` (padded, Σ_j (f_j - w_j) of these populations, lbm_momentum), f not read;
+// use_fsum = 2 (CK_MIXTURE): `fsum` holds Σ_j (f_j - w_j) minus the sand terms (coupling_pressure_sand_terms), so
+// the update adds none of its own and sand_v, slip_cells (and on the host eps) are not read.
 // skip_sand_free != 0 (host, CK_MIXTURE): rows without sand around them skip the mixture's four stencils
 // (lbm_rows_sand_free; bitwise the same p).  The GPU ignores it.
 KERNEL void lbm_macro_pressure(const long long n, const ck_store_t* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
@@ -132,6 +107,11 @@ KERNEL void lbm_macro_pressure(const long long n, const ck_store_t* RESTRICT f /
         const long long N = pxy * (nz + 2);
         const long long c = (x + 1) + px * (long long)(y + 1) + pxy * (z + 1);
         if (flags[c] != FLAG_FLUID) continue;
+#if CK_MIXTURE
+        if (use_fsum == 2)
+            lbm_pressure_cell<0, LBM_NB_MASK, 1, 1, 0, 1, 0>(c, LBM_P_ARGS(px, pxy, N), 0u, false, odd, slip_cells);
+        else
+#endif
         if (use_fsum)
             lbm_pressure_cell<0, LBM_NB_MASK, 1, 1, 0, 1>(c, LBM_P_ARGS(px, pxy, N), 0u, false, odd, slip_cells);
         else
@@ -150,7 +130,7 @@ KERNEL void lbm_macro_pressure(const long long n, const ck_store_t* RESTRICT f /
 #if CK_MIXTURE
 #define LBM_P_ROWS(row) lbm_rows_all_fluid(flags, row, 0, nx + 1, px, pxy)
 #define LBM_P_SLIP(i) slipw[i]
-#define LBM_P_MIX(row) (!skip_sand_free || !lbm_rows_sand_free(eps, sand_v, row, nx, px, pxy, N))
+#define LBM_P_MIX(row) (use_fsum != 2 && (!skip_sand_free || !lbm_rows_sand_free(eps, sand_v, row, nx, px, pxy, N)))
 #else
 #define LBM_P_ROWS(row) lbm_row_fluid(flags, row, 1, nx)
 #define LBM_P_SLIP(i) 0u

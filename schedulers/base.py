@@ -97,6 +97,9 @@ class Scheduler:
 
     kind = "base"
     coupled_stages: tuple[str, ...] = ()
+    folds_sand_velocity = False
+    """Whether every fluid step follows its own step's coupling stages, so that the fluid need keep no sand velocity
+    (:meth:`couplekit.coupling.coupler.SandFluidCoupler.fold_sand_velocity`; lockstep)."""
 
     def __init__(
         self,
@@ -124,6 +127,7 @@ class Scheduler:
             # porosity can live in S_φ's buffer (SandFluidCoupler.share_source_buffer); without the source term
             # it needs a buffer of its own, and S_φ stays 0
             coupler.share_source_buffer(self.source_term)
+            coupler.fold_sand_velocity(self.folds_sand_velocity)
         self.timing = bool(timing)
         self.warm_up_steps = int(warm_up_steps)
         self.backend = (fluid or sand).backend

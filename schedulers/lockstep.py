@@ -17,7 +17,8 @@ stage                                 Algorithm 1 line (paper 000 equations)
 ``mpm_grid_update``                   MPM_UpdateGridMomenta (Eqs. 26, 29, boundaries)
 ``moisture``                          saturation for cohesion (Eq. 59), moisture ratio (Eq. 58)
 ``mpm_g2p``                           MPM_GridToParticlesAndAdvect (Eq. 30)
-``sand_velocity``                     the sand grid velocity handed to the fluid (input of Eq. 39)
+``sand_velocity``                     the sand grid velocity handed to the fluid: Eq. 39's sand terms folded
+                                      into the pressure update's kept population sum (no stored copy)
 ``lbm_boundaries``                    ghost / periodic / outflow copies of the fluid step
 ``lbm_pressure``                      UpdatePressureField (Eq. 39)
 ``lbm_pressure_filter``               ApplyFilter (Eq. 40)
@@ -72,6 +73,7 @@ class LockstepScheduler(Scheduler):
 
     kind = "lockstep"
     coupled_stages = COUPLED_STAGES
+    folds_sand_velocity = True
 
     def __init__(
         self,

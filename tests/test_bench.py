@@ -76,7 +76,7 @@ def test_validate_prints_the_memory_of_each_effect():
         capture_output=True, text=True, timeout=60,
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr
-    # the coupling costs its fields (33 B per padded cell); the source term none (S_phi lives in last step's porosity
+    # the coupling costs its fields (21 B per padded cell in lockstep); the source term none (S_phi lives in last step's porosity
     # buffer, SandFluidCoupler.share_source_buffer), surface tension none (mu_phi is computed in the collide)
     assert re.search(r"coupling\s+on\s+this costs \d+\.\d bytes per cell", proc.stdout)
     assert re.search(r"source_term\s+on\s+no fields of its own", proc.stdout)

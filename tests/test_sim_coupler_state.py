@@ -71,7 +71,7 @@ def test_a_checkpoint_holding_the_exchange_velocity_still_loads_and_continues_bi
     a.step(4)
     saved = a._states()
     old = {solver: dict(arrays) for solver, arrays in saved.items()}
-    old["coupler"]["fluid_u"] = np.full_like(saved["fluid"]["sand_velocity"], np.nan)  # any value: not read
+    old["coupler"]["fluid_u"] = np.full_like(saved["fluid"]["force"], np.nan)  # any value: not read
     old["coupler"]["eps_sand"] = np.full_like(saved["fluid"]["fluid_fraction"], np.nan)
     old["coupler"]["water"] = np.full_like(saved["coupler"]["bound"], np.nan)
     b._load_states(saved, 4)

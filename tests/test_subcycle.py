@@ -71,7 +71,9 @@ def test_one_substep_is_lockstep_bit_for_bit(name, spec):
     lock.step(9)
     other.step(9)
     a, b = _state_bytes(lock), _state_bytes(other)
-    assert a.keys() == b.keys()
+    # lockstep keeps no sand velocity (it folds Eq. 39's sand terms into the pressure update); the others store it
+    assert b.keys() - a.keys() == ({"fluid.sand_velocity"} if lock.coupler is not None else set())
+    assert a.keys() <= b.keys()
     assert [k for k in a if a[k] != b[k]] == []
 
 

@@ -47,11 +47,11 @@ FLUID_STAGE_BYTES_PER_CELL = {
     "phase_field_collide_stream": BYTES_TWO_PHASE_STEP["phase_collide_stream"],
     "volume_controller": 2 * F32 + 1,  # phi and source read, flags (a reduction)
 }
-# mixture inputs read by the collide kernel when coupled: ε, sand velocity, force
-MIXTURE_BYTES_PER_CELL = (1 + 3 + 3) * F32
-# the coupled step's pressure update: Σ (f − w) kept by the exchange velocity's pass (fluid_velocity) instead of
-# f, plus its mixture inputs (ε, sand velocity, the last collision's u, the slip-cell byte)
-COUPLED_PRESSURE_BYTES_PER_CELL = KERNEL_TRAFFIC["lbm_macro_pressure (kept Σ)"].bytes + (1 + 3 + 3) * F32 + 1
+# mixture inputs read by the collide kernel when coupled: ε, force (it reads no sand velocity)
+MIXTURE_BYTES_PER_CELL = (1 + 3) * F32
+# the coupled (lockstep) step's pressure update: Σ (f − w) kept by the exchange velocity's pass (fluid_velocity)
+# instead of f, with Eq. 39's sand terms already folded into it by the sand_velocity stage (no mixture inputs)
+COUPLED_PRESSURE_BYTES_PER_CELL = KERNEL_TRAFFIC["lbm_macro_pressure (kept Σ)"].bytes
 
 # ---------------------------------------------------------------------------------------------- coupling
 COUPLING_STAGE_BYTES_PER_CELL = {
@@ -59,7 +59,9 @@ COUPLING_STAGE_BYTES_PER_CELL = {
     "fluid_velocity": KERNEL_TRAFFIC["lbm_momentum"].bytes,  # f read, Σ f c and Σ (f − w) written
     "drag_buoyancy": 3 * F32 + 3 * F32 + F32 + F32,  # force write, sand velocity read, ε, p
     "retention_source": 4 * F32 + F32,  # ε, ε_prev, φ, source write, d_bound
-    "sand_velocity": 3 * F32 + F32,  # sand velocity write, mass read
+    # Eq. 39's sand terms into the kept sum: grid velocity, ε, the last collision's u, φ read, the sum read and
+    # written, the slip-cell and flag bytes (kernels/coupling_pressure.cu)
+    "sand_velocity": (3 + 1 + 3 + 1 + 2) * F32 + 2,
     "coupling_finish": 2 * F32,  # ε_prev ← ε
     "moisture": 2 * F32,  # ε̃ and φ, from which the gather computes the water fraction of Eq. 59
 }

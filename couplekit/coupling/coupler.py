@@ -5,8 +5,9 @@ The coupler owns what belongs to neither solver: last step's porosity, and with 
 water R, its increment dR and the particles' moisture ratio r_p.  The sand fraction (Eq. 25) and the water
 fraction of Eq. 59 are not stored: the drag computes the first from the sand's P2G volume, the moisture the
 second from the porosity, φ and R (kernels/coupling_fields.cuh), 8 B per cell.  It writes the
-fluid's inputs (``fluid_fraction``, ``force``, ``source_term``, ``sand_velocity``) and the sand's
-(``grid_mv``: drag and buoyancy impulses; ``saturation``).  One lockstep step, in Algorithm 1's order::
+fluid's inputs (``fluid_fraction``, ``force``, ``source_term``, and ``sand_velocity`` or, in lockstep, Eq. 39's
+sand terms folded into the pressure update) and the sand's (``grid_mv``: drag and buoyancy impulses;
+``saturation``).  One lockstep step, in Algorithm 1's order::
 
     sand.p2g()                 # Eq. 24
     coupler.fluid_velocity()   # u = Σ_j f_j c_j of the fluid's current populations (Eq. 13, no force shift)
@@ -16,7 +17,7 @@ fluid's inputs (``fluid_fraction``, ``force``, ``source_term``, ``sand_velocity`
     sand.grid_update()         # Eqs. 26, 29 and the sand's boundaries
     coupler.moisture()         # Eqs. 58, 59 -> sand.saturation (before G2P moves the particles)
     sand.g2p()                 # Eq. 30
-    coupler.sand_velocity()    # grid velocity -> fluid.sand_velocity (Eq. 39 input)
+    coupler.sand_velocity()    # grid velocity -> Eq. 39's sand terms (or fluid.sand_velocity, see below)
     fluid.step()
     coupler.finish()           # this step's porosity becomes last step's
 
@@ -40,15 +41,27 @@ retention), whose kernel reads it at a cell before it writes S_φ there; S_φ is
 :meth:`finish` writes this step's porosity into the buffer.  Between steps it holds ε̃_prev (what a checkpoint
 saves under both names).
 
-Where Σ f c lives (:attr:`SandFluidCoupler.fluid_u`): in the fluid's ``sand_velocity`` buffer, 12 B per cell
-that are not stored twice.  The two are never alive at once in a step: Σ f c is written by
-:meth:`fluid_velocity` and last read by :meth:`exchange` (and :meth:`phase_source`), the sand velocity is
-written after G2P by :meth:`sand_velocity` and read by the fluid step, and every scheduler's step computes
-Σ f c afresh before it reads it (so it is not in a checkpoint either).  The one order where they overlap is a
-multi-rate block of m > 1 fluid steps, whose other steps recompute Σ f c for the source term while the fluid
-still needs the sand velocity of the block's sand step: that scheduler calls :meth:`own_fluid_velocity`
-(:mod:`couplekit.schedulers.multirate`).  The sub-cycling scheduler keeps its last-step copy before the sand
-velocity is written (:mod:`couplekit.schedulers.subcycle`).
+Where the sand velocity goes (:meth:`SandFluidCoupler.fold_sand_velocity`): in lockstep nowhere, 12 B per cell
+less.  Its only reader in the fluid step is the pressure update (Eq. 39: (1 − ε) ∇·v and the slip (u − v)·∇ε),
+which runs first and sums the populations that :meth:`fluid_velocity` already summed for the exchange (the kept
+Σ (f − w), FluidSolver.current_velocity).  So :meth:`sand_velocity` computes those terms right away from the
+MPM grid velocity (kernels/coupling_pressure.cu, the pressure kernel's own function on the values it would have
+read) and subtracts them from the kept sum, and the pressure update adds none: bitwise the same pressure
+(tests/coupling/test_exchange_velocity_buffer.py).  The sub-cycling and multi-rate schedulers keep the stored
+sand velocity: their fluid steps read the substeps' mean, or one sand step's velocity over a block.
+
+Where Σ f c lives (:attr:`SandFluidCoupler.fluid_u`): in lockstep in the fluid's ``force`` buffer, which
+:meth:`exchange` overwrites with the drag cell by cell (each cell reads its own Σ f c before it writes its
+force; kernels/coupling_drag.cu); otherwise in the fluid's ``sand_velocity`` buffer.  Either way 12 B per cell
+not stored twice: Σ f c is written by :meth:`fluid_velocity` and last read by :meth:`exchange` (and
+:meth:`phase_source`), the force is written by :meth:`exchange` and read by the fluid step's collision, the
+sand velocity is written after G2P by :meth:`sand_velocity` and read by the fluid step, and every scheduler's
+step computes Σ f c afresh before it reads it (so it is not in a checkpoint either).  The one order where Σ f c
+and the sand velocity overlap is a multi-rate block of m > 1 fluid steps, whose other steps recompute Σ f c for
+the source term while the fluid still needs the sand velocity of the block's sand step: that scheduler calls
+:meth:`own_fluid_velocity` (:mod:`couplekit.schedulers.multirate`).  The sub-cycling scheduler keeps its
+last-step copy before the sand velocity is written and reads the force in its substeps' fluid view
+(:mod:`couplekit.schedulers.subcycle`).
 """
 
 from __future__ import annotations
@@ -64,7 +77,7 @@ __all__ = ["SandFluidCoupler"]
 
 _STATE = ("eps_prev", "bound_in", "bound", "d_bound", "moisture_ratio", "retain")
 """Arrays of :meth:`SandFluidCoupler.state` (the retention ones only when retention is on, ``retain`` only with
-per-body retention).  Not ``fluid_u`` (it shares the sand velocity's buffer), the sand fraction or the water
+per-body retention).  Not ``fluid_u`` (it shares the force's or the sand velocity's buffer), the sand fraction or the water
 fraction (neither is stored): every step recomputes them before reading them.  Checkpoints that hold them
 (``fluid_u``, ``eps_sand``, ``water``: before session 13) still load; those values are ignored."""
 
@@ -133,9 +146,35 @@ class SandFluidCoupler:
 
     @property
     def fluid_u(self):
-        """The exchange velocity Σ_j f_j c_j (padded, lattice units): the fluid's ``sand_velocity`` buffer, or
-        a buffer of its own after :meth:`own_fluid_velocity` (module docstring)."""
-        return self.fluid.sand_velocity if self._fluid_u is None else self._fluid_u
+        """The exchange velocity Σ_j f_j c_j (padded, lattice units): the fluid's ``sand_velocity`` buffer, its
+        ``force`` buffer when the sand velocity is folded into the pressure update (:meth:`fold_sand_velocity`),
+        or a buffer of its own after :meth:`own_fluid_velocity` (module docstring)."""
+        if self._fluid_u is not None:
+            return self._fluid_u
+        return self.fluid.force if self.fluid.sand_velocity is None else self.fluid.sand_velocity
+
+    @property
+    def folds_sand_velocity(self) -> bool:
+        """Whether the fluid keeps no sand velocity and :meth:`sand_velocity` folds Eq. 39's sand terms into the
+        pressure update instead (:meth:`fold_sand_velocity`)."""
+        return self.fluid.sand_velocity is None
+
+    def fold_sand_velocity(self, fold: bool) -> None:
+        """Keep no padded sand velocity in the fluid (``fold``; 12 B per cell less): :meth:`sand_velocity` then
+        subtracts Eq. 39's sand terms, computed from the MPM grid velocity, from the population sum that
+        :meth:`fluid_velocity` kept for the pressure update, and Σ f c lives in the fluid's ``force`` buffer,
+        which :meth:`exchange` overwrites cell by cell with the drag (module docstring).  For a scheduler whose
+        every fluid step follows this step's :meth:`fluid_velocity` and :meth:`exchange` (lockstep); the
+        sub-cycling and multi-rate schedulers call it with False (their fluid steps read a stored sand velocity).
+        Bitwise the same results either way."""
+        if fold:
+            if self._fluid_u is not None:
+                raise RuntimeError(
+                    "the exchange velocity has a buffer of its own (a multi-rate block): keep the sand velocity"
+                )
+            self.fluid.release_sand_velocity()
+        else:
+            self.fluid.keep_sand_velocity()
 
     @property
     def eps_prev(self):
@@ -171,7 +210,7 @@ class SandFluidCoupler:
         """Give :attr:`fluid_u` a buffer of its own (12 B per padded cell), for a scheduler that computes
         Σ f c while the fluid still needs the sand velocity (a multi-rate block, module docstring)."""
         if self._fluid_u is None:
-            self._fluid_u = self.fluid.backend.xp.zeros_like(self.fluid.sand_velocity)
+            self._fluid_u = self.fluid.backend.xp.zeros_like(self.fluid.force)  # (3, padded), float32
 
     # ------------------------------------------------------------------ stages
     def fluid_velocity(self) -> None:
@@ -250,9 +289,18 @@ class SandFluidCoupler:
 
     def sand_velocity(self, grid_v=None) -> None:
         """The sand grid velocity (after the grid update; or ``grid_v``, e.g. the substeps' average) into
-        ``fluid.sand_velocity`` (lattice units)."""
+        ``fluid.sand_velocity`` (lattice units); with the sand velocity folded (:meth:`fold_sand_velocity`)
+        Eq. 39's sand terms from it into the population sum this step's :meth:`fluid_velocity` kept."""
         v = self.sand.grid_v if grid_v is None else grid_v
-        self.ops.sand_velocity(v, self.fluid.sand_velocity, self.units, self.periodic)
+        f = self.fluid
+        if f.sand_velocity is not None:
+            self.ops.sand_velocity(v, f.sand_velocity, self.units, self.periodic)
+            return
+        f.fold_sand_pressure_terms(
+            lambda fsum: self.ops.pressure_sand_terms(
+                v, f.flags, f.velocity, f.phi, f.fluid_fraction, f.slip_cells, fsum, self.units, self.periodic
+            )
+        )
 
     def finish(self) -> None:
         """End of the step: this step's porosity becomes last step's."""

@@ -86,6 +86,19 @@ class KernelOps:
             *(np.int32(bool(v)) for v in periodic), np.float32(units.dt / units.dx),
         )  # fmt: skip
 
+    def pressure_sand_terms(
+        self, grid_v, flags, velocity, phi, eps, slip, fsum, units: Units, periodic: Sequence[bool] = (True, True, True)
+    ) -> None:
+        """``fsum`` −= Eq. 39's sand terms on the interior fluid cells, the sand velocity read from the MPM grid
+        velocity ``grid_v`` (SI) with :meth:`sand_velocity`'s ghost rule: ``coupling_pressure_sand_terms``
+        (see ReferenceOps.pressure_sand_terms)."""
+        nz, ny, nx = grid_v.shape[1:]
+        self._fn("coupling_pressure.cu", "coupling_pressure_sand_terms", "CK_TWO_PHASE")(
+            (nx + 2) * (ny + 2) * (nz + 2), grid_v, flags, velocity, self._opt(phi, self.two_phase, "phi"), eps,
+            slip, fsum, np.int32(nx), np.int32(ny), np.int32(nz), *(np.int32(bool(v)) for v in periodic),
+            np.float32(units.dt / units.dx),
+        )  # fmt: skip
+
     def drag_buoyancy(
         self,
         grid_m,

@@ -209,6 +209,23 @@ class ReferenceOps:
         ix = source_index(nx, periodic[0])[None, None, :]
         sand_v[...] = grid_v.astype(np.float64)[:, iz, iy, ix] / (units.dx / units.dt)
 
+    def pressure_sand_terms(
+        self, grid_v, flags, velocity, phi, eps, slip, fsum, units: Units, periodic: Sequence[bool] = (True, True, True)
+    ) -> None:
+        """Fold Eq. 39's sand terms into the kept population sum: ``fsum`` −= ((1 − ε) ∇·v + φ (u − v)·∇ε) / ε
+        on the interior fluid cells (:func:`couplekit.fluid.reference.sand_pressure_terms`), v the MPM grid
+        velocity ``grid_v`` in lattice units with the ghosts of :meth:`sand_velocity`.  The fluid's pressure
+        update then adds none (``sand_in_fsum``): the same update as from a stored ``sand_velocity``, without
+        keeping one (the lockstep step; :meth:`couplekit.fluid.solver.FluidSolver.fold_sand_pressure_terms`)."""
+        from ..fluid.grid import FLUID
+        from ..fluid.reference import interior, sand_pressure_terms
+
+        sand_v = np.zeros((3,) + tuple(flags.shape))
+        self.sand_velocity(grid_v, sand_v, units, periodic)
+        terms = sand_pressure_terms(velocity, phi, eps, sand_v, slip, flags, self.two_phase)
+        fluid = interior(flags) == FLUID
+        interior(fsum)[fluid] = (interior(fsum).astype(np.float64) - terms)[fluid]
+
     # ------------------------------------------------------------------ buoyancy (Eq. 31) + implicit drag (§4.3)
     def drag_buoyancy(
         self,

@@ -139,10 +139,24 @@ class KernelOps:
         return nx * ny * nz, nx, ny, nz
 
     def macro_pressure(
-        self, f, flags, velocity, phi, eps, sand_v, slip, p, parity: int, rho_h: float, rho_l: float, fsum=None
+        self,
+        f,
+        flags,
+        velocity,
+        phi,
+        eps,
+        sand_v,
+        slip,
+        p,
+        parity: int,
+        rho_h: float,
+        rho_l: float,
+        fsum=None,
+        sand_in_fsum: bool = False,
     ) -> None:
         """Eq. 39 pressure update in place (see ReferenceOps.macro_pressure; ``fsum``: Σ_j (f_j − w_j) of these
-        populations from :meth:`momentum`, read instead of f).
+        populations from :meth:`momentum`, read instead of f; ``sand_in_fsum``: it also holds minus the sand's
+        terms, kernels/coupling_pressure.cu, and ``sand_v`` may be None).
 
         An odd step's wall links are prefilled here for the collide that follows (its ``prefilled``), unless
         ``fsum`` is given: then :meth:`momentum` ran on these same populations and wall velocities at this step
@@ -163,7 +177,7 @@ class KernelOps:
             self._dummy if fsum is None else fsum,
             p,
             np.int32(parity),
-            np.int32(fsum is not None),
+            np.int32(0 if fsum is None else (2 if sand_in_fsum and self.mixture else 1)),
             np.int32(self.skip_sand_free_rows),
             np.int32(nx),
             np.int32(ny),

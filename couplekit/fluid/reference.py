@@ -279,6 +279,23 @@ def from_stored(stored: np.ndarray) -> np.ndarray:
     return shifted + weights27(shifted.ndim)
 
 
+def sand_pressure_terms(velocity, phi, eps, sand_v, slip, flags, two_phase: bool) -> np.ndarray:
+    """The sand's terms of Eq. 39 on the interior (float64): ((1 − ε) ∇·v + (u − v)·∇ε) / ε, the slip term
+    (u − v)·∇ε only in the cells of ``slip`` and weighted by the clamped water fraction φ in two-phase flow
+    (why both: :meth:`ReferenceOps.macro_pressure`).  ``velocity``: the Eq. 13 velocity of the last collision;
+    ``eps``, ``sand_v``: the padded porosity and sand velocity (lattice units), ghosts filled."""
+    e = interior(eps).astype(np.float64)
+    u = interior(velocity).astype(np.float64)  # Eq. 13 velocity of the last collision (macro_pressure)
+    v = interior(sand_v).astype(np.float64)
+    grad_e = isotropic_gradient(eps, flags)
+    div_v = sum(isotropic_gradient(sand_v[d], flags)[d] for d in range(3))
+    u_grad_e = sum((u[d] - v[d]) * grad_e[d] for d in range(3))
+    u_grad_e = np.where(interior(slip) != 0, u_grad_e, 0.0)  # macro_pressure: not near walls
+    if two_phase:
+        u_grad_e = np.clip(interior(phi).astype(np.float64), 0.0, 1.0) * u_grad_e  # macro_pressure: light phase
+    return ((1.0 - e) * div_v + u_grad_e) / e
+
+
 class ReferenceOps:
     """NumPy implementation of the fluid stages (see the module docstring for layouts and rules).
 
@@ -377,13 +394,29 @@ class ReferenceOps:
 
     # ------------------------------------------------------------------------------------------ stages
     def macro_pressure(
-        self, f, flags, velocity, phi, eps, sand_v, slip, p, parity: int, rho_h: float, rho_l: float, fsum=None
+        self,
+        f,
+        flags,
+        velocity,
+        phi,
+        eps,
+        sand_v,
+        slip,
+        p,
+        parity: int,
+        rho_h: float,
+        rho_l: float,
+        fsum=None,
+        sand_in_fsum: bool = False,
     ) -> None:
         """Pressure update, Eq. 39, in place on the interior fluid cells of ``p``.
 
         ``fsum``: Σ_j (f_j − w_j) of the current populations (padded, from :meth:`momentum`), which then stands for
         Σ_j f_j − 1 instead of a sum over ``f`` (the coupled step computes it with the exchange velocity, so the
-        pressure update does not read the populations again).
+        pressure update does not read the populations again).  ``sand_in_fsum``: ``fsum`` already holds minus
+        the sand's terms (:func:`sand_pressure_terms`, subtracted by the coupling from the MPM grid velocity:
+        :meth:`couplekit.coupling.reference.ReferenceOps.pressure_sand_terms`), so none are added here and
+        ``sand_v`` is not read.
 
         p^{n+1} = p^n − c_s² ρ^{n+1} [(1 − Σ_j f_j) + (ε_s ∇·v + (u − v)·∇ε)/ε], with 1 − Σf ≈ ∇·u (Eq. 38),
         ε_s = 1 − ε the sand fraction, u the fluid velocity of Eq. 13 as the last collision wrote it
@@ -433,17 +466,8 @@ class ReferenceOps:
             s0 = 1.0 + interior(fsum).astype(np.float64)  # Σ_j f_j = Σ_j (f_j − w_j) + Σ_j w_j, Σ_j w_j = 1
         rho = self._density(phi, rho_h, rho_l)
         divergence = 1.0 - s0  # Eq. 38: 1 − Σ_j f_j ≈ ∇·u
-        if self.mixture:
-            e = interior(eps).astype(np.float64)
-            u = interior(velocity).astype(np.float64)  # Eq. 13 velocity of the last collision (docstring)
-            v = interior(sand_v).astype(np.float64)
-            grad_e = isotropic_gradient(eps, flags)
-            div_v = sum(isotropic_gradient(sand_v[d], flags)[d] for d in range(3))
-            u_grad_e = sum((u[d] - v[d]) * grad_e[d] for d in range(3))
-            u_grad_e = np.where(interior(slip) != 0, u_grad_e, 0.0)  # docstring: not near walls
-            if self.two_phase:
-                u_grad_e = np.clip(interior(phi).astype(np.float64), 0.0, 1.0) * u_grad_e  # docstring: light phase
-            divergence = divergence + ((1.0 - e) * div_v + u_grad_e) / e
+        if self.mixture and not sand_in_fsum:
+            divergence = divergence + sand_pressure_terms(velocity, phi, eps, sand_v, slip, flags, self.two_phase)
         fluid = interior(flags) == FLUID
         new = interior(p).astype(np.float64) - CS2 * rho * divergence
         interior(p)[fluid] = new[fluid]

@@ -292,6 +292,10 @@ class FluidSolver:
     velocity: initial velocity ``(3, nz, ny, nx)`` (x, y, z components), default rest.
     pressure: initial pressure ``(nz, ny, nx)`` (e.g. hydrostatic), default 0.
     mixture: allocate the ``fluid_fraction`` (ε, ones) and ``sand_velocity`` (zeros) inputs.
+    sand_velocity: with ``mixture``, allocate ``sand_velocity`` (default). ``False`` for a coupling that folds
+        Eq. 39's sand terms into the pressure update's kept population sum instead
+        (:meth:`fold_sand_pressure_terms`; the lockstep scheduler does), 12 B per cell less;
+        :meth:`keep_sand_velocity` allocates it later.
     external_force: allocate the ``force`` input (force density, e.g. drag; zeros).
     source_term: allocate the phase field's source ``source_term`` (S_φ, zeros; two-phase only); default
         ``None`` = with ``mixture`` (the coupling writes it). Without it the phase-field kernels are built with
@@ -320,6 +324,7 @@ class FluidSolver:
         external_force: bool = False,
         source_term: bool | None = None,
         storage: str = "fp32",
+        sand_velocity: bool = True,
     ):
         self.backend = backend
         self.storage = check_storage(storage, "FluidSolver storage")
@@ -397,7 +402,7 @@ class FluidSolver:
         self.pbar = xp.zeros(pshape, dtype=np.float32)
 
         self.fluid_fraction = xp.ones(pshape, dtype=np.float32) if self.mixture else None
-        self.sand_velocity = xp.zeros((3,) + pshape, dtype=np.float32) if self.mixture else None
+        self.sand_velocity = xp.zeros((3,) + pshape, dtype=np.float32) if self.mixture and sand_velocity else None
         # the cells where Eq. 39 keeps its porosity-slip term: not in the layers next to a wall, 3 with the
         # odd-rate floor, 1 with the paper's collision (grid.slip_wall_layers)
         self._slip_cells = None
@@ -410,6 +415,7 @@ class FluidSolver:
 
         self.step_count = 0
         self._fsum_step = None  # the step whose Σ (f − w) current_velocity(keep_fsum=True) left in p̄
+        self._fsum_sand = False  # that sum also holds minus Eq. 39's sand terms (fold_sand_pressure_terms)
         self.gamma = 1.0
         # water held outside the phase field that V of Eq. 52 counts (the sand's bound water, Eq. 53; set by
         # the coupler every step, 0 otherwise)
@@ -557,15 +563,24 @@ class FluidSolver:
             if parity:
                 ops.halo_copy(self.f, self._ghost, self._image)
                 ops.halo_copy(self.f, self._out_ghost, self._out_src)
-            if self.mixture:
-                ops.halo_copy(self.fluid_fraction, self._ghost, self._image)
-                ops.halo_copy(self.sand_velocity, self._ghost, self._image)
             # Σ (f − w) of these populations, if current_velocity(keep_fsum=True) left it in p̄ at this step
             fsum = self.pbar if self._fsum_step == self.step_count else None
-            self._fsum_step = None
+            sand_in_fsum = fsum is not None and self._fsum_sand
+            self._fsum_step, self._fsum_sand = None, False
+            if self.mixture:
+                ops.halo_copy(self.fluid_fraction, self._ghost, self._image)
+                if self.sand_velocity is not None:
+                    ops.halo_copy(self.sand_velocity, self._ghost, self._image)
+                elif not sand_in_fsum:
+                    raise RuntimeError(
+                        "this fluid keeps no sand velocity (FluidSolver(sand_velocity=False)) and Eq. 39's sand "
+                        "terms were not folded into this step's pressure update: call "
+                        "SandFluidCoupler.sand_velocity() after the fluid_velocity() of the same step, or build "
+                        "the fluid with sand_velocity=True (keep_sand_velocity())"
+                    )
             ops.macro_pressure(
                 self.f, self.flags, self.velocity, self.phi, self.fluid_fraction, self.sand_velocity,
-                self._slip_cells, self.p, parity, prm.rho_h, prm.rho_l, fsum=fsum,
+                self._slip_cells, self.p, parity, prm.rho_h, prm.rho_l, fsum=fsum, sand_in_fsum=sand_in_fsum,
             )  # fmt: skip
             ops.halo_copy(self.p, self._ghost, self._image)
             ops.pressure_filter(self.p, self.flags, self.pbar, self._wall_rule_axes)
@@ -625,7 +640,39 @@ class FluidSolver:
         fsum = self.pbar if keep_fsum else None
         self.ops.momentum(self.f, self.flags, self.velocity, out, parity, fsum=fsum)
         self._fsum_step = self.step_count if keep_fsum else None
+        self._fsum_sand = False
         return out
+
+    @property
+    def slip_cells(self):
+        """The padded uint8 mask of the cells where Eq. 39 keeps its slip term (None without ``mixture``;
+        :func:`couplekit.fluid.grid.slip_cells`)."""
+        return self._slip_cells
+
+    def keep_sand_velocity(self) -> None:
+        """Allocate the ``sand_velocity`` input (zeros) if this mixture fluid was built without it."""
+        if self.mixture and self.sand_velocity is None:
+            self.sand_velocity = self.xp.zeros((3,) + padded_shape(self.shape), dtype=np.float32)
+
+    def release_sand_velocity(self) -> None:
+        """Drop the ``sand_velocity`` input: every step's pressure update then needs its sand terms folded in
+        (:meth:`fold_sand_pressure_terms`)."""
+        self.sand_velocity = None
+
+    def fold_sand_pressure_terms(self, fold) -> None:
+        """Have ``fold(fsum)`` subtract Eq. 39's sand terms from the Σ (f − w) that :meth:`current_velocity`
+        (``keep_fsum=True``) kept at this step, in place (the coupling computes them from the MPM grid velocity:
+        kernels/coupling_pressure.cu), so that this step's pressure update adds none of its own and reads no
+        ``sand_velocity``; bitwise the same pressure as with the sand velocity stored.  Once per step."""
+        if self._fsum_step != self.step_count:
+            raise RuntimeError(
+                "no population sum kept at this step to fold the sand's pressure terms into: call "
+                "current_velocity(keep_fsum=True) first in the same step (SandFluidCoupler.fluid_velocity)"
+            )
+        if self._fsum_sand:
+            raise RuntimeError("the sand's pressure terms are already folded into this step's population sum")
+        fold(self.pbar)
+        self._fsum_sand = True
 
     # ------------------------------------------------------------------------------------------ outputs
     @property
@@ -780,6 +827,8 @@ class FluidSolver:
                 continue
             if k not in state and k in ("pbar", "phi"):
                 continue  # checkpoints from before they were saved: rebuilt as well as those could
+            if k not in state and k == "sand_velocity":
+                continue  # a lockstep run keeps none (fold_sand_pressure_terms): its next step writes it first
             if k not in state:
                 raise KeyError(f"state has no {k!r}: it was saved by a solver with other effects")
             arr = np.asarray(state[k])
@@ -800,7 +849,7 @@ class FluidSolver:
                 continue
             setattr(self, k, self.backend.asarray(arr.astype(np.float32)))
         self.step_count = int(state["step_count"])
-        self._fsum_step = None
+        self._fsum_step, self._fsum_sand = None, False
         self.gamma = float(state["gamma"])
         self.volume0 = float(state["volume0"])
         self.held_volume = float(state.get("held_volume", 0.0))  # absent from checkpoints before it existed

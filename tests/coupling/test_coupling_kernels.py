@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from coupling_states import GRAVITY, RHO_H, RHO_L, SHAPE, UNITS, grid_state, padded, particles
+from coupling_states import GRAVITY, RHO_H, RHO_L, SHAPE, UNITS, fluid_flags, grid_state, padded, particles
 
 from couplekit.coupling import CouplingParams, KernelOps, ReferenceOps
 
@@ -241,3 +241,75 @@ def test_masked_particle_moisture_matches_reference(cpu):
     gained = float(((res[1][0].astype(np.float64) - pt["r"]) * pt["vol"]).sum()) / UNITS.dx**3
     absorbed = float(d_bound.astype(np.float64).sum())
     assert absorbed > 0 and abs(gained - absorbed) <= 1e-5 * absorbed
+
+
+# ------------------------------------------------------------------ Eq. 39's sand terms, folded into the kept sum
+def _sand_terms_state(rng, shape, periodic, two_phase):
+    """Random fluid fields on ``shape`` with walls on the non-periodic axes, the sand's grid velocity (SI) zero
+    and ε = 1 in a slab of z (rows without sand: the host skips them), and a kept sum Σ (f − w)."""
+    walls = "".join(a for a, p in zip("xyz", periodic, strict=True) if not p)
+    flags = fluid_flags(rng, shape, walls=walls, obstacles=4)
+    pad = padded(shape)
+    eps = rng.uniform(0.35, 1.0, pad).astype(np.float32)
+    grid_v = rng.uniform(-0.4, 0.4, (3, *shape)).astype(np.float32)
+    grid_v[:, :2] = 0.0  # the first two z layers hold no sand ...
+    eps[:4] = 1.0  # ... and no porosity change around them
+    return {
+        "flags": flags,
+        "eps": eps,
+        "grid_v": grid_v,
+        "vel": rng.uniform(-0.05, 0.05, (3, *pad)).astype(np.float32),
+        "phi": rng.uniform(-0.05, 1.05, pad).astype(np.float32) if two_phase else None,
+        "slip": (rng.random(pad) < 0.7).astype(np.uint8),
+        "fsum": rng.uniform(-1e-3, 1e-3, pad).astype(np.float32),
+    }
+
+
+@pytest.mark.parametrize("two_phase", [True, False], ids=["two_phase", "single_phase"])
+@pytest.mark.parametrize(
+    "shape, periodic",
+    [(SHAPE, (True, False, True)), ((6, 9, 37), (True, True, False)), ((5, 4, 19), (False, True, True))],
+    ids=["small-xz-periodic", "long-rows-xy-periodic", "yz-periodic"],
+)
+def test_pressure_sand_terms_match_reference_and_the_stored_path(cpu, two_phase, shape, periodic):
+    """The sand terms of Eq. 39 folded into the kept population sum (kernels/coupling_pressure.cu): against the
+    reference (a 26-neighbour gradient of each velocity component, divided by ε ≥ 0.35: atol 1e-6 × the largest
+    term + 1e-9), exactly unchanged outside the interior fluid cells and in the sand-free rows, and the pressure
+    update from the folded sum bitwise the update from the stored sand velocity (lbm_pressure.cu, use_fsum 2
+    against 1; rows long enough for the host's bulk and tail vectors)."""
+    from couplekit.fluid.kernel_ops import KernelOps as FluidKernelOps
+
+    rng = np.random.default_rng(21)
+    st = _sand_terms_state(rng, shape, periodic, two_phase)
+    kops, rops = _pair(cpu, False, two_phase)
+    out = []
+    for ops in (kops, rops):
+        fsum = st["fsum"].copy()
+        ops.pressure_sand_terms(
+            st["grid_v"], st["flags"], st["vel"], st["phi"], st["eps"], st["slip"], fsum, UNITS, periodic
+        )
+        out.append(fsum)
+    terms_k = out[0].astype(np.float64) - st["fsum"]
+    terms_r = out[1].astype(np.float64) - st["fsum"]
+    assert np.abs(terms_r).max() > 1e-4  # the sand's terms are not negligible here
+    np.testing.assert_allclose(terms_k, terms_r, rtol=0, atol=1e-6 * np.abs(terms_r).max() + 1e-9)
+    fluid = np.zeros(st["flags"].shape, bool)
+    fluid[1:-1, 1:-1, 1:-1] = st["flags"][1:-1, 1:-1, 1:-1] == 0
+    assert out[0][~fluid].tobytes() == st["fsum"][~fluid].tobytes()
+    assert out[0][1:2].tobytes() == st["fsum"][1:2].tobytes()  # z layer 0: no sand within a row of it
+    # the pressure update: folded sum (sand_in_fsum) against the stored sand velocity, bitwise
+    fops = FluidKernelOps(cpu, two_phase=two_phase, mixture=True, external_force=True)
+    sand_v = np.zeros((3, *padded(shape)), np.float32)
+    kops.sand_velocity(st["grid_v"], sand_v, UNITS, periodic)
+    f = np.zeros((27, *padded(shape)), np.float32)
+    p0 = rng.uniform(-1e-3, 1e-3, padded(shape)).astype(np.float32)
+    ps = []
+    for sv, fsum, folded in ((sand_v, st["fsum"].copy(), False), (None, out[0].copy(), True)):
+        p = p0.copy()
+        fops.macro_pressure(
+            f, st["flags"], st["vel"], st["phi"], st["eps"], sv, st["slip"], p, 0, 1.0, 0.00125, fsum=fsum,
+            sand_in_fsum=folded,
+        )  # fmt: skip
+        ps.append(p)
+    assert not np.array_equal(ps[0], p0)
+    assert ps[0].tobytes() == ps[1].tobytes()

@@ -1,6 +1,7 @@
-"""The exchange velocity Σ f c shares the fluid's sand-velocity buffer (SandFluidCoupler module docstring): the
-sharing changes no result of any scheduler, and the one order where both are alive at once (a multi-rate
-block of m > 1 fluid steps) gives Σ f c a buffer of its own."""
+"""The exchange velocity Σ f c shares a buffer (SandFluidCoupler module docstring): the fluid's force in lockstep,
+which keeps no sand velocity (Eq. 39's sand terms are folded into the pressure update), the sand velocity's
+otherwise.  The sharing and the folding change no result of any scheduler, and the one order where Σ f c and the
+sand velocity are alive at once (a multi-rate block of m > 1 fluid steps) gives Σ f c a buffer of its own."""
 
 from __future__ import annotations
 
@@ -39,8 +40,10 @@ SCHEDULERS = [
 def test_sharing_the_buffer_changes_nothing(scheduler, retention):
     """Every state array after 12 steps, shared buffer against a buffer of its own: bitwise equal."""
     shared, own = _sim(scheduler, own=False, retention=retention), _sim(scheduler, own=True, retention=retention)
-    assert shared.coupler.fluid_u is shared.fluid.sand_velocity
-    assert own.coupler.fluid_u is not own.fluid.sand_velocity
+    lockstep = scheduler["kind"] == "lockstep"
+    assert (shared.fluid.sand_velocity is None) == lockstep  # lockstep keeps none
+    assert shared.coupler.fluid_u is (shared.fluid.force if lockstep else shared.fluid.sand_velocity)
+    assert own.coupler.fluid_u is not own.fluid.sand_velocity and own.coupler.fluid_u is not own.fluid.force
     shared.step(12)
     own.step(12)
     assert float(np.abs(shared.fluid.force).max()) > 0  # the drag acted
@@ -67,10 +70,53 @@ def test_a_multirate_block_keeps_the_sand_velocity_of_its_sand_step():
     assert not np.allclose(u[:, fluid], held[:, fluid])
 
 
-def test_the_shared_buffer_holds_the_sand_velocity_when_the_fluid_steps():
-    """Lockstep: after a step (the fluid step read it) the buffer holds the sand grid velocity in lattice units,
-    ghosts included, as the sand-velocity stage writes it: Σ f c left nothing behind."""
+@pytest.mark.parametrize("backend", ["cpu", "cpu-device", "numpy"])
+@pytest.mark.parametrize("retention", [False, True], ids=["dry", "retention"])
+def test_folding_the_sand_velocity_into_the_pressure_changes_nothing(backend, retention):
+    """Lockstep folds Eq. 39's sand terms into the kept population sum (kernels/coupling_pressure.cu) instead of
+    storing the sand velocity: every state array after 12 steps equals a run that stores it, bitwise on the
+    kernel backends (the same stencils on the same values, 0 − (s0 − t) = (0 − s0) + t exactly; one thread, so
+    that the sand's atomics add in one order) and to float32 round-off of the kept sum with the reference."""
+    sims = []
+    for fold in (True, False):
+        sim = Simulation(Scene.from_dict(_scene({"kind": "lockstep"}, retention)), backend=backend, log=None, threads=1)
+        sim.coupler.fold_sand_velocity(fold)
+        assert sim.coupler.folds_sand_velocity == fold
+        sim.step(12 if backend != "numpy" else 4)
+        sims.append(sim)
+    folded, stored = sims
+    assert float(np.abs(np.array(stored.fluid.sand_velocity)).max()) > 0  # the sand moves: its terms act
+    a, b = folded._states(), stored._states()
+    for solver in a:
+        for k in a[solver]:
+            x, y = np.asarray(a[solver][k]), np.asarray(b[solver][k])
+            if backend == "numpy":
+                np.testing.assert_allclose(x, y, rtol=1e-5, atol=1e-9, err_msg=f"{solver}/{k}")
+            else:
+                assert x.tobytes() == y.tobytes(), (solver, k)
+    assert set(b["fluid"]) - set(a["fluid"]) == {"sand_velocity"}
+
+
+def test_a_fluid_without_sand_velocity_refuses_a_step_without_the_folded_terms():
+    """A step of a fluid that keeps no sand velocity, whose sand terms were not folded in, is refused with the fix
+    (not run without Eq. 39's sand terms); so is a fold without a kept population sum, or a second fold."""
     sim = _sim({"kind": "lockstep"}, own=False)
+    with pytest.raises(RuntimeError, match="keeps no sand velocity"):
+        sim.fluid.step()
+    with pytest.raises(RuntimeError, match="current_velocity"):
+        sim.coupler.sand_velocity()
+    sim.coupler.fluid_velocity()
+    sim.coupler.sand_velocity()
+    with pytest.raises(RuntimeError, match="already folded"):
+        sim.coupler.sand_velocity()
+    sim.step(2)  # and the scheduler's own order runs
+
+
+def test_the_shared_buffer_holds_the_sand_velocity_when_the_fluid_steps():
+    """Lockstep storing the sand velocity: after a step (the fluid step read it) the buffer holds the sand grid
+    velocity in lattice units, ghosts included, as the sand-velocity stage writes it: Σ f c left nothing behind."""
+    sim = _sim({"kind": "lockstep"}, own=False)
+    sim.coupler.fold_sand_velocity(False)
     sim.step(5)
     c = sim.coupler
     expect = np.zeros_like(np.array(sim.fluid.sand_velocity))

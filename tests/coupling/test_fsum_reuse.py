@@ -32,8 +32,10 @@ def _tiny(scheduler: dict, **fluid) -> Scene:
 
 
 def _without_reuse(sim: Simulation) -> Simulation:
-    """``sim`` whose coupler computes Σ f c without keeping Σ (f − w): the pressure update reads f."""
+    """``sim`` whose coupler computes Σ f c without keeping Σ (f − w): the pressure update reads f (and, with
+    nothing kept to fold Eq. 39's sand terms into, the stored sand velocity)."""
     c = sim.coupler
+    c.fold_sand_velocity(False)
     c.fluid_velocity = lambda: c.fluid.current_velocity(out=c.fluid_u)
     return sim
 
@@ -59,7 +61,7 @@ CASES = {
 @pytest.mark.parametrize("case", list(CASES))
 def test_reusing_the_population_sum_changes_nothing(case, backend):
     """Every state array after 7 steps (both parities, a multi-rate block's sand step and its other steps),
-    reused against re-read: bitwise equal (the kernels sum Σ (f − w) in the same order in both passes; the
+    reused (lockstep: with Eq. 39's sand terms folded into it) against re-read (with the sand velocity stored): bitwise equal (the kernels sum Σ (f − w) in the same order in both passes; the
     reference sums in float64 and stores float32, so it is compared with a tolerance of that rounding)."""
     if backend == "numpy" and case.startswith("fig"):
         pytest.skip("the NumPy reference runs the tiny scenes (the figures take minutes on it)")
@@ -93,6 +95,7 @@ def test_a_kept_sum_is_used_only_by_the_step_it_was_taken_at():
     """A fluid step without a preceding exchange-velocity pass (a fluid stepped on its own, a checkpoint just
     loaded) reads f; the kept sum is dropped by the step that used it."""
     sim = Simulation(_tiny({"kind": "lockstep"}), backend="cpu", log=None)
+    sim.coupler.fold_sand_velocity(False)  # a fluid stepped on its own reads a stored sand velocity
     fl = sim.fluid
     seen = []
     macro = fl.ops.macro_pressure
