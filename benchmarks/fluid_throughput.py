@@ -142,7 +142,15 @@ def two_phase_stage_times(backend, n: int, steps: int = 6) -> dict[str, float]:
 
         setattr(obj, name, timed)
 
-    for name in ("halo_copy", "macro_pressure", "pressure_filter", "collide_stream", "fold", "outflow_fix"):
+    for name in (
+        "halo_copy",
+        "halo_pull",
+        "macro_pressure",
+        "pressure_filter",
+        "collide_stream",
+        "fold",
+        "outflow_fix",
+    ):
         wrap(s.ops, name, "flow." + name)
     for name in ("collide_stream", "macroscopic", "volume_sums"):
         if hasattr(s.pf_ops, name):

@@ -38,6 +38,7 @@ FLUID_STAGES = (
 # FluidSolver ops methods -> stage
 _FLUID_OPS = {
     "halo_copy": "lbm_boundaries",
+    "halo_pull": "lbm_boundaries",
     "fold": "lbm_boundaries",
     "outflow_fix": "lbm_boundaries",
     "macro_pressure": "lbm_pressure",

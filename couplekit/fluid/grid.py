@@ -30,6 +30,7 @@ corner ghosts are never part of a region.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -282,6 +283,75 @@ def periodic_lists(shape: tuple[int, int, int], boundaries: Boundaries) -> tuple
     ghost = outside & ~nonperiodic
     idx = (xx + px * (yy + py * zz))[ghost].astype(np.int64)
     return idx, _wrap_index(shape, zz[ghost], yy[ghost], xx[ghost])
+
+
+def periodic_link_boxes(shape: tuple[int, int, int], boundaries: Boundaries) -> np.ndarray:
+    """The periodic ghosts' populations that the odd (pull / push) step exchanges with the interior, as boxes:
+    int32 rows ``(x0, x1, y0, y1, z0, z1, ox, oy, oz, q)``, every padded cell (x, y, z) of the inclusive box a
+    periodic ghost g of :func:`periodic_lists` whose direction q has g − c_q interior, its image g + (ox, oy, oz).
+
+    Exactly the (ghost, q) pairs of the fold (:meth:`couplekit.fluid.reference.ReferenceOps.fold`) and of the
+    pull's reads (:meth:`~couplekit.fluid.reference.ReferenceOps.halo_pull`): a face ghost's 9 directions that
+    point out of the interior (its other 18 are read by no stage), an edge's 3, a corner's 1.  As boxes, the
+    kernel copies whole rows of x for the ghosts of the y and z faces (kernels/lbm_halo.cu, lbm_halo_boxes),
+    where the list loop touched all 27 populations of each ghost one cell at a time."""
+    from ..lattice import C27
+
+    ext = (shape[2], shape[1], shape[0])  # (nx, ny, nz)
+    rows = []
+    # per axis: the ghost at 0, the interior, the ghost at n + 1
+    for pos in np.ndindex(3, 3, 3):
+        if pos == (1, 1, 1):
+            continue
+        if any(
+            p != 1 and boundaries.face("xyz"[a] + ("-" if p == 0 else "+")).kind != "periodic"
+            for a, p in enumerate(pos)
+        ):
+            continue
+        for q in range(1, 27):
+            box, off = [], []
+            for a, p in enumerate(pos):
+                n, c = ext[a], int(C27[q, a])
+                if p == 0:  # ghost at 0: g − c interior only for c = −1; image at n
+                    lo = hi = 0 if c == -1 else None
+                    off.append(n)
+                elif p == 2:  # ghost at n + 1: c = +1; image at 1
+                    lo = hi = n + 1 if c == 1 else None
+                    off.append(-n)
+                else:  # interior: x − c within 1..n
+                    lo, hi = max(1, 1 + c), min(n, n + c)
+                    off.append(0)
+                if lo is None or lo > hi:
+                    break
+                box += [lo, hi]
+            else:
+                rows.append(box + off + [q])
+    return np.asarray(rows, np.int32).reshape(-1, 10)
+
+
+@dataclass(frozen=True)
+class LinkBoxes:
+    """The kernels' form of :func:`periodic_link_boxes` (:func:`link_box_arrays`): ``rows`` flattened (int32),
+    ``start`` the prefix sums of the boxes' cell counts (int64, one more than the boxes), ``total`` the cell
+    count; the arrays host or backend ones (:meth:`on`).  Immutable: :meth:`copy` returns it."""
+
+    rows: Any
+    start: Any
+    total: int
+
+    def on(self, backend) -> LinkBoxes:
+        """The same boxes with their arrays on ``backend``."""
+        return LinkBoxes(backend.asarray(self.rows), backend.asarray(self.start), self.total)
+
+    def copy(self) -> LinkBoxes:
+        return self
+
+
+def link_box_arrays(boxes: np.ndarray) -> LinkBoxes:
+    """:class:`LinkBoxes` of the rows of :func:`periodic_link_boxes`."""
+    counts = np.prod(boxes[:, 1:6:2].astype(np.int64) - boxes[:, 0:6:2] + 1, axis=1)
+    start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    return LinkBoxes(np.ascontiguousarray(boxes.reshape(-1), np.int32), start, int(start[-1]))
 
 
 SLIP_WALL_LAYERS = 1

@@ -64,7 +64,7 @@ class KernelOps:
         self._momentum = pressure.function("lbm_momentum")
         self._halo = halo.function("lbm_halo_copy")
         self._halo_pop = halo.function("lbm_halo_copy_pop")
-        self._fold = halo.function("lbm_fold")
+        self._halo_boxes = halo.function("lbm_halo_boxes")
         self._outflow_fix = halo.function("lbm_outflow_fix")
         self._prefill = halo.function("lbm_wall_prefill")
         self._bounce = halo.function("lbm_wall_bounce")
@@ -270,12 +270,27 @@ class KernelOps:
         fn = self._halo_pop if a.dtype == np.float16 else self._halo
         fn(int(ghost.size), a, ghost, image, np.int32(ncomp), np.int64(ncell))
 
-    def fold(self, f, ghost, image) -> None:
-        """After an odd step, move populations pushed into periodic ghosts to their images."""
-        if ghost.size == 0:
+    def halo_pull(self, f, ghost, image, boxes) -> None:
+        """Before an odd step: the populations the pull reads from the periodic ghosts, copied from their images
+        (ReferenceOps.halo_pull); ``boxes``: :func:`couplekit.fluid.grid.link_box_arrays` of
+        :func:`~couplekit.fluid.grid.periodic_link_boxes`, arrays on the backend (the lists ``ghost``, ``image``
+        are the reference's)."""
+        self._run_boxes(f, boxes, 0)
+
+    def fold(self, f, ghost, image, boxes) -> None:
+        """After an odd step, move populations pushed into periodic ghosts to their images (ReferenceOps.fold;
+        ``boxes`` as in :meth:`halo_pull`)."""
+        self._run_boxes(f, boxes, 1)
+
+    def _run_boxes(self, f, boxes, fold: int) -> None:
+        rows, start, total = boxes.rows, boxes.start, boxes.total
+        if total == 0:
             return
         pz, py, px = f.shape[-3:]
-        self._fold(int(ghost.size), f, ghost, image, np.int32(px - 2), np.int32(py - 2), np.int32(pz - 2))
+        self._halo_boxes(
+            total, f, rows, start, np.int32(rows.size // 10), np.int32(fold), np.int32(px - 2), np.int32(py - 2),
+            np.int32(pz - 2),
+        )  # fmt: skip
 
     def outflow_fix(self, f, ghost, src) -> None:
         """After an odd step, set what the outflow ghosts would have pushed (zero gradient)."""

@@ -296,6 +296,16 @@ def sand_pressure_terms(velocity, phi, eps, sand_v, slip, flags, two_phase: bool
     return ((1.0 - e) * div_v + u_grad_e) / e
 
 
+def _pull_links(f, ghost):
+    """(j, mask) for j = 1..26: which periodic ghosts g have g − c_j interior (the odd step's links)."""
+    pz, py, px = f.shape[-3:]
+    gz, rem = np.divmod(ghost, px * py)
+    gy, gx = np.divmod(rem, px)
+    for j in range(1, 27):
+        sx, sy, sz = gx - C27[j, 0], gy - C27[j, 1], gz - C27[j, 2]
+        yield j, (sx >= 1) & (sx <= px - 2) & (sy >= 1) & (sy <= py - 2) & (sz >= 1) & (sz <= pz - 2)
+
+
 class ReferenceOps:
     """NumPy implementation of the fluid stages (see the module docstring for layouts and rules).
 
@@ -654,16 +664,23 @@ class ReferenceOps:
             flat[j, (t[0] + px * (t[1] + py * t[2]))[ok]] = flat[j, (u[0] + px * (u[1] + py * u[2]))[ok]]
 
     @staticmethod
-    def fold(f, ghost, image) -> None:
+    def fold(f, ghost, image, boxes=None) -> None:
         """After an odd (push) step: move populations pushed into periodic ghosts to their images.
 
-        For ghost g with image i and direction j, F[j][i] = F[j][g] when g − c_j is an interior cell.
+        For ghost g with image i and direction j, F[j][i] = F[j][g] when g − c_j is an interior cell (the push of
+        the interior cell g − c_j wrote it).  ``boxes``: the kernels' form of the same pairs (unused here).
         """
-        pz, py, px = f.shape[-3:]
-        gz, rem = np.divmod(ghost, px * py)
-        gy, gx = np.divmod(rem, px)
         flat = f.reshape(27, -1)
-        for j in range(1, 27):
-            sx, sy, sz = gx - C27[j, 0], gy - C27[j, 1], gz - C27[j, 2]
-            inside = (sx >= 1) & (sx <= px - 2) & (sy >= 1) & (sy <= py - 2) & (sz >= 1) & (sz <= pz - 2)
+        for j, inside in _pull_links(f, ghost):
             flat[j, image[inside]] = flat[j, ghost[inside]]
+
+    @staticmethod
+    def halo_pull(f, ghost, image, boxes=None) -> None:
+        """Before an odd (pull) step: for ghost g with image i and direction j, F[j][g] = F[j][i] when g − c_j is
+        an interior cell: the populations an odd step reads from a periodic ghost (the AA pattern's odd step of
+        an interior cell c reads F[j] at c + c_j: :meth:`load`), the pairs :meth:`fold` moves back after it.  A
+        ghost's other populations are read by no stage and keep what they hold.  ``boxes`` as in :meth:`fold`.
+        """
+        flat = f.reshape(27, -1)
+        for j, inside in _pull_links(f, ghost):
+            flat[j, ghost[inside]] = flat[j, image[inside]]

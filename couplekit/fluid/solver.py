@@ -39,8 +39,10 @@ from .grid import (
     Boundaries,
     build_flags,
     inflow_front_ramp,
+    link_box_arrays,
     outflow_lists,
     padded_shape,
+    periodic_link_boxes,
     periodic_lists,
     slip_cells,
     slip_wall_layers,
@@ -381,6 +383,8 @@ class FluidSolver:
             check_gaps(flags, periodic_axes, params.odd_ramp)
             self.odd_ramp = backend.asarray(ramp_weights(flags, periodic_axes, params.odd_ramp))
         self._ghost, self._image = backend.asarray(ghost), backend.asarray(image)
+        # the periodic ghosts' links of the odd step (halo_pull, fold)
+        self._link_boxes = link_box_arrays(periodic_link_boxes(self.shape, self.boundaries)).on(backend)
         self._out_ghost, self._out_src = backend.asarray(out_ghost), backend.asarray(out_src)
 
         u0 = np.zeros((3,) + self.shape) if velocity is None else np.asarray(velocity, np.float64)
@@ -561,7 +565,7 @@ class FluidSolver:
         for _ in range(int(n)):
             parity = self.step_count & 1
             if parity:
-                ops.halo_copy(self.f, self._ghost, self._image)
+                ops.halo_pull(self.f, self._ghost, self._image, self._link_boxes)
                 ops.halo_copy(self.f, self._out_ghost, self._out_src)
             # Σ (f − w) of these populations, if current_velocity(keep_fsum=True) left it in p̄ at this step
             fsum = self.pbar if self._fsum_step == self.step_count else None
@@ -599,7 +603,7 @@ class FluidSolver:
                 prefilled=True,  # macro_pressure prefilled this odd step's wall links; nothing since wrote f or u
             )  # fmt: skip
             if parity:
-                ops.fold(self.f, self._ghost, self._image)
+                ops.fold(self.f, self._ghost, self._image, self._link_boxes)
                 ops.outflow_fix(self.f, self._out_ghost, self._out_src)
             if self.two_phase:
                 self._set_inflow_front()  # first: the controller's target counts the inflow's φ_b of this step
@@ -635,7 +639,7 @@ class FluidSolver:
             out = self.xp.zeros_like(self.velocity)
         parity = self.step_count & 1
         if parity:
-            self.ops.halo_copy(self.f, self._ghost, self._image)
+            self.ops.halo_pull(self.f, self._ghost, self._image, self._link_boxes)
             self.ops.halo_copy(self.f, self._out_ghost, self._out_src)
         fsum = self.pbar if keep_fsum else None
         self.ops.momentum(self.f, self.flags, self.velocity, out, parity, fsum=fsum)

@@ -4,7 +4,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from couplekit.fluid.grid import Boundaries, Face, build_flags, outflow_lists, padded_shape, periodic_lists
+from couplekit.fluid.grid import (
+    Boundaries,
+    Face,
+    build_flags,
+    link_box_arrays,
+    outflow_lists,
+    padded_shape,
+    periodic_link_boxes,
+    periodic_lists,
+)
 from couplekit.fluid.reference import equilibrium, to_stored
 
 SHAPE = (6, 7, 9)  # (nz, ny, nx) interior
@@ -42,6 +51,7 @@ def random_state(
     f = equilibrium(u) * (1.0 + 1e-3 * rng.standard_normal((27,) + pshape))
     velocity = np.where(flags[None] == 0, rng.uniform(-0.05, 0.05, (3,) + pshape), wall_u)
     ghost, image = periodic_lists(shape, boundaries)
+    links = link_box_arrays(periodic_link_boxes(shape, boundaries))
     out_ghost, out_src = outflow_lists(shape, flags)
     state = {
         "f": to_stored(f),  # the fluid arrays hold f - w (shifted storage)
@@ -56,6 +66,7 @@ def random_state(
         "pbar": rng.uniform(-1e-3, 1e-3, pshape).astype(np.float32),
         "ghost": ghost,
         "image": image,
+        "links": links,
         "out_ghost": out_ghost,
         "out_src": out_src,
     }

@@ -239,9 +239,9 @@ def test_halo_fold_outflow_copies_of_fp16_populations_are_exact(cpu, boundaries)
     ko, ro = KernelOps(cpu, storage="fp16"), ReferenceOps(storage="fp16")
     sk, sr = _fp16_state(31, BOUNDARY_SETS[boundaries])
     for ops, s in ((ko, sk), (ro, sr)):
-        ops.halo_copy(s["f"], s["ghost"], s["image"])
+        ops.halo_pull(s["f"], s["ghost"], s["image"], s["links"])
         ops.halo_copy(s["p"], s["ghost"], s["image"])  # a float32 field through the same ops
-        ops.fold(s["f"], s["ghost"], s["image"])
+        ops.fold(s["f"], s["ghost"], s["image"], s["links"])
         ops.halo_copy(s["f"], s["out_ghost"], s["out_src"])
         ops.outflow_fix(s["f"], s["out_ghost"], s["out_src"])
     for key in ("f", "p"):

@@ -227,10 +227,10 @@ def test_halo_fold_outflow_copies_are_exact(cpu, boundaries):
     ko, ro = KernelOps(cpu), ReferenceOps()
     sk, sr = _pair(31, BOUNDARY_SETS[boundaries])
     for ops, s in ((ko, sk), (ro, sr)):
-        ops.halo_copy(s["f"], s["ghost"], s["image"])
+        ops.halo_pull(s["f"], s["ghost"], s["image"], s["links"])
         ops.halo_copy(s["velocity"], s["ghost"], s["image"])
         ops.halo_copy(s["p"], s["ghost"], s["image"])
-        ops.fold(s["f"], s["ghost"], s["image"])
+        ops.fold(s["f"], s["ghost"], s["image"], s["links"])
         ops.halo_copy(s["f"], s["out_ghost"], s["out_src"])
         ops.outflow_fix(s["f"], s["out_ghost"], s["out_src"])
     for key in ("f", "velocity", "p"):
@@ -428,3 +428,38 @@ def test_stages_on_rows_with_solid_ends_match_reference_and_keep_non_fluid_cells
     assert np.array_equal(sk["velocity"][:, ~fluid], before["velocity"][:, ~fluid])
     assert np.array_equal(out["k"][:, ~fluid], out0[:, ~fluid])
     assert np.abs(sk["velocity"][:, fluid] - before["velocity"][:, fluid]).max() > 1e-3  # the fluid moved
+
+
+@pytest.mark.parametrize("shape", [(5, 6, 7), (3, 9, 2), (8, 2, 4)])
+@pytest.mark.parametrize(
+    "walls", [(), ("z",), ("x", "y"), ("x", "y", "z")], ids=["periodic", "z-walls", "xy-walls", "closed"]
+)
+def test_link_boxes_are_the_odd_steps_ghost_links(shape, walls):
+    """The boxes the kernels copy and fold by (periodic_link_boxes) hold exactly the (ghost, image, direction)
+    triples of the reference's rule, each once: ghost g of periodic_lists and direction j with g − c_j interior
+    (a face ghost 9 directions, an edge 3, a corner 1); extents of 2 and 3 cells, the ghost of one face is the
+    image's neighbour there."""
+    from couplekit.fluid.grid import link_box_arrays, periodic_link_boxes, periodic_lists
+    from couplekit.lattice import C27
+
+    faces = {a + s: Face("wall") for a in walls for s in "-+"}
+    b = Boundaries(faces)
+    ghost, image = periodic_lists(shape, b)
+    pz, py, px = (n + 2 for n in shape)
+    gz, rem = np.divmod(ghost, px * py)
+    gy, gx = np.divmod(rem, px)
+    expect = []
+    for j in range(1, 27):
+        sx, sy, sz = gx - C27[j, 0], gy - C27[j, 1], gz - C27[j, 2]
+        inside = (sx >= 1) & (sx <= px - 2) & (sy >= 1) & (sy <= py - 2) & (sz >= 1) & (sz <= pz - 2)
+        expect += [(int(g), int(i), j) for g, i in zip(ghost[inside], image[inside], strict=True)]
+    boxes = periodic_link_boxes(shape, b)
+    got = []
+    for x0, x1, y0, y1, z0, z1, ox, oy, oz, q in boxes.tolist():
+        for z in range(z0, z1 + 1):
+            for y in range(y0, y1 + 1):
+                for x in range(x0, x1 + 1):
+                    g = x + px * (y + py * z)
+                    got.append((g, g + ox + px * (oy + py * oz), q))
+    assert sorted(got) == sorted(expect) and len(set(got)) == len(got)
+    assert link_box_arrays(boxes).total == len(expect)
