@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from ..backend import Backend
+from ..slabs import host_slabs
 from .grid import (
     FLUID,
     INFLOW,
@@ -396,7 +397,10 @@ class FluidSolver:
         # stored as f - w (shifted storage, reference.py); 0 in the ghost / wall cells, which are written before
         # they are read
         f = np.zeros((27,) + pshape, dtype_of(self.storage))
-        f[(slice(None), *INTERIOR)] = to_stored(equilibrium(u0), self.storage)  # parity 0: natural order
+        # parity 0: natural order.  By slabs of z: the float64 equilibrium of the whole grid took 216 B per cell
+        # and its conversion 108 more at once (1.3 GB above the solver's own 325 MB at 1.8 M cells)
+        for z0, z1 in host_slabs(self.shape, 27 * 8 * 3):
+            f[:, 1 + z0 : 1 + z1, 1:-1, 1:-1] = to_stored(equilibrium(u0[:, z0:z1]), self.storage)
         self.f = backend.asarray(f)
         self.velocity = backend.asarray(vel)
         p0 = np.zeros(pshape, np.float32)

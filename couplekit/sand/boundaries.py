@@ -236,8 +236,9 @@ def pack_colliders(colliders: Sequence[Collider]) -> np.ndarray:
     return np.concatenate([c.row() for c in colliders]).astype(np.float32)
 
 
-def node_positions(shape: tuple[int, int, int], dx: float) -> np.ndarray:
-    """(nz*ny*nx, 3) node positions (x, y, z) in linear-index order; node (i, j, k) at ((i+½)dx, …)."""
+def node_positions(shape: tuple[int, int, int], dx: float, z0: int = 0, z1: int | None = None) -> np.ndarray:
+    """(nz*ny*nx, 3) node positions (x, y, z) in linear-index order; node (i, j, k) at ((i+½)dx, …); of the z
+    layers z0 .. z1 - 1 only when given (a slab)."""
     nz, ny, nx = shape
-    z, y, x = np.meshgrid(np.arange(nz), np.arange(ny), np.arange(nx), indexing="ij")
+    z, y, x = np.meshgrid(np.arange(z0, nz if z1 is None else z1), np.arange(ny), np.arange(nx), indexing="ij")
     return (np.stack([x.ravel(), y.ravel(), z.ravel()], axis=1) + 0.5) * dx
