@@ -17,6 +17,7 @@ from typing import Any
 
 __all__ = [
     "OutputFolderError",
+    "OutputIndexError",
     "prepare_output",
     "run_files",
     "RUN_FILES",
@@ -59,6 +60,13 @@ can tell its own folder from another run's (:func:`prepare_output`)."""
 
 class OutputFolderError(ValueError):
     """The output folder cannot be used (the message names it, what is wrong and the fix)."""
+
+
+class OutputIndexError(OutputFolderError, OSError):
+    """A ParaView index (.pvd) in the output folder is damaged and cannot be rebuilt from the folder
+    (:class:`couplekit.io.vtk.PvdIndex`); the message names the file and the fix. Both an
+    :class:`OutputFolderError` (``couplekit run`` prints it and exits 2, as for any unusable folder) and an
+    :class:`OSError` (a file that cannot be read back), so either ``except`` catches it."""
 
 
 def default_output(scene_name: str) -> Path:

@@ -155,10 +155,11 @@ def write_surface_obj(path: str | Path, mesh) -> Path:
 
 
 def write_surface_vtp(path: str | Path, mesh) -> Path:
-    """Write a surface mesh as VTK XML poly data (.vtp) with its ``Normals`` (the ParaView series)."""
-    path = Path(path)
-    mesh.save(str(path))
-    return path
+    """Write a surface mesh as VTK XML poly data (.vtp) with its ``Normals`` (the ParaView series), through
+    :func:`couplekit.io.vtk.save_vtk` (checked against the free space first, never a cut-off file)."""
+    from .vtk import save_vtk
+
+    return save_vtk(mesh, path)
 
 
 _WRITERS = {"ply": write_surface_ply, "obj": write_surface_obj, "vtp": write_surface_vtp}
