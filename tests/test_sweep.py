@@ -210,6 +210,15 @@ BAD_SWEEPS = {
     "invalid base scene": ({"grid": {"time.dt": [1e-4]}}, {"domain": {"size": [0.06] * 3, "dx": -0.005}}, "sweep.base"),
     "unnamed case among several": ({"cases": [{"set": {"time.dt": 1e-4}}, {"name": "b"}]}, None, "sweep.cases[0].name"),
     "refused reference": ({"grid": {"time.dt": [1e-4]}, "reference": {"time.dt": 1.0}}, None, "sweep.reference"),
+    # sweep.frames (2 in _write_sweep) would replace these in every point: refused, not silently overridden
+    "time.frames in the grid": ({"grid": {"time.frames": [1, 2]}}, None, 'sweep.grid."time.frames"'),
+    "time.frames in the set": ({"set": {"time.frames": 3}}, None, 'sweep.set."time.frames"'),
+    "time.frames in a case": (
+        {"cases": [{"grid": {"time.frames": [1, 3]}}]},
+        None,
+        'sweep.cases[0].grid."time.frames"',
+    ),
+    "time.frames in the reference": ({"reference": {"time.frames": 4}}, None, 'sweep.reference."time.frames"'),
 }
 
 
@@ -231,6 +240,19 @@ def test_not_toml_is_refused(tmp_path):
     with pytest.raises(SweepError) as err:
         load_sweep(path)
     assert err.value.keys == ["(syntax)"]
+
+
+def test_sweep_frames_with_time_frames_in_the_grid_is_refused_naming_both(tmp_path):
+    path = _write_sweep(tmp_path, {"frames": 1, "grid": {"time.frames": [1, 2]}})
+    with pytest.raises(SweepError) as err:
+        load_sweep(path)
+    text = str(err.value)
+    assert err.value.keys == ['sweep.grid."time.frames"'], text
+    assert "sweep.frames" in text and "remove sweep.frames" in text and "drop time.frames from the grid" in text
+    # without sweep.frames each point runs the frames its grid value names
+    data = {"sweep": {"base": "base.toml", "backend": "cpu", "grid": {"time.frames": [1, 2]}}}
+    spec = parse_sweep(data, base_dir=tmp_path)
+    assert [(p.name, p.frames) for p in spec.points] == [("time.frames=1", 1), ("time.frames=2", 2)]
 
 
 def test_dotted_keys_create_tables_and_check_indexes():
@@ -284,6 +306,41 @@ def test_points_names_ids_and_overrides():
     assert spec.keys[:2] == ("time.dt", "scheduler.substeps")
 
 
+# ------------------------------------------------------------------------------------------------ the folder
+def _files(folder: Path) -> dict[Path, bytes]:
+    return {p: p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def test_a_folder_holding_another_sweep_is_refused_and_kept(tmp_path, cluster_address):
+    a = _write_sweep(tmp_path, {"name": "A", "grid": {"time.dt": [1e-4, 2e-4]}}, name="A.toml")
+    out = tmp_path / "out"
+    first = run_sweep(a, out, address=cluster_address, progress=False)
+    before = _files(out)
+
+    (tmp_path / "b").mkdir()  # another base scene (another file), another name, one point shared with A's ids
+    b = _write_sweep(tmp_path / "b", {"name": "B", "frames": 1, "grid": {"time.dt": [1e-4]}}, tiny_sand(frames=1))
+    (tmp_path / "c").mkdir()  # the name of A, the base scene of another file
+    c = _write_sweep(tmp_path / "c", {"name": "A", "grid": {"time.dt": [1e-4]}})
+    d = _write_sweep(tmp_path, {"name": "D", "grid": {"time.dt": [1e-4]}}, name="D.toml")  # A's base, another name
+    for path, differs in [(b, ("'A'", "'B'", "base scene")), (c, ("base scene",)), (d, ("'A'", "'D'"))]:
+        with pytest.raises(SweepError) as err:
+            run_sweep(path, out, address="tcp://127.0.0.1:9", progress=False)  # refused before any cluster
+        text = str(err.value)
+        assert str(out.resolve()) in text and "another sweep" in text and "--out" in text, text
+        assert all(s in text for s in differs), text
+        assert ("'B'" in text) == (path == b) and ("sweep.name" in text) == (path != c), text
+        assert _files(out) == before  # A's point files, runs, sweep.json and table are untouched
+    assert [r["id"] for r in load_results(out)] == [r["id"] for r in first]
+
+    # the same sweep resumes in its own folder, also with a value added to its grid (5e-3: invalid, not run)
+    a = _write_sweep(tmp_path, {"name": "A", "grid": {"time.dt": [1e-4, 2e-4, 5e-3]}}, name="A.toml")
+    log = io.StringIO()
+    again = run_sweep(a, out, address="tcp://127.0.0.1:9", stream=log)
+    assert "skipped 2 points" in log.getvalue() and "running" not in log.getvalue()
+    assert [r["status"] for r in again] == ["done", "done", "invalid"]
+    assert json.loads((out / "sweep.json").read_text())["name"] == "A"
+
+
 # ------------------------------------------------------------------------------------------------ metrics
 def test_errors_compare_frames_at_the_same_times():
     def rec(t, x, ke, front=0.0):
@@ -316,6 +373,15 @@ def test_cli_sweep_exit_codes(tmp_path, cluster_address, capsys, monkeypatch):
     bad = _write_sweep(tmp_path, {"grid": {"time.dt": 1e-4}}, name="bad.toml")
     assert main(["sweep", str(bad), "--out", str(tmp_path / "c")]) == 2
     assert 'sweep.grid."time.dt"' in capsys.readouterr().err
+
+    # another sweep into a's folder: refused, exit 2 (not a traceback); a file in place of the folder: named
+    other = _write_sweep(tmp_path, {"name": "other", "grid": {"time.dt": [2e-4]}}, name="other.toml")
+    assert main(["sweep", str(other), "--out", str(tmp_path / "a"), *args]) == 2
+    assert "holds the results of another sweep" in capsys.readouterr().err
+    (tmp_path / "file").write_text("x")
+    assert main(["sweep", str(other), "--out", str(tmp_path / "file"), *args]) == 2
+    err = capsys.readouterr().err
+    assert "cannot write the sweep's results" in err and "LocalCluster" not in err
 
     monkeypatch.setitem(sys.modules, "distributed", None)  # as if dask.distributed were not installed
     assert main(["sweep", str(good), "--out", str(tmp_path / "d")]) == 2

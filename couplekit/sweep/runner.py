@@ -1,9 +1,18 @@
 """Running a sweep on Dask: one task per point, results written as they finish, resumable.
 
 :func:`run_point` is the task (a module-level function of plain dicts, so that any Dask worker with couplekit
-installed can unpickle it); :func:`run_sweep` validates the sweep, skips points already finished in the output
-folder, submits the rest to a ``LocalCluster`` (or the scheduler at ``address``), writes every finished
-point to ``<out>/points/<id>.json`` at once, and writes the results table at the end.
+installed can unpickle it); :func:`run_sweep` validates the sweep, refuses an output folder that holds another
+sweep's results, skips points already finished in the output folder, submits the rest to a ``LocalCluster``
+(or the scheduler at ``address``), writes every finished point to ``<out>/points/<id>.json`` at once, and
+writes the results table at the end.
+
+A sweep folder belongs to the sweep its ``sweep.json`` records: the sweep's ``name`` and ``base`` (where its
+base scene comes from, :attr:`SweepSpec.base`) identify it. Running another sweep there (another name or base
+scene) would overwrite the points the two share (same overrides, same id) and replace the results table, so
+it is refused with a :class:`~couplekit.sweep.SweepError` before anything is written. Everything else may
+change between runs of the same sweep: points added to or dropped from a grid or a case, an edited base scene
+file, other ``frames``, ``backend`` or ``threads`` (finished points whose scene, frames or backend changed
+run again).
 """
 
 from __future__ import annotations
@@ -22,7 +31,17 @@ from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any, TextIO
 
-from .spec import REFERENCE_ID, SweepPoint, SweepSpec, finite_or_none, is_final, load_sweep, point_fingerprint
+from ..scene.schema import Problem
+from .spec import (
+    REFERENCE_ID,
+    SweepError,
+    SweepPoint,
+    SweepSpec,
+    finite_or_none,
+    is_final,
+    load_sweep,
+    point_fingerprint,
+)
 from .table import build_rows, write_results
 
 __all__ = ["DaskUnavailableError", "require_dask", "run_point", "run_sweep", "point_task"]
@@ -233,10 +252,12 @@ def _as_spec(sweep: str | Path | SweepSpec) -> SweepSpec:
 
 
 def _write_plan(out: Path, spec: SweepSpec) -> None:
-    """``<out>/sweep.json``: the expanded sweep (every point's id, name, overrides, frames, validity)."""
+    """``<out>/sweep.json`` (atomically): the sweep's name, source and base scene (what identifies it, see
+    :func:`_check_folder`), and the expanded sweep (every point's id, name, overrides, frames, validity)."""
     plan = {
         "name": spec.name,
         "source": spec.source,
+        "base": spec.base,
         "backend": spec.backend,
         "threads": spec.threads,
         "keys": list(spec.keys),
@@ -252,7 +273,46 @@ def _write_plan(out: Path, spec: SweepSpec) -> None:
             for p in spec.all_points()
         ],
     }
-    (out / "sweep.json").write_text(json.dumps(finite_or_none(plan), indent=1) + "\n")
+    tmp = out / "sweep.json.tmp"
+    tmp.write_text(json.dumps(finite_or_none(plan), indent=1) + "\n")
+    os.replace(tmp, out / "sweep.json")
+
+
+def _differ(recorded: str, current: str) -> tuple[str, str]:
+    """Two base scenes as shown in a message: their file names, or the whole paths when those are the same."""
+    a, b = Path(recorded).name, Path(current).name
+    return (a, b) if a != b else (recorded, current)
+
+
+def _check_folder(out: Path, spec: SweepSpec) -> None:
+    """Refuse ``out`` (a :class:`SweepError` naming the folder, what differs and the fix) when its ``sweep.json``
+    records another sweep: another ``name``, or another ``base`` scene (a ``sweep.json`` written before the
+    base was recorded is compared by name only). A ``sweep.json`` that cannot be read is refused too, since
+    whose results the folder holds is then unknown. Nothing is written here."""
+    path = out / "sweep.json"
+    if not path.exists():
+        return
+    try:
+        plan = json.loads(path.read_text())
+        why = "it is not a JSON object"
+    except (OSError, ValueError) as exc:
+        plan, why = None, f"{type(exc).__name__}: {exc}"
+    fix = f"run this sweep into a new folder (a new --out), or delete {out} to replace what it holds"
+    if not isinstance(plan, dict):
+        problem = f"{out} holds a sweep.json that cannot be read ({why}), so whose results the folder holds is unknown"
+        raise SweepError([Problem("(folder)", problem, fix)], spec.source)
+    differs = []
+    name, base = plan.get("name"), plan.get("base")
+    if isinstance(name, str) and name != spec.name:
+        differs.append(f"sweep.name {name!r}, not {spec.name!r}")
+    if isinstance(base, str) and base and spec.base and base != spec.base:
+        differs.append("base scene {}, not {}".format(*_differ(base, spec.base)))
+    if differs:
+        problem = (
+            f"{out} holds the results of another sweep ({'; '.join(differs)}): running this one there would "
+            "overwrite the points they share and replace its results table"
+        )
+        raise SweepError([Problem("(folder)", problem, fix)], spec.source)
 
 
 def _plan_runs(spec: SweepSpec, out: Path, say: _Reporter) -> tuple[dict[str, dict], list[dict]]:
@@ -338,11 +398,14 @@ def run_sweep(
     Points already finished in ``out`` (a JSON file with status done, diverged or invalid, for the same scene)
     are not run again; no cluster is started when nothing is left to run. A point that fails is recorded
     with status "error" and the others go on. Raises :class:`~couplekit.sweep.SweepError` for a malformed
-    sweep and :class:`DaskUnavailableError` when dask.distributed is missing.
+    sweep, and before anything is written when ``out`` holds another sweep's results (its ``sweep.json``
+    records another sweep name or base scene: give this sweep its own folder, or delete that one), and
+    :class:`DaskUnavailableError` when dask.distributed is missing.
     """
     spec = _as_spec(sweep)
     spec = dataclasses.replace(spec, threads=threads or spec.threads, backend=backend or spec.backend)
     out = Path(out if out is not None else Path("runs") / "sweeps" / spec.name).resolve()
+    _check_folder(out, spec)  # another sweep's folder is refused before anything is written into it
     (out / "points").mkdir(parents=True, exist_ok=True)
     say = _Reporter(progress, stream)
     say(f"{spec.describe()}; folder {out}")

@@ -6,6 +6,15 @@ the fix), applies the overrides of every point to the base scene and validates e
 :meth:`couplekit.scene.Scene.from_dict`. A point whose scene is refused is kept with ``invalid`` set to the
 :class:`~couplekit.scene.SceneError` text (it is recorded, never run); a refused reference scene is a
 :class:`SweepError`, since every point is compared with it.
+
+``sweep.frames`` replaces the base scene's ``time.frames`` in every point (and the reference); a sweep that
+gives ``sweep.frames`` and also sets ``time.frames`` in a set, grid, case or reference is refused, since
+``sweep.frames`` would silently replace those values too (a point named ``time.frames=2`` would run
+``sweep.frames`` frames).
+
+:attr:`SweepSpec.base` names where the base scene comes from (the resolved path of the ``sweep.base`` file, or
+the inline ``[base]`` of the sweep file): with :attr:`SweepSpec.name` it identifies the sweep, so that a sweep
+folder holding another sweep's results is refused (:mod:`couplekit.sweep.runner`).
 """
 
 from __future__ import annotations
@@ -24,7 +33,7 @@ from typing import Any
 
 from ..scene import Scene, SceneError
 from ..scene.schema import Problem, ProblemError, read_toml
-from .keys import KeyPathError, check_key, flatten_keys, set_key
+from .keys import KeyPathError, check_key, flatten_keys, parse_key, set_key
 
 __all__ = [
     "BACKENDS",
@@ -88,7 +97,11 @@ class SweepPoint:
 class SweepSpec:
     """A checked, expanded sweep: ``points`` (in file order), the optional ``reference`` point, ``keys`` (every
     overridden dotted key, the order of the results table's columns), ``scene_dir`` (where the scenes'
-    relative files resolve), and how to run (``backend``, ``threads`` per point, ``frames`` override)."""
+    relative files resolve), and how to run (``backend``, ``threads`` per point, ``frames`` override).
+
+    ``base``: where the base scene comes from, the resolved path of the ``sweep.base`` file or ``"the inline
+    [base] of <sweep file name>"`` (empty when unknown). With ``name`` it identifies the sweep: a sweep folder
+    whose ``sweep.json`` records another name or base belongs to another sweep, and is refused."""
 
     name: str
     source: str
@@ -99,6 +112,7 @@ class SweepSpec:
     points: tuple[SweepPoint, ...]
     reference: SweepPoint | None
     keys: tuple[str, ...]
+    base: str = ""
 
     def all_points(self) -> list[SweepPoint]:
         """The reference (when there is one) first, then the points."""
@@ -155,9 +169,11 @@ def parse_sweep(
     if problems or base is None:
         raise SweepError(problems, source)
 
-    base_scene, scene_dir = base
+    base_scene, scene_dir, base_file = base
+    base_label = str(base_file) if base_file is not None else f"the inline [base] of {Path(source).name}"
     _check_key_names(base_scene, global_set, global_grid, cases, reference, problems)
     _check_overlaps(global_set, global_grid, cases, problems)
+    _check_frames(frames, global_set, global_grid, cases, reference, problems)
     if problems:
         raise SweepError(problems, source)
 
@@ -175,7 +191,7 @@ def parse_sweep(
     keys = _column_keys(global_set, global_grid, cases, reference)
     return SweepSpec(
         name=name, source=source, scene_dir=str(scene_dir), backend=backend, threads=threads, frames=frames,
-        points=tuple(points), reference=ref_point, keys=keys,
+        points=tuple(points), reference=ref_point, keys=keys, base=base_label,
     )  # fmt: skip
 
 
@@ -254,8 +270,11 @@ def _optional(table: dict, key: str, kind: type, default: Any, problems: list[Pr
     return value
 
 
-def _read_base(data: dict, sweep: dict, base_dir: Path, problems: list[Problem]) -> tuple[dict, Path] | None:
-    """(base scene dict, directory its files resolve against), checked with Scene.from_dict."""
+def _read_base(
+    data: dict, sweep: dict, base_dir: Path, problems: list[Problem]
+) -> tuple[dict, Path, Path | None] | None:
+    """(base scene dict, directory its files resolve against, the resolved scene file or None for an inline
+    ``[base]``), checked with Scene.from_dict."""
     inline, ref = data.get("base"), sweep.get("base")
     if inline is not None and ref is not None:
         problems.append(
@@ -275,27 +294,29 @@ def _read_base(data: dict, sweep: dict, base_dir: Path, problems: list[Problem])
         found = _base_file(ref, base_dir, problems)
     if found is None:
         return None
-    scene, scene_dir, key, what = found
+    scene, scene_dir, key, what, file = found
     try:
         Scene.from_dict(copy.deepcopy(scene), base_dir=scene_dir, source_name=what)
     except SceneError as exc:
         problems.extend(Problem(key, f"{what} is invalid: {p.key}: {p.message}", p.fix) for p in exc.problems)
         return None
-    return scene, scene_dir
+    return scene, scene_dir, file
 
 
-def _inline_base(inline: Any, base_dir: Path, problems: list[Problem]) -> tuple[dict, Path, str, str] | None:
-    """(scene, scene dir, sweep-file key, description) of an inline ``[base]`` table."""
+def _inline_base(
+    inline: Any, base_dir: Path, problems: list[Problem]
+) -> tuple[dict, Path, str, str, Path | None] | None:
+    """(scene, scene dir, sweep-file key, description, None: no scene file) of an inline ``[base]`` table."""
     if not isinstance(inline, dict):
         problems.append(
             Problem("base", f"must be a table, got {_type_name(inline)}", "write the scene under [base.*] tables")
         )
         return None
-    return inline, base_dir, "base", "the inline [base] scene"
+    return inline, base_dir, "base", "the inline [base] scene", None
 
 
-def _base_file(ref: Any, base_dir: Path, problems: list[Problem]) -> tuple[dict, Path, str, str] | None:
-    """(scene, scene dir, sweep-file key, description) of the scene file ``sweep.base`` names."""
+def _base_file(ref: Any, base_dir: Path, problems: list[Problem]) -> tuple[dict, Path, str, str, Path | None] | None:
+    """(scene, scene dir, sweep-file key, description, resolved path) of the scene file ``sweep.base`` names."""
     if not isinstance(ref, str):
         problems.append(Problem("sweep.base", f"must be a string, got {_type_name(ref)}", 'write base = "scene.toml"'))
         return None
@@ -314,7 +335,7 @@ def _base_file(ref: Any, base_dir: Path, problems: list[Problem]) -> tuple[dict,
     except (OSError, tomllib.TOMLDecodeError) as exc:
         problems.append(Problem("sweep.base", f"cannot read the base scene {path}: {exc}", "fix the scene file"))
         return None
-    return scene, path.parent, "sweep.base", f"the base scene {path}"
+    return scene, path.parent, "sweep.base", f"the base scene {path}", path.resolve()
 
 
 def _overrides(table: Any, where: str, problems: list[Problem]) -> dict[str, Any]:
@@ -462,6 +483,39 @@ def _check_overlaps(global_set, global_grid, cases, problems: list[Problem]) -> 
     for key in global_grid:
         if key in global_set:
             problems.append(Problem(f'sweep.grid."{key}"', "is also fixed in sweep.set", "keep it in one of the two"))
+
+
+def _sets_frames(key: str, value: Any, grid: bool) -> bool:
+    """Whether the override ``key = value`` (a grid's list of values when ``grid``) sets ``time.frames``."""
+    try:
+        parts = parse_key(key)
+    except KeyPathError:
+        return False
+    if parts == ("time", "frames"):
+        return True
+    values = value if grid and isinstance(value, list) else [value]
+    return parts == ("time",) and any(isinstance(v, dict) and "frames" in v for v in values)
+
+
+def _check_frames(frames, global_set, global_grid, cases, reference, problems: list[Problem]) -> None:
+    """``sweep.frames`` replaces ``time.frames`` in every point, so a table that sets ``time.frames`` too is
+    refused: its values would be silently replaced (points named ``time.frames=2`` running ``sweep.frames``)."""
+    if frames is None:
+        return
+    for where, table in _tables(global_set, global_grid, cases, reference):
+        grid = where.endswith(".grid")
+        for key, value in table.items():
+            if not _sets_frames(key, value, grid):
+                continue
+            drop = "drop time.frames from the grid" if grid else f"drop time.frames from {where}"
+            problems.append(
+                Problem(
+                    f'{where}."{key}"',
+                    f"sets time.frames, but sweep.frames = {frames} replaces time.frames in every point, so each "
+                    f"would run {frames} frame{'s' if frames != 1 else ''} whatever this says",
+                    f"remove sweep.frames (every point then runs its own time.frames), or {drop}",
+                )
+            )
 
 
 # ------------------------------------------------------------------------------------------------ points
