@@ -14,7 +14,9 @@ exit 0.
 with a progress bar, writing ParaView/PLY/PNG outputs, diagnostics and checkpoints (``--scheduler`` replaces
 the scene's ``[scheduler]`` table, e.g. ``subcycle:8``). Exit codes: 0 done, 1 NaN/Inf (the report names
 step, field and cell; ``last_good.h5`` is kept), 2 invalid scene, 3 refused (coupled scene,
-not enough memory), 130 interrupted by Ctrl-C (``interrupted.h5`` written; resume with ``--resume``).
+not enough memory), 130 interrupted by Ctrl-C, 143 by SIGTERM (``interrupted.h5`` written either way; resume
+with ``--resume``, which without ``--out`` continues in the folder the checkpoint lies in when that is a run's
+folder).
 
 A closed standard output (``couplekit validate scene.toml | head -1``) ends the command quietly, exit 141
 (128 + SIGPIPE, as a shell reports a process ended by a closed pipe).
@@ -179,6 +181,18 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def _run_folder_of(checkpoint: str) -> str | None:
+    """The run folder a checkpoint lies in (its folder holds a run's marker, :data:`couplekit.io.outputs.RUN_MARKER`):
+    where ``--resume`` without ``--out`` continues, so that a run started with ``--out DIR`` goes on in DIR; None
+    for a checkpoint kept elsewhere (then the stored scene's folder)."""
+    from pathlib import Path
+
+    from .io.outputs import RUN_MARKER
+
+    folder = Path(checkpoint).parent
+    return str(folder) if (folder / RUN_MARKER).is_file() else None
+
+
 def _note_scene_file(path: str, stored, checkpoint: str) -> None:
     """A note when the scene file given with --resume is not the checkpoint's scene (changed, invalid or gone):
     the stored scene is the one resumed either way."""
@@ -220,7 +234,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
             sim = Simulation.load(args.resume, backend=args.backend, threads=args.threads)
             _note_scene_file(args.scene, sim.scene, args.resume)
             out = prepare_output(
-                args.out or sim.scene.outputs.directory or default_output(sim.scene.name),
+                args.out
+                or _run_folder_of(args.resume)
+                or sim.scene.outputs.directory
+                or default_output(sim.scene.name),
                 resume=True,
                 overwrite=args.overwrite,
             )
@@ -249,6 +266,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
     except (BackendUnavailableError, CheckpointError, OutputFolderError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except OSError as exc:  # the output folder cannot be made: a name too long, a read-only or full disk
+        print(f"error: cannot use the output folder: {exc.strerror or exc} ({exc.filename or args.out}); choose "
+              "another --out", file=sys.stderr)  # fmt: skip
+        return 2
     except KeyboardInterrupt:
         print("interrupted before the run started; nothing to save", file=sys.stderr)
         return 130
@@ -258,15 +279,24 @@ def _cmd_run(args: argparse.Namespace) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     except OSError as exc:  # a full disk, a folder removed during the run: what was written stays
+        kept = sorted(p.name for p in out.glob("*.h5")) if out.is_dir() else []
+        then = (
+            f"then --resume {out / kept[-1] if 'checkpoint.h5' not in kept else out / 'checkpoint.h5'} --out {out}"
+            if kept
+            else "then run it again (no checkpoint was written yet)"
+        )
         print(
             f"error: writing the run's outputs into {out} failed ({exc.strerror or exc}); the frames and checkpoints "
-            "written before are kept; free space or choose another --out, then --resume from the last checkpoint",
+            f"written before are kept; free space or choose another --out, {then}",
             file=sys.stderr,
         )
         return 2
     if result.status == "interrupted":
-        print(f"interrupted: checkpoint {result['checkpoint']}; continue with --resume {result['checkpoint']}")
-        return 130
+        print(
+            f"interrupted ({result.get('signal') or 'stopped'}): checkpoint {result['checkpoint']}; continue with "
+            f"--resume {result['checkpoint']} --out {out}"
+        )
+        return 143 if result.get("signal") == "SIGTERM" else 130
     if result.status == "diverged":
         kept = f"last good state in {result['checkpoint']}" if result["checkpoint"] else "no good state to keep"
         print(f"diverged: {result['error']}; {kept}", file=sys.stderr)
@@ -304,11 +334,18 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
             spec, out, address=args.address, workers=args.workers, progress=not args.no_progress,
             threads=args.threads, backend=args.backend,
         )  # fmt: skip
+    except SweepError as exc:  # e.g. the folder holds another sweep's results (refused before anything is written)
+        print(exc, file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         print(f"interrupted: finished points are kept in {out}/points; run the same command to resume", file=sys.stderr)
         return 130
-    except OSError as exc:  # includes the timeout of connecting to --address
-        print(f"error: cannot run the sweep on {args.address or 'a LocalCluster'}: {exc}", file=sys.stderr)
+    except OSError as exc:  # an unusable output folder, or the timeout of connecting to --address
+        if exc.filename is not None:  # a file operation failed: the folder, not the cluster
+            print(f"error: cannot write the sweep's results into {out}: {exc.strerror or exc} ({exc.filename}); "
+                  "choose another --out", file=sys.stderr)  # fmt: skip
+        else:
+            print(f"error: cannot run the sweep on {args.address or 'a LocalCluster'}: {exc}", file=sys.stderr)
         return 2
     failed = [r for r in rows if not is_final(r["status"])]
     if args.no_progress:
@@ -424,7 +461,12 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--out", default=None, help="output folder (default: outputs.directory or runs/<name>)")
     run.add_argument("--backend", default="auto", help="auto (default), cuda, cpu or numpy")
     run.add_argument("--threads", type=int, default=None, help="OpenMP threads of the cpu backend")
-    run.add_argument("--resume", default=None, metavar="CKPT", help="continue from an HDF5 checkpoint")
+    run.add_argument(
+        "--resume",
+        default=None,
+        metavar="CKPT",
+        help="continue from an HDF5 checkpoint (outputs go on in its run folder unless --out says otherwise)",
+    )
     run.add_argument(
         "--scheduler",
         default=None,

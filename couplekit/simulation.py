@@ -174,7 +174,8 @@ def _gib(b: float) -> str:
 class RunResult(dict):
     """What :meth:`Simulation.run` did: ``status`` ("done", "interrupted", "diverged"), ``frames``,
     ``steps``, ``out`` (folder), ``checkpoint`` (last checkpoint written), ``error`` (for "diverged": the first
-    non-finite value, or the sand time-step limit that stopped the run before it went non-finite)."""
+    non-finite value, or the sand time-step limit that stopped the run before it went non-finite), ``signal``
+    (for "interrupted": "SIGINT" or "SIGTERM", None when ``stop()`` ended it)."""
 
     @property
     def status(self) -> str:
@@ -245,6 +246,7 @@ class Simulation:
         self.steps_per_frame = sc.time.steps_per_frame
         self.step_count = 0
         self._resumed = False  # set by load(): run() then appends to an output folder instead of refusing it
+        self._run_folder: Path | None = None  # the folder of the last run(): a later run() into it continues there
         self.fluid = self.sand = self.coupler = self.scheduler = self.emitter = None
         self._timing = bool(timing)
         self._cost_mark: tuple[dict[str, float], int] = ({}, 0)  # stage totals at the last frame (frame_stage_costs)
@@ -769,15 +771,18 @@ class Simulation:
         ``out`` (default ``outputs.directory`` or ``runs/<name>``).
 
         Each frame: step, NaN/Inf check, outputs, diagnostics line, progress bar; checkpoints every
-        ``outputs.checkpoint_every`` frames and at the end (``checkpoint.h5``). Ctrl-C (SIGINT) or ``stop()``
-        returning True ends the run cleanly between steps with ``interrupted.h5``. On NaN/Inf the last good
+        ``outputs.checkpoint_every`` frames and at the end (``checkpoint.h5``). Ctrl-C (SIGINT), SIGTERM (what
+        batch schedulers and ``timeout`` send) or ``stop()`` returning True ends the run cleanly between steps with
+        ``interrupted.h5`` (the result's ``signal`` names the signal). On NaN/Inf the last good
         state (the last one that passed the check) is written to ``last_good.h5`` and the report to
         ``diverged.txt``. At the end, also after a divergence or an interrupt, the diagnostics are drawn into
         ``summary.png`` (:func:`couplekit.io.plots.plot_run`; a plotting failure is only a warning; not with
         ``summary=False``, as sweep points run: their figures are drawn together by ``couplekit compare``).
 
         The folder is checked first (:func:`couplekit.io.outputs.prepare_output`): one holding an earlier run's
-        outputs is refused unless this run resumes from a checkpoint (it appends) or ``overwrite`` deletes them.
+        outputs is refused unless this run resumes from a checkpoint (it appends), continues this simulation's
+        own last run() in the same folder, or ``overwrite`` deletes them. A simulation stepped with :meth:`step`
+        before its first run() is a new run: it does not append to (and so cut short) an earlier run's folder.
         """
         from .io import DiagnosticsLog, PvdIndex
         from .io.outputs import default_output, prepare_output, write_run_marker
@@ -785,15 +790,19 @@ class Simulation:
 
         sc = self.scene
         total = _count("frames", frames, least=1) if frames is not None else int(sc.time.frames)
-        resumed = self.step_count > 0 or self._resumed
+        folder = Path(out or sc.outputs.directory or default_output(sc.name))
+        # a checkpoint's run appends; so does this simulation's own earlier run() into the same folder
+        resumed = self._resumed or (self.step_count > 0 and self._run_folder == _resolved(folder))
         scene_dict = sc.to_dict()
-        out = prepare_output(
-            out or sc.outputs.directory or default_output(sc.name),
-            resume=resumed,
-            overwrite=overwrite,
-            scene=scene_dict,
-        )
+        out = prepare_output(folder, resume=resumed, overwrite=overwrite, scene=scene_dict)
+        self._run_folder = _resolved(out)
         write_run_marker(out, scene_dict)
+        missing = [k for k in sc.outputs.fields if k not in self.fields()]
+        if missing and sc.outputs.vtk:
+            self._log(
+                f"note: outputs.fields lists {', '.join(missing)}, which this scene does not produce "
+                f"({', '.join(sorted(self.fields())) or 'no grid fields'}): not written"
+            )
         indexes = {"fields": PvdIndex(out / "fields.pvd"), "particles": PvdIndex(out / "particles.pvd")}
         log_file = (
             DiagnosticsLog(out / "diagnostics.jsonl", append=resumed, until_step=self.step_count)
@@ -807,10 +816,11 @@ class Simulation:
         previous = None
         if threading_main():
 
-            def _on_sigint(signum, frame):
+            def _on_signal(signum, frame):
                 interrupted["flag"] = True
+                interrupted["signal"] = signal.Signals(signum).name
 
-            previous = signal.signal(signal.SIGINT, _on_sigint)
+            previous = {sig: signal.signal(sig, _on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
         result = RunResult(status="done", out=str(out), checkpoint=None, steps=0)
         steps_done = 0
         chunk = max(1, min(self.steps_per_frame, 10))
@@ -835,7 +845,7 @@ class Simulation:
                     if interrupted["flag"] or (stop is not None and stop()):
                         path = self.save(out / "interrupted.h5")
                         self._log(f"\ninterrupted at step {self.step_count} (frame {self.frame}); checkpoint {path}")
-                        result.update(status="interrupted", checkpoint=str(path))
+                        result.update(status="interrupted", checkpoint=str(path), signal=interrupted.get("signal"))
                         return result
                     n = min(chunk, target - self.step_count)
                     try:
@@ -890,8 +900,8 @@ class Simulation:
                 log_file.close()
                 if summary:
                     self._write_summary_plot(out)
-            if previous is not None:
-                signal.signal(signal.SIGINT, previous)
+            for sig, handler in (previous or {}).items():
+                signal.signal(sig, handler)
 
     def _keep_last_good(self, out: Path, good: dict, good_step: int) -> Path:
         """Back to the last checked state (fresh solvers, its arrays) and save it as ``last_good.h5``."""
@@ -915,6 +925,11 @@ class Simulation:
         if self.sand is not None:
             parts.append(f"{self.sand.n_particles} particles")
         return ", ".join(parts) + ")"
+
+
+def _resolved(path: Path) -> Path:
+    """``path`` made absolute (symlinks resolved where they exist), to compare run folders."""
+    return Path(path).expanduser().resolve()
 
 
 def threading_main() -> bool:

@@ -189,6 +189,41 @@ def test_ctrl_c_writes_checkpoint_and_resume_finishes(tmp_path):
     assert rc == 0
 
 
+def test_sigterm_writes_checkpoint_and_resume_goes_on_in_the_same_folder(tmp_path, monkeypatch, capsys):
+    """SIGTERM (batch schedulers, `timeout`) is an interrupt like Ctrl-C: exit 143 with interrupted.h5 and the
+    hint; --resume without --out continues in the folder the checkpoint lies in (the run was started with
+    --out), not in the scene's default folder."""
+    scene = _scene(tmp_path, frames=400)
+    out = tmp_path / "given"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "couplekit", "run", str(scene), "--out", str(out), "--backend", "cpu"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=dict(os.environ, PYTHONUNBUFFERED="1"),
+    )  # fmt: skip
+    deadline = time.time() + 300
+    while time.time() < deadline and not (out / "diagnostics.jsonl").exists():
+        time.sleep(0.2)
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGTERM)
+    stdout, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 143, stdout + stderr
+    assert (out / "interrupted.h5").exists() and f"--out {out}" in stdout and "SIGTERM" in stdout
+    frames_before = len(list(out.glob("fields_*.vti")))
+    monkeypatch.chdir(tmp_path)  # the default folder would be runs/<name> here
+    frames = frames_before + 2  # frame files 0 .. frames
+    rc = main(["run", str(scene), "--frames", str(frames), "--backend", "cpu", "--resume",
+               str(out / "interrupted.h5"), "--no-progress"])  # fmt: skip
+    assert rc == 0
+    assert f"in {out}" in capsys.readouterr().out
+    assert len(list(out.glob("fields_*.vti"))) == frames + 1 and not (tmp_path / "runs").exists()
+
+
+def test_an_unusable_out_folder_is_an_error_not_a_traceback(tmp_path, capsys):
+    """A folder name the file system cannot take (here too long): exit 2 and a message naming the fix."""
+    assert main(["run", str(_scene(tmp_path)), "--out", str(tmp_path / ("a" * 300)), "--backend", "numpy"]) == 2
+    err = capsys.readouterr().err
+    assert "File name too long" in err and "another --out" in err
+
+
 @pytest.mark.parametrize("name", ["sand_drop_small.toml"])
 def test_demo_scene_loads(name):
     from couplekit.scene import Scene

@@ -303,3 +303,35 @@ def test_a_sand_step_limit_mid_run_keeps_the_last_good_state(tmp_path, case, mon
     assert "last good state: step 3" in report and result["error"] in report
     good = Simulation.load(tmp_path / "last_good.h5", backend="cpu", log=None)
     assert good.step_count == 3 and all(np.isfinite(a).all() for a in good.particles().values())
+
+
+def test_a_stepped_simulation_does_not_append_to_another_runs_folder(tmp_path):
+    """run() after step() is a new run: into a folder holding an earlier run of the same scene it is refused
+    (it used to take it for a resume and cut that run's diagnostics and .pvd index short); its own earlier run()
+    into the same folder it continues."""
+    from couplekit.io.outputs import OutputFolderError
+
+    out = tmp_path / "r"
+    _sim(tiny_sand()).run(frames=3, out=out, progress=False)
+    before = [r["frame"] for r in read_diagnostics(out / "diagnostics.jsonl")]
+    sim = _sim(tiny_sand())
+    sim.step(sim.steps_per_frame + 1)
+    with pytest.raises(OutputFolderError, match="earlier run"):
+        sim.run(frames=2, out=out, progress=False)
+    assert [r["frame"] for r in read_diagnostics(out / "diagnostics.jsonl")] == before  # nothing cut
+    again = tmp_path / "again"
+    sim.run(frames=2, out=again, progress=False)
+    sim.run(frames=3, out=again, progress=False)  # continues its own run there
+    assert [r["frame"] for r in read_diagnostics(again / "diagnostics.jsonl")] == [2, 3]
+
+
+def test_a_requested_field_the_scene_does_not_make_is_noted(tmp_path):
+    """outputs.fields naming a field this scene does not produce (a sand-only scene has no fluid 'solid' field)
+    says so when the run starts, instead of writing nothing without a word."""
+    lines = []
+    d = tiny_sand()
+    d.setdefault("outputs", {})["fields"] = ["solid", "sand_fraction"]
+    sim = Simulation(Scene.from_dict(d), backend="cpu", log=lines.append)
+    sim.run(frames=1, out=tmp_path / "r", progress=False)
+    assert any("outputs.fields lists solid" in line and "not written" in line for line in lines)
+    assert (tmp_path / "r" / "fields_0001.vti").exists()  # the field it makes is written
