@@ -384,9 +384,48 @@ def _fp16_gravity_caution(scene: Scene) -> list[str]:
     ]
 
 
+def _small_drop_cautions(scene: Scene) -> list[str]:
+    """A water body smaller than its own interface on every axis (under 2 interface widths across): the phase
+    field's tanh profile (``build_fluid``) holds far more water than the body (a probe's sphere of 0.2 cell took
+    ~800x its volume, one of 2 cells 3.6x). The initial water of such a body, summed on its cells, against its
+    volume (sub-cell points inside); a caution above 1.25x."""
+    dom, w = scene.domain, scene.fluid.interface_width
+    out = []
+    for i, b in enumerate(scene.bodies):
+        if b.kind != "water":
+            continue
+        try:
+            shape = b.geometry.shape(dom, 0.25 * dom.dx)
+            lo, hi = (np.asarray(v, np.float64) for v in shape.bounds())
+        except Exception:  # a shape that does not build is validation's problem
+            continue
+        if np.any(hi - lo >= 2 * w * dom.dx):
+            continue
+        pad = 2 * w * dom.dx
+        a = np.floor((lo - pad) / dom.dx).astype(int)
+        z = np.ceil((hi + pad) / dom.dx).astype(int)
+        axes = [(np.arange(a[k], z[k]) + 0.5) * dom.dx for k in range(3)]
+        pts = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+        phi = 0.5 * (1.0 - np.tanh(2.0 * np.asarray(shape.sdf(pts)) / (dom.dx * w)))
+        fine = [(np.arange(4 * a[k], 4 * z[k]) + 0.5) * dom.dx / 4 for k in range(3)]
+        sub = np.stack(np.meshgrid(*fine, indexing="ij"), axis=-1).reshape(-1, 3)
+        volume = float((np.asarray(shape.sdf(sub)) < 0).sum()) / 64  # in cells
+        ratio = float(phi.sum()) / volume if volume > 0 else np.inf
+        if ratio > 1.25:
+            across = float((hi - lo).max() / dom.dx)
+            amount = f"{ratio:.3g}x its volume of water" if np.isfinite(ratio) else f"{phi.sum():.3g} cells of water"
+            out.append(
+                f"bodies[{i}] (water) is only {across:.3g} cells across, less than 2 interface widths "
+                f"(fluid.interface_width = {w:g} cells): the phase field's interface profile starts it with "
+                f"{amount}; make it at least {2 * w:g} cells across (or lower domain.dx)"
+            )
+    return out
+
+
 def _input_cautions(scene: Scene) -> list[str]:
     """Cautions about what a scene asks of the fluid beyond what was measured or what can have a steady state:
-    a density ratio beyond :data:`MEASURED_DENSITY_RATIO`; a water outlet in an outflow face (the zero-gradient
+    a density ratio beyond :data:`MEASURED_DENSITY_RATIO`; a water body smaller than its interface
+    (:func:`_small_drop_cautions`); a water outlet in an outflow face (the zero-gradient
     outflow cells around it copy the jet's inward velocity and let water in too: a 4 × 4-cell outlet delivered
     1.4-1.9× its flux, exactly its flux in a wall face); a single-phase fluid let in through an inflow with no
     outflow face (the liquid has nowhere to go: its pressure rises for as long as the inflow runs)."""
@@ -407,6 +446,8 @@ def _input_cautions(scene: Scene) -> list[str]:
                 f"flux u A, tests/scene/test_stability_cautions.py); make domain.boundary.{inf.face} a wall and "
                 "put the outflow on another face"
             )
+    if fl.phases == 2:
+        out += _small_drop_cautions(scene)
     if fl.phases == 1 and scene.inflows and "outflow" not in scene.domain.boundary.values():
         out.append(
             "a single-phase fluid enters through inflows[0] but no face is an outflow: the liquid has nowhere to "

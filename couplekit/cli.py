@@ -99,18 +99,48 @@ def _with_sets(scene, args: argparse.Namespace, scheduler: str | None = None):
     return with_settings(scene, settings, base_dir=Path(args.scene).parent)
 
 
+def _load_with_sets(args: argparse.Namespace, scheduler: str | None = None):
+    """The scene file of ``args`` with ``scheduler`` and the ``--set`` options applied (:func:`_with_sets`).
+    A file that is invalid on its own but valid with the settings is taken: the settings are applied to the
+    file's own table and the result validated once (``--set time.dt=1e-4`` fixes a file whose time step breaks
+    a limit; validating the file first refused it with the value the option replaces).  Errors of the result
+    name the settings."""
+    from .scene import Scene, SceneError
+    from .scene.schema import read_toml
+    from .simulation import parse_setting
+    from .sweep.keys import check_key, set_key
+
+    try:
+        return _with_sets(Scene.load(args.scene), args, scheduler=scheduler)
+    except SceneError:
+        if not args.set and scheduler is None:
+            raise
+    data = read_toml(Path(args.scene), SceneError)
+    settings: dict = {}
+    if scheduler is not None:
+        from .schedulers import spec_table
+
+        settings["scheduler"] = spec_table(scheduler)
+    settings.update(parse_setting(s) for s in args.set)
+    for key, value in settings.items():
+        check_key(key, data)
+        set_key(data, key, value)
+    shown = ", ".join(f"{k} = {v!r}" for k, v in settings.items())
+    return Scene.from_dict(data, base_dir=Path(args.scene).parent, source_name=f"{args.scene} with {shown}")
+
+
 def _cmd_validate(args: argparse.Namespace) -> int:
     """Exit 0 valid, 2 invalid, 3 refused with ``run``'s message and exit code: an effect the coupling cannot
     switch off yet, or a memory estimate beyond what any machine holds.  What ``run`` refuses on this machine
     only (its memory) is noted with ``run``'s message, exit 0: the same file validates alike on every host."""
     from .assembly import CouplingUnavailableError, check_odd_ramp_gaps, check_run, stability_cautions
-    from .scene import Scene, SceneError
+    from .scene import SceneError
     from .simulation import InsufficientMemoryError, _gib
     from .sweep.keys import KeyPathError
 
     any_machine = 2.0**44  # 16 TiB: more than the memory of any single host or device couplekit runs on
     try:
-        scene = _with_sets(Scene.load(args.scene), args)
+        scene = _load_with_sets(args)
     except SceneError as exc:
         print(exc, file=sys.stderr)
         return 2
@@ -165,6 +195,12 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     """Table 1 row by row and the price of each effect (couplekit.bench.runner); prints the tables."""
     from .bench.runner import run_bench
 
+    if args.backend is not None:  # refused before anything is measured or written (the folder included)
+        try:
+            get_backend(args.backend)
+        except (BackendUnavailableError, ValueError) as exc:
+            print(f"error: --backend {args.backend}: {exc}", file=sys.stderr)
+            return 2
     try:
         res = run_bench(args.out, quick=args.quick, tiny=args.tiny, backend=args.backend, progress=not args.no_progress)
     except OSError as exc:
@@ -212,7 +248,7 @@ def _note_scene_file(path: str, stored, checkpoint: str) -> None:
 def _cmd_run(args: argparse.Namespace) -> int:
     from .io.checkpoint import CheckpointError
     from .io.outputs import OutputFolderError, default_output, prepare_output
-    from .scene import Scene, SceneError
+    from .scene import SceneError
     from .simulation import CouplingUnavailableError, InsufficientMemoryError, Simulation
     from .sweep.keys import KeyPathError
 
@@ -243,10 +279,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
             )
             print(f"resumed from {args.resume} at step {sim.step_count} (frame {sim.frame})")
         else:
-            scene = Scene.load(args.scene)
             # --scheduler and --set together, validated once: each alone may be refused where the pair is valid
             # (multirate:2 with a softer sand.youngs_modulus), so neither is checked against the file's other half
-            scene = _with_sets(scene, args, scheduler=args.scheduler)
+            scene = _load_with_sets(args, scheduler=args.scheduler)
             # the output folder before anything is allocated: a used one is refused unless overwritten
             out = prepare_output(
                 args.out or scene.outputs.directory or default_output(scene.name),

@@ -4,6 +4,9 @@ Every shape has ``sdf(points)`` for points ``(N, 3)`` (metres, columns x, y, z) 
 axis-aligned box ``(lo, hi)`` that contains it. Primitives (box, sphere, cylinder) are exact SDFs
 (Quílez's formulas); :class:`Transformed` applies a uniform scale, a rotation and a translation, which keep
 an SDF exact (the distance scales with the uniform scale); :class:`Inverted` swaps inside and outside.
+The box of a transformed shape is the shape's own :meth:`Shape.transformed_bounds` (the tight box of the
+moved solid where the shape knows it: a sphere, a cylinder, a mesh's vertices; the moved corners of its box
+otherwise, larger by up to √3 but never too small); nested transforms compose into one.
 Height fields and triangle meshes are in :mod:`couplekit.scene.mesh`.
 
 :func:`sdf_on_grid` samples a shape at the cell centres of a grid, returning ``(nz, ny, nx)`` float32 (the
@@ -44,6 +47,14 @@ class Shape:
         """(lo, hi): an axis-aligned box containing the solid."""
         raise NotImplementedError
 
+    def transformed_bounds(
+        self, scale: float, rotation: np.ndarray, translation: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(lo, hi): an axis-aligned box containing the solid mapped by x -> scale · rotation · x + translation
+        (``rotation`` a 3×3 matrix). This fallback moves the 8 corners of :meth:`bounds`: always large enough,
+        exact for a box, up to √3 times too large for a round solid; shapes that know better override it."""
+        return _moved_corners(self.bounds(), scale, rotation, translation)
+
     def __call__(self, points: np.ndarray) -> np.ndarray:
         return self.sdf(points)
 
@@ -53,6 +64,18 @@ def _points(points: np.ndarray) -> np.ndarray:
     if p.ndim != 2 or p.shape[1] != 3:
         raise ValueError(f"points must have shape (N, 3), got {p.shape}")
     return p
+
+
+def _moved_corners(
+    box: tuple[np.ndarray, np.ndarray], scale: float, rotation: np.ndarray, translation: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The axis-aligned box of the 8 corners of ``box`` mapped by x -> scale · rotation · x + translation."""
+    lo, hi = box
+    corners = np.array(
+        [[(lo, hi)[i][0], (lo, hi)[j][1], (lo, hi)[k][2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)]
+    )
+    world = (corners * scale) @ np.asarray(rotation, dtype=np.float64).T + translation
+    return world.min(axis=0), world.max(axis=0)
 
 
 class Box(Shape):
@@ -93,6 +116,14 @@ class Sphere(Shape):
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         return self.center - self.radius, self.center + self.radius
 
+    def transformed_bounds(
+        self, scale: float, rotation: np.ndarray, translation: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        # a ball stays a ball: the moved centre ± the scaled radius, whatever the rotation
+        c = scale * (np.asarray(rotation, dtype=np.float64) @ self.center) + translation
+        r = scale * self.radius
+        return c - r, c + r
+
 
 class Cylinder(Shape):
     """Capped cylinder: ``radius``, ``height`` along ``axis`` ("x", "y" or "z"), centred at ``center``."""
@@ -117,6 +148,19 @@ class Cylinder(Shape):
         half = np.full(3, self.radius)
         half[self.axis] = 0.5 * self.height
         return self.center - half, self.center + half
+
+    def transformed_bounds(
+        self, scale: float, rotation: np.ndarray, translation: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        # the hull of the two end discs: each disc (radius ρ, unit normal a) reaches ρ·sqrt(1 − a_i²) along axis
+        # i from its centre, and the cylinder's extreme along any axis lies on an end disc's rim
+        rot = np.asarray(rotation, dtype=np.float64)
+        c = scale * (rot @ self.center) + translation
+        a = rot[:, self.axis]
+        a = a / np.linalg.norm(a)
+        ends = np.stack([c - 0.5 * scale * self.height * a, c + 0.5 * scale * self.height * a])
+        reach = scale * self.radius * np.sqrt(np.maximum(1.0 - a * a, 0.0))
+        return ends.min(axis=0) - reach, ends.max(axis=0) + reach
 
 
 def rotation_matrix(degrees_xyz: Sequence[float]) -> np.ndarray:
@@ -157,12 +201,18 @@ class Transformed(Shape):
         return self.scale * self.shape.sdf(self.to_local(points))
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        lo, hi = self.shape.bounds()
-        corners = np.array(
-            [[(lo, hi)[i][0], (lo, hi)[j][1], (lo, hi)[k][2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)]
+        # the shape's own box of its moved solid (tight for spheres, cylinders and meshes), not the box of its
+        # rotated box (up to √3 times larger: rotated bodies that fit the domain were refused)
+        return self.shape.transformed_bounds(self.scale, self.rotation, self.translation)
+
+    def transformed_bounds(
+        self, scale: float, rotation: np.ndarray, translation: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        # x -> s·R·(s₀·R₀·x + t₀) + t = (s·s₀)·(R·R₀)·x + (s·R·t₀ + t): one transform of the inner shape
+        rot = np.asarray(rotation, dtype=np.float64)
+        return self.shape.transformed_bounds(
+            scale * self.scale, rot @ self.rotation, scale * (rot @ self.translation) + translation
         )
-        world = (corners * self.scale) @ self.rotation.T + self.translation
-        return world.min(axis=0), world.max(axis=0)
 
 
 class Inverted(Shape):
@@ -194,6 +244,12 @@ class Union(Shape):
         b = [s.bounds() for s in self.shapes]
         return np.min([x[0] for x in b], axis=0), np.max([x[1] for x in b], axis=0)
 
+    def transformed_bounds(
+        self, scale: float, rotation: np.ndarray, translation: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        b = [s.transformed_bounds(scale, rotation, translation) for s in self.shapes]
+        return np.min([x[0] for x in b], axis=0), np.max([x[1] for x in b], axis=0)
+
 
 class Difference(Shape):
     """``shape`` less the ``cutters`` (e.g. a sand body less the obstacles it overlaps): inside where ``shape`` is
@@ -215,6 +271,11 @@ class Difference(Shape):
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         return self.shape.bounds()
+
+    def transformed_bounds(
+        self, scale: float, rotation: np.ndarray, translation: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        return self.shape.transformed_bounds(scale, rotation, translation)
 
 
 def overlapping(shape: Shape, others: Sequence[Shape]) -> list[Shape]:

@@ -38,6 +38,7 @@ import numpy as np
 
 from ..faces import PLANE_AXES, SCENE_FACES, face_extent, face_plane_shape, region_bounds, region_mask, solver_face
 from ..lattice import CS2
+from ..sand.emission import emission_sites
 from ..units import Units
 from .geometry import Box, Cylinder, Difference, Inverted, Shape, Sphere, Transformed
 from .schema import (
@@ -799,6 +800,8 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
             _check_sand_overlaps(list(zip(body_ids, bodies, strict=True)), domain, sand, problems)
         if fluid is not None and len(problems) == n_geometry:
             _check_fluid_room(list(zip(body_ids, bodies, strict=True)), domain, problems)
+        if len(problems) == n_geometry and not failed_inflows:
+            _check_jets_clear(inflows, list(zip(body_ids, bodies, strict=True)), domain, wall_cells, problems)
         allowed = sand is not None and sand.periodic_walls
         for name, kind in domain.boundary.items():
             if kind == "periodic" and any(b.kind == "sand" for b in bodies) and not allowed:
@@ -1690,6 +1693,23 @@ def _check_bounds(body: Body, i: int, lo, hi, domain: Domain, problems: list[Pro
             )
         return
     margin = wall_cells * domain.dx if body.kind == "sand" else 0.0
+    default_base = body.geometry.type == "heightfield" and body.geometry.params.get("base") is None
+    if default_base and body.kind == "water":
+        # the default base, one cell below the domain, lies below the floor on purpose: the water fills the
+        # domain's cells under the surface; only its sides and top must lie within the domain
+        lo = np.array([lo[0], lo[1], max(float(lo[2]), 0.0)])
+    if default_base and body.kind == "sand" and lo[2] < margin - tol:
+        problems.append(
+            Problem(
+                f"bodies[{i}].geometry.base",
+                f"the sand height field {body.name!r} reaches down to its default base, one cell below the domain, "
+                f"inside the MPM walls (sand must stay {wall_cells} cells = {margin:g} m from each face, "
+                "sand.wall_layers)",
+                f"set geometry.base = {margin:g} (or higher) for a sand height field: the default suits obstacles "
+                "and water",
+            )
+        )
+        return
     if np.any(lo < margin - tol) or np.any(hi > size - margin + tol):
         axis = int(np.argmax(np.maximum(margin - lo, hi - (size - margin))))
         where = (
@@ -1803,10 +1823,20 @@ def _check_seeding(built: list[tuple[int, Body]], domain: Domain, sand: Sand, pr
         if seeded is not False:  # particles found, or a body too large to search (None)
             continue
         spacing = domain.dx / k
+        own_cuts = bool(b.geometry.subtract) and isinstance(shape, Difference)
         if alone:
             problems.append(
                 _inside_obstacles(
                     i, b, obstacles, cutters, "no particle would be seeded (particles are not seeded inside obstacles)"
+                )
+            )
+        elif own_cuts and _seeds_any(shape.shape.sdf, lo, hi, domain.dx, k) is not False:
+            problems.append(
+                Problem(
+                    f"bodies[{i}].geometry.subtract",
+                    f"the sand body {b.name!r} is wholly removed by its own geometry.subtract: no particle would be "
+                    "seeded",
+                    "make the subtracted shapes smaller than the body (or remove them)",
                 )
             )
         else:
@@ -1820,6 +1850,61 @@ def _check_seeding(built: list[tuple[int, Body]], domain: Domain, sand: Sand, pr
                     "lower domain.dx)",
                 )
             )
+
+
+def _check_jets_clear(
+    inflows: list[Inflow], built: list[tuple[int, Body]], domain: Domain, rim: int, problems: list[Problem]
+) -> None:
+    """A sand-carrying inflow's particles are emitted ``rim`` cells inside its face (couplekit.sand.emission):
+    the cells of its open area from the face to one cell beyond the emission plane must be clear of obstacles,
+    or the particles appear inside the solid (they stayed there, or were pushed out through the face and went
+    non-finite: a probe's plate in front of an outlet).  Tested at those cells' centres against every obstacle."""
+    obstacles = [(i, b.geometry.solver_shape(domain)) for i, b in built if b.kind == "obstacle"]
+    if not obstacles:
+        return
+    size = np.asarray(domain.size, np.float64)
+    for n, inf in enumerate(inflows):
+        if inf.sand_fraction <= 0 or _face_too_large(domain, inf.face):
+            continue
+        face = solver_face(inf.face)
+        if inf.shape == "face":
+            mask = None
+        elif (
+            inf.center is None
+            or (inf.shape == "rect" and inf.size is None)
+            or (inf.shape == "disc" and inf.radius is None)
+        ):
+            continue
+        else:
+            mask = region_mask(domain.shape, domain.dx, face, inf.shape, inf.center, inf.size, inf.radius)
+        sites = emission_sites(domain.shape, domain.dx, face, mask, 1, rim)  # one point per open cell
+        if sites.shape[1] == 0:
+            continue
+        axis = "xyz".index(face[0])
+        plane = [a for a in range(3) if a != axis]
+        depth = (np.arange(rim + 2) + 0.5) * domain.dx  # cell centres from the face to beyond the emission plane
+        if face[1] == "+":
+            depth = size[axis] - depth
+        pts = np.empty((sites.shape[1] * depth.size, 3))
+        pts[:, plane[0]] = np.tile(sites[0], depth.size)
+        pts[:, plane[1]] = np.tile(sites[1], depth.size)
+        pts[:, axis] = np.repeat(depth, sites.shape[1])
+        for j, shape in obstacles:
+            inside = np.asarray(shape.sdf(pts)) < 0
+            if inside.any():
+                where = np.round(pts[np.argmax(inside)], 6).tolist()
+                problems.append(
+                    Problem(
+                        f"inflows[{n}]",
+                        f"the inflow carries sand (sand_fraction = {inf.sand_fraction:g}), but obstacle bodies[{j}] "
+                        f"fills {int(inside.sum())} of the cells within {rim + 2} cells of face {inf.face} where its "
+                        f"particles are emitted ({rim} cells inside the face) and enter (e.g. the cell at {where} m): "
+                        "they would appear inside the solid",
+                        f"move bodies[{j}] at least {(rim + 2) * domain.dx:g} m away from the outlet, move the "
+                        f"outlet, or set inflows[{n}].sand_fraction = 0",
+                    )
+                )
+                break
 
 
 def _check_fluid_room(built: list[tuple[int, Body]], domain: Domain, problems: list[Problem]) -> None:
@@ -1847,6 +1932,21 @@ def _check_fluid_room(built: list[tuple[int, Body]], domain: Domain, problems: l
             )
         )
         return
+    for i, shape in obstacles:  # an obstacle thinner than a cell between two cell centres is no solid cell at all
+        lo, hi = (np.clip(np.asarray(v, np.float64), 0.0, size) for v in shape.bounds())
+        try:
+            covers = _seeds_any(shape.sdf, lo, hi, domain.dx, 1)
+        except Exception:
+            continue
+        if covers is False:
+            problems.append(
+                Problem(
+                    f"bodies[{i}].geometry",
+                    f"the obstacle covers no cell centre (dx = {domain.dx:g} m): the fluid, whose solid cells are the "
+                    "cells whose centre lies inside an obstacle, would not see it and would flow through it",
+                    f"make it at least {domain.dx:g} m thick across, or lower domain.dx",
+                )
+            )
     for i, b, shape, lo, hi in _shapes_of_kind(built, "water", domain):
         hits = overlapping(shape, cutters)
         if not hits:

@@ -273,10 +273,16 @@ def render() -> str:
         "box": "Axis-aligned box (rotate it for any orientation).",
         "sphere": "Ball.",
         "cylinder": "Capped cylinder.",
-        "heightfield": "The solid under a surface z = h(x, y), down to `base`; rows of the grid run along y, columns along x.",
+        "heightfield": "The solid under a surface z = h(x, y), down to `base`; rows of the grid run along y, "
+        "columns along x. The default `base`, one cell below the domain, suits obstacles and water (the water "
+        "fills the domain's cells under the surface); a sand height field needs `base` at least "
+        "`sand.wall_layers` cells above the floor.",
         "mesh": "A closed triangle mesh (an open one, with edges of one triangle only, is refused: its inside is "
         "undefined). Inside: parity of +x ray crossings (orientation-independent); "
-        "distance: exact point–triangle distance to candidate triangles found through dense surface samples.",
+        "distance: exact point–triangle distance to candidate triangles found through dense surface samples. "
+        "Several closed parts in one file must not overlap: by parity a point inside two of them counts as "
+        "outside (their overlap is a hole); join them into one surface in the modeller, or give each its own "
+        "body.",
     }
     for gtype, keys in GEOMETRY_KEYS.items():
         parts.append(f'### type = "{gtype}"\n\n{descriptions[gtype]}\n\n{_table(keys)}\n')
