@@ -62,3 +62,73 @@ def test_with_settings_takes_a_scene_file():
     assert scene.to_dict() == with_settings(ck.Scene.load(SCENE), {"time.frames": 3}).to_dict()
     with pytest.raises(TypeError, match="scene must be a Scene or a scene file's path, got int"):
         with_settings(3, {"time.frames": 3})
+
+
+# ---------------------------------------------------------------------------- found by a probe (session 22)
+def test_save_refuses_what_it_would_replace_that_is_not_a_file(sim, tmp_path):
+    """save() writes a temporary file and moves it over the path: a FIFO (or, as root, /dev/null) or a symbolic
+    link became a regular file. Refused, as is a folder that does not exist (an h5py error about '.tmp')."""
+    import os
+
+    from couplekit.io import CheckpointError
+
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    with pytest.raises(CheckpointError, match="not a regular file"):
+        sim.save(fifo)
+    assert fifo.is_fifo()
+    target = tmp_path / "real.h5"
+    sim.save(target)
+    link = tmp_path / "link.h5"
+    link.symlink_to(target)
+    with pytest.raises(CheckpointError, match="symbolic link"):
+        sim.save(link)
+    assert link.is_symlink()
+    with pytest.raises(CheckpointError, match="does not exist; create it first"):
+        sim.save(tmp_path / "missing" / "c.h5")
+    sim.save(target)  # a regular file is replaced, as before
+
+
+def test_a_validated_scene_cannot_be_changed_in_place(sim):
+    """domain.boundary and sand.walls were plain dicts of the frozen Scene: changing one built and ran a scene its
+    to_dict() (and checkpoints) did not describe. Refused; pickling and the to_dict round trip still hold."""
+    import copy
+    import pickle
+
+    scene = sim.scene
+    with pytest.raises(TypeError, match="cannot be changed in place"):
+        scene.domain.boundary["x_min"] = "wall"
+    with pytest.raises(TypeError, match="cannot be changed in place"):
+        scene.domain.boundary.update({"x_min": "wall"})
+    if scene.sand is not None:
+        with pytest.raises(TypeError):
+            scene.sand.walls["z_min"] = "slip"
+    assert pickle.loads(pickle.dumps(scene)) == scene == copy.deepcopy(scene)
+    assert ck.Scene.from_dict(scene.to_dict()) == scene
+    changed = with_settings(scene, {"sand.walls.z_min.kind": "slip"})  # the way to change one
+    assert changed.sand.walls["z_min"].kind == "slip" and scene.sand.walls["z_min"].kind == "separate"
+
+
+@pytest.mark.parametrize("value", ["no", 1, None])
+def test_fields_lattice_must_be_a_bool(sim, value):
+    """fields(lattice="no") returned lattice units: any non-empty string is true."""
+    with pytest.raises(TypeError, match="lattice must be True or False"):
+        sim.fields(lattice=value)
+    assert sim.fields(lattice=np.bool_(False)).keys() == sim.fields().keys()
+
+
+@pytest.mark.parametrize("threads", [1.5, "x", True, 0])
+def test_threads_must_be_a_whole_number(threads):
+    """threads=1.5 became 1 and 'x' raised int()'s message."""
+    from couplekit.backend import get_backend
+
+    with pytest.raises(ValueError, match="threads must be a whole number >= 1"):
+        get_backend("numpy", threads=threads)
+
+
+def test_an_empty_backend_name_is_refused():
+    """backend='' silently meant auto."""
+    from couplekit.backend import get_backend
+
+    with pytest.raises(ValueError, match="empty name"):
+        get_backend("")

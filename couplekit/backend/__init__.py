@@ -154,8 +154,8 @@ class Backend:
 
 def _threads_from(threads: int | None) -> int | None:
     if threads is not None:
-        if int(threads) < 1:
-            raise ValueError(f"threads must be >= 1, got {threads}")
+        if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1:
+            raise ValueError(f"threads must be a whole number >= 1 (OpenMP threads of the cpu backends), got {threads!r}")
         return int(threads)
     env = os.environ.get("OMP_NUM_THREADS")
     if env:
@@ -179,6 +179,8 @@ def get_backend(name: str | None = "auto", threads: int | None = None) -> Backen
             f"backend must be a name ({', '.join(repr(b) for b in ('auto', *BACKENDS, 'cpu-device'))}) or a "
             f"Backend, got {name!r} ({type(name).__name__})"
         )
+    if name is not None and not name.strip():
+        raise ValueError("backend is an empty name: give one of auto, cuda, cpu, numpy, cpu-device (or None for auto)")
     source = "argument"
     if name in (None, "auto") and os.environ.get("COUPLEKIT_BACKEND"):
         name, source = os.environ["COUPLEKIT_BACKEND"].strip().lower(), "COUPLEKIT_BACKEND"

@@ -85,6 +85,13 @@ def save_checkpoint(
     path = Path(path).expanduser()
     if path.is_dir():
         raise CheckpointError(f"{path} is a folder: give the checkpoint a file name, e.g. {path / 'state.h5'}")
+    if path.is_symlink() or (path.exists() and not path.is_file()):
+        # written by replacing whatever is at the path: a device (/dev/null), a FIFO or a link would become a file
+        kind = "a symbolic link" if path.is_symlink() else "not a regular file (a device, a FIFO or a socket)"
+        raise CheckpointError(f"{path} is {kind}: a checkpoint replaces the file at its path; give a new or a "
+                              "regular file's path")  # fmt: skip
+    if not path.parent.is_dir():
+        raise CheckpointError(f"cannot write {path}: its folder {path.parent} does not exist; create it first")
     tmp = path.with_name(path.name + ".tmp")
     scene_text, meta_text = json.dumps(scene), json.dumps(dict(meta))
     try:

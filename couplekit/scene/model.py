@@ -98,6 +98,23 @@ on faces of at most 2²⁸ cells: a larger face belongs to a grid of more than 1
 _DEFAULT_LATTICE_VISCOSITY = {"water": 1e-4, "air": 1e-2}  # the most common Table 1 values
 
 
+class FrozenDict(dict):
+    """A read-only dict: the mappings inside a validated, frozen :class:`Scene` (``domain.boundary``,
+    ``sand.walls``). Changing one in place would bypass validation and leave ``to_dict()`` (what a checkpoint
+    stores) saying something else; build a changed scene with :func:`couplekit.simulation.with_settings`."""
+
+    def _refuse(self, *args, **kwargs):
+        raise TypeError(
+            "a validated scene cannot be changed in place (its to_dict() and checkpoints would disagree): build a "
+            "changed one with couplekit.with_settings(scene, {'domain.boundary.x_min': 'wall'}) or Scene.from_dict"
+        )
+
+    __setitem__ = __delitem__ = clear = pop = popitem = setdefault = update = __ior__ = _refuse
+
+    def __reduce__(self):  # pickle and deepcopy without __setitem__
+        return (type(self), (dict(self),))
+
+
 @dataclass(frozen=True)
 class Domain:
     size: tuple[float, float, float]
@@ -642,7 +659,11 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
             dx = dxs[0]
         if dx is not None and res is not None and len(problems) == n_before:
             domain = Domain(
-                tuple(size), float(dx), tuple(int(n) for n in res), tuple(dom["gravity"] or (0, 0, -9.81)), dict(bnd)
+                tuple(size),
+                float(dx),
+                tuple(int(n) for n in res),
+                tuple(dom["gravity"] or (0, 0, -9.81)),
+                FrozenDict(bnd),
             )
 
     # ---- boundaries: periodic pairs
@@ -1128,7 +1149,7 @@ def _with_sand_walls(sand: Sand, raw: Any, problems: list[Problem]) -> Sand:
         elif friction is None:
             friction = sand.wall_friction
         walls[face] = SandWall(kind, friction)
-    return dataclasses.replace(sand, walls=walls)
+    return dataclasses.replace(sand, walls=FrozenDict(walls))
 
 
 def _check_saturation(body: Body, index: int, sand: Sand | None, fluid: Fluid | None, problems: list[Problem]) -> None:
