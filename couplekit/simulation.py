@@ -44,6 +44,7 @@ from typing import Any
 import numpy as np
 
 from . import __version__
+from .arguments import whole_count
 from .assembly import CouplingUnavailableError, assemble, check_run, memory_estimate, refuse_unsupported
 from .backend import Backend, get_backend
 from .fluid.hydrostatic import hydrostatic_pressure
@@ -100,15 +101,8 @@ def parse_setting(text: str) -> tuple[str, Any]:
 
 
 def _count(name: str, value: Any, least: int = 0) -> int:
-    """``value`` as a whole number ≥ ``least``, else TypeError / ValueError naming ``name`` (``True`` and ``2.5``
-    are not counts; a float or NumPy integer with a whole value is)."""
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer, float, np.floating)):
-        raise TypeError(f"{name} must be a whole number of steps or frames, got {value!r} ({type(value).__name__})")
-    if not float(value).is_integer():
-        raise ValueError(f"{name} must be a whole number, got {value!r}")
-    if value < least:
-        raise ValueError(f"{name} must be {least} or more, got {value!r}")
-    return int(value)
+    """``value`` as a whole number >= ``least`` (:func:`couplekit.arguments.whole_count`)."""
+    return whole_count(name, value, least, what="steps or frames")
 
 
 def with_settings(scene: Scene | str | Path, settings: Mapping[str, Any], base_dir: str | Path | None = None) -> Scene:

@@ -21,6 +21,8 @@ from contextlib import contextmanager
 
 import numpy as np
 
+from ..arguments import whole_count
+
 __all__ = ["Scheduler", "SAND_STAGES", "FLUID_STAGES", "SubstepLimitError"]
 
 SAND_STAGES = ("mpm_p2g", "mpm_grid_update", "mpm_g2p")
@@ -190,8 +192,9 @@ class Scheduler:
 
     # ------------------------------------------------------------------ stepping
     def step(self, n: int = 1) -> None:
-        """Advance ``n`` coupling steps of Δt."""
-        for _ in range(int(n)):
+        """Advance ``n`` coupling steps of Δt; ``n`` a whole number >= 0 (as
+        :meth:`couplekit.simulation.Simulation.step`)."""
+        for _ in range(whole_count("n", n)):
             self._last = {}
             if self.coupler is not None:
                 self._coupled_step()

@@ -71,7 +71,7 @@ def test_threads_from_argument_and_environment(monkeypatch, cpu_backend):
     be = get_backend("cpu", threads=2)
     assert be.threads == 2
     assert be.module("selfcheck.cu").num_threads() == 2
-    with pytest.raises(ValueError, match="threads must be >= 1"):
+    with pytest.raises(ValueError, match="threads must be a whole number >= 1"):
         get_backend("cpu", threads=0)
 
 

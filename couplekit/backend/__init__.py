@@ -155,7 +155,9 @@ class Backend:
 def _threads_from(threads: int | None) -> int | None:
     if threads is not None:
         if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1:
-            raise ValueError(f"threads must be a whole number >= 1 (OpenMP threads of the cpu backends), got {threads!r}")
+            raise ValueError(
+                f"threads must be a whole number >= 1 (OpenMP threads of the cpu backends), got {threads!r}"
+            )
         return int(threads)
     env = os.environ.get("OMP_NUM_THREADS")
     if env:

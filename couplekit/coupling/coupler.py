@@ -308,7 +308,8 @@ class SandFluidCoupler:
 
     def step(self, n: int = 1) -> None:
         """``n`` lockstep steps of sand + fluid in Algorithm 1's order: the untimed
-        :class:`couplekit.schedulers.lockstep.LockstepScheduler` (one code path for the stage order)."""
+        :class:`couplekit.schedulers.lockstep.LockstepScheduler` (one code path for the stage order). ``n`` a whole
+        number >= 0 (as :meth:`couplekit.simulation.Simulation.step`; the scheduler refuses anything else)."""
         if self._scheduler is None:
             from ..schedulers.lockstep import LockstepScheduler
 

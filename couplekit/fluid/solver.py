@@ -30,7 +30,8 @@ from typing import Any
 
 import numpy as np
 
-from ..backend import Backend
+from ..arguments import is_real, whole_count
+from ..backend import Backend, get_backend
 from ..slabs import host_slabs
 from .grid import (
     FLUID,
@@ -53,6 +54,25 @@ from .kernel_ops import KernelOps
 from .odd_ramp import check_gaps, ramp_weights
 from .reference import ReferenceOps, equilibrium, to_stored
 from .storage import check_storage, dtype_of
+
+
+def _checked_solid(solid: Any, shape: tuple[int, int, int]) -> np.ndarray | None:
+    """The ``solid`` argument of :class:`FluidSolver` as a boolean mask of ``shape``: a boolean array, or numbers
+    that are all 0 or 1. Anything else is refused: ``np.asarray(solid, bool)`` made every nonzero cell solid, so
+    a signed distance field passed instead of ``sdf < 0`` turned the whole box into a wall."""
+    if solid is None:
+        return None
+    mask = np.asarray(solid)
+    if mask.shape != shape:
+        raise ValueError(f"solid must be a boolean mask of the interior shape {shape}, got shape {mask.shape}")
+    if mask.dtype == bool:
+        return mask
+    if mask.dtype.kind not in "iuf" or not np.isin(mask, (0, 1)).all():
+        raise ValueError(
+            f"solid must be a boolean mask (True = obstacle cell), got {mask.dtype} values that are not all 0 or 1: "
+            "for a signed distance field pass solid=sdf < 0"
+        )
+    return mask.astype(bool)
 
 
 def _ghost_faces(idx: np.ndarray, pshape: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray]:
@@ -152,26 +172,59 @@ class FluidParams:
     phase_trt_lambda: float | None = None
     odd_ramp: float = 0.0
 
+    # (lowest, highest, lowest excluded, what it is / the usual value) of every numeric field: each a finite real
+    # number (bool is not) in its range. The phase-field ranges follow the scene keys' (couplekit/scene/schema.py:
+    # interface_width >= 2, mobility in (0, 1]); viscosities and densities only > 0, as a scene's lattice values
+    # are checked by the scene itself
+    _RANGES = {
+        "rho_h": (0.0, math.inf, True, "density of the heavy phase (phi = 1), usually 1"),
+        "rho_l": (0.0, math.inf, True, "density of the light phase (phi = 0), e.g. 1/800"),
+        "nu_h": (0.0, math.inf, True, "lattice viscosity, tau = 3 nu + 1/2 > 1/2"),
+        "nu_l": (0.0, math.inf, True, "lattice viscosity, tau = 3 nu + 1/2 > 1/2"),
+        "sigma": (0.0, math.inf, False, "0 = no surface tension"),
+        "mobility": (0.0, 1.0, True, "scenes use 0.02"),
+        "width": (2.0, math.inf, False, "cells; scenes refuse interface_width < 2 and use 4"),
+        "eta": (0.0, math.inf, False, "0 = controller off; Table 1 uses 1 or 2"),
+        "smagorinsky": (0.0, 1.0, False, "typical 0.1-0.2"),
+        "odd_lambda": (0.0, 1.0, False, "e.g. 0.015"),
+        "odd_nu_max": (0.0, math.inf, True, "default 5e-4"),
+        "odd_ramp": (0.0, 64.0, False, "0: the floor everywhere; 3 measured"),
+        "phase_trt_lambda": (0.0, 1.0, False, "None: 1/6 with an inflow, else 0"),
+    }
+
     def __post_init__(self) -> None:
-        for name in ("rho_h", "rho_l", "nu_h", "nu_l", "mobility", "width"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"FluidParams.{name} must be > 0, got {getattr(self, name)}")
-        if self.sigma < 0 or self.eta < 0:
-            raise ValueError("FluidParams.sigma and .eta must be >= 0")
-        if self.phase_trt_lambda is not None and not 0.0 <= self.phase_trt_lambda <= 1.0:
-            raise ValueError(f"FluidParams.phase_trt_lambda must be None or in [0, 1], got {self.phase_trt_lambda}")
-        if not self.odd_nu_max > 0:
-            raise ValueError(f"FluidParams.odd_nu_max must be > 0, got {self.odd_nu_max}")
-        if not 0.0 <= self.odd_lambda <= 1.0:
-            raise ValueError(f"FluidParams.odd_lambda must be in [0, 1] (e.g. 0.25), got {self.odd_lambda}")
-        if not (0.0 <= self.odd_ramp <= 64.0):
-            raise ValueError(
-                f"FluidParams.odd_ramp must be in [0, 64] cells (0: the floor everywhere; 3 measured), got {self.odd_ramp}"
+        problems = []
+        for name, (lo, hi, lo_open, what) in self._RANGES.items():
+            value = getattr(self, name)
+            if value is None and name == "phase_trt_lambda":
+                continue
+            bounds = ("(" if lo_open else "[") + f"{lo:g}, " + (f"{hi:g}]" if math.isfinite(hi) else "inf)")
+            if not is_real(value):
+                problems.append(
+                    f"{name} must be a finite number in {bounds} ({what}), got {value!r} ({type(value).__name__})"
+                )
+            elif not (math.isfinite(value) and (lo < value if lo_open else lo <= value) and value <= hi):
+                problems.append(f"{name} must be a finite number in {bounds} ({what}), got {value!r}")
+        g = self.gravity
+        try:
+            components = list(g) if not isinstance(g, (str, bytes)) else None
+        except TypeError:
+            components = None
+        if components is None or len(components) != 3:
+            problems.append(f"gravity must be 3 numbers (x, y, z) in lattice units, e.g. (0, 0, -1e-5), got {g!r}")
+        elif not all(is_real(c) and math.isfinite(c) for c in components):
+            problems.append(f"gravity must be 3 finite numbers (x, y, z) in lattice units, got {g!r}")
+        if not isinstance(self.store_filtered_pressure, (bool, np.bool_)):
+            problems.append(f"store_filtered_pressure must be True or False, got {self.store_filtered_pressure!r}")
+        rho_h, rho_l = self.rho_h, self.rho_l
+        if all(is_real(r) and math.isfinite(r) and r > 0 for r in (rho_h, rho_l)) and rho_h < rho_l:
+            problems.append(
+                f"rho_h = {rho_h:g} is below rho_l = {rho_l:g}: rho_h is the heavy phase, the one phi = 1 marks (the "
+                "solver's checks of a sharp interface read rho_h / rho_l). Swap the densities and give phi -> 1 - phi "
+                "(a single-phase fluid uses rho_h alone: leave rho_l at or below it)"
             )
-        if not 0.0 <= self.smagorinsky <= 1.0:
-            raise ValueError(f"FluidParams.smagorinsky must be in [0, 1] (typical 0.1-0.2), got {self.smagorinsky}")
-        if len(self.gravity) != 3:
-            raise ValueError(f"FluidParams.gravity needs 3 components, got {self.gravity!r}")
+        if problems:
+            raise ValueError("invalid FluidParams: " + "; ".join(problems))
 
     @classmethod
     def scene_defaults(cls, **overrides: Any) -> FluidParams:
@@ -284,13 +337,15 @@ class FluidSolver:
 
     Parameters
     ----------
-    backend: where to run (:func:`couplekit.backend.get_backend`); numpy runs the reference ops.
+    backend: a :class:`~couplekit.backend.Backend` or a backend name (``"auto"``, ``"cuda"``, ``"cpu"``,
+        ``"numpy"``; :func:`couplekit.backend.get_backend`); numpy runs the reference ops.
     shape: interior grid ``(nz, ny, nx)``.
     params: :class:`FluidParams` in lattice units (``FluidParams.scene_defaults()`` for a scene's fluid;
         ``FluidParams()`` differs: see its docstring). ``odd_floor_active``: whether its odd-rate floor acts.
     boundaries: the six faces (:class:`~couplekit.fluid.grid.Boundaries`); default ``None`` = **all periodic**
         (a scene's faces default to walls: ``Boundaries.scene_defaults()``).
-    solid: interior boolean mask of stationary obstacle cells (e.g. ``sdf < 0`` of a signed distance field).
+    solid: interior boolean mask of stationary obstacle cells (e.g. ``sdf < 0`` of a signed distance field;
+        numbers other than 0 and 1, such as the distances themselves, are refused).
     phi: initial phase field ``(nz, ny, nx)`` (1 = heavy); ``None`` makes a single-phase solver.
     velocity: initial velocity ``(3, nz, ny, nx)`` (x, y, z components), default rest.
     pressure: initial pressure ``(nz, ny, nx)`` (e.g. hydrostatic), default 0.
@@ -315,7 +370,7 @@ class FluidSolver:
 
     def __init__(
         self,
-        backend: Backend,
+        backend: Backend | str | None,
         shape: tuple[int, int, int],
         params: FluidParams,
         boundaries: Boundaries | None = None,
@@ -329,11 +384,22 @@ class FluidSolver:
         storage: str = "fp32",
         sand_velocity: bool = True,
     ):
-        self.backend = backend
+        self.backend = backend = backend if isinstance(backend, Backend) else get_backend(backend)
         self.storage = check_storage(storage, "FluidSolver storage")
         self.shape = tuple(int(s) for s in shape)
         if len(self.shape) != 3 or min(self.shape) < 2:
             raise ValueError(f"shape must be (nz, ny, nx) with every extent >= 2, got {shape!r}")
+        if not isinstance(params, FluidParams):
+            raise TypeError(
+                f"params must be a FluidParams, got {type(params).__name__}: build one, e.g. FluidParams(nu_h=0.1) "
+                "or FluidParams.scene_defaults(...), from the values"
+            )
+        if boundaries is not None and not isinstance(boundaries, Boundaries):
+            raise TypeError(
+                f"boundaries must be a Boundaries or None (all periodic), got {type(boundaries).__name__}: build one, "
+                "e.g. Boundaries.channel('xyz') or Boundaries.scene_defaults()"
+            )
+        solid = _checked_solid(solid, self.shape)
         self.params = params
         # the odd-rate floor acts only where nu < 2 Λ / 3 (see reference.odd_rate); 0 when no cell can reach it,
         # so the kernel keeps its rate-1 fast path
@@ -405,7 +471,10 @@ class FluidSolver:
         self.velocity = backend.asarray(vel)
         p0 = np.zeros(pshape, np.float32)
         if pressure is not None:
-            p0[INTERIOR] = np.asarray(pressure, np.float32)
+            p_host = np.asarray(pressure, np.float32)
+            if p_host.shape != self.shape:
+                raise ValueError(f"pressure must have the interior shape {self.shape}, got {p_host.shape}")
+            p0[INTERIOR] = p_host
         self.p = backend.asarray(p0)
         self.pbar = xp.zeros(pshape, dtype=np.float32)
 
@@ -564,9 +633,9 @@ class FluidSolver:
         return self._pf.gradient_fields(self.pf_ops, self.phi, self.flags, self.beta, self.kappa)
 
     def step(self, n: int = 1) -> None:
-        """Advance ``n`` LBM steps."""
+        """Advance ``n`` LBM steps; ``n`` a whole number >= 0 (as :meth:`couplekit.simulation.Simulation.step`)."""
         ops, prm = self.ops, self.params
-        for _ in range(int(n)):
+        for _ in range(whole_count("n", n)):
             parity = self.step_count & 1
             if parity:
                 ops.halo_pull(self.f, self._ghost, self._image, self._link_boxes)

@@ -35,6 +35,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..arguments import is_real
+
 __all__ = ["SandParams", "ConstitutiveModel"]
 
 
@@ -78,6 +80,18 @@ class SandParams:
 
     def __post_init__(self) -> None:
         problems = []
+        numeric = (
+            "density", "youngs_modulus", "poisson_ratio", "h0", "h1", "h2", "h3", "cohesion_max",
+            "cohesion_s1", "cohesion_s2", "cohesion_s3", "viscosity",
+        )  # fmt: skip
+        for name in numeric:  # each a finite real number (bool is not): NaN passed every "> 0" test below
+            value = getattr(self, name)
+            if not is_real(value):
+                problems.append(f"{name} must be a finite number, got {value!r} ({type(value).__name__})")
+            elif not math.isfinite(value):
+                problems.append(f"{name} must be a finite number, got {value!r}")
+        if problems:
+            raise ValueError("invalid SandParams: " + "; ".join(problems))
         if not self.density > 0:
             problems.append(f"density must be > 0 kg/m³, got {self.density}")
         if not self.youngs_modulus > 0:
@@ -93,10 +107,42 @@ class SandParams:
             )
         if self.h2 < 0:
             problems.append(f"h2 must be >= 0, got {self.h2}")
+        elif self.plasticity:  # a purely elastic solid has no friction angle
+            lo, hi = self.friction_angle_range()
+            if not self.hardening and not 0.0 < lo < 90.0:
+                problems.append(
+                    f"h0 = {self.h0:g} degrees is the constant friction angle (hardening=False); it must be in "
+                    "(0, 90) degrees, e.g. 30"
+                )
+            elif not (0.0 < lo and hi < 90.0):
+                problems.append(
+                    f"h0, h1, h2, h3 = {self.h0:g}, {self.h1:g}, {self.h2:g}, {self.h3:g} make the friction angle "
+                    f"h0 + (h1 q - h3) exp(-h2 q) range over [{lo:.3g}, {hi:.3g}] degrees as the plastic strain q "
+                    "grows; it must stay within (0, 90) degrees (the paper's sand: 35, 9, 0.2, 10, 25 to 48 degrees)"
+                )
         if not self.viscosity >= 0:
             problems.append(f"viscosity must be >= 0 Pa s, got {self.viscosity}")
         if problems:
             raise ValueError("invalid SandParams: " + "; ".join(problems))
+
+    def friction_angle_range(self) -> tuple[float, float]:
+        """(lowest, highest) friction angle in degrees over plastic strains q >= 0: h0 without hardening, else
+        the range of φ_F(q) = h0 + (h1 q − h3) exp(−h2 q) (h2 >= 0): φ_F(0) = h0 − h3, the limit h0 (h2 > 0), and
+        its one stationary point q* = 1/h2 + h3/h1 where q* > 0; with h2 = 0 a line, unbounded unless h1 = 0 (the
+        scene check of ``sand.hardening``, couplekit/scene/model.py)."""
+        h0, h1, h2, h3 = self.h0, self.h1, self.h2, self.h3
+        if not self.hardening:
+            return float(h0), float(h0)
+        values = [h0 - h3]
+        if h2 > 0:
+            values.append(h0)
+            if h1 != 0:
+                q = 1.0 / h2 + h3 / h1
+                if q > 0:
+                    values.append(h0 + (h1 * q - h3) * math.exp(-h2 * q))
+        elif h1 != 0:
+            values.append(math.copysign(math.inf, h1))
+        return float(min(values)), float(max(values))
 
     @property
     def mu(self) -> float:

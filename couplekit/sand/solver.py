@@ -16,10 +16,13 @@ domain [0, nx dx] × [0, ny dx] × [0, nz dx].
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
+from ..arguments import is_real, whole_count
 from ..backend import Backend, get_backend
 from ..slabs import host_slabs
 from .boundaries import Collider, DomainWalls, SdfCollider, node_positions, pack_colliders, pack_walls
@@ -37,6 +40,44 @@ _PARTICLE_FIELDS = ("x", "v", "C", "F", "tau", "q", "vc", "saturation", "mass", 
 
 class TimeStepError(ValueError):
     """Δt above the MPM stability limit."""
+
+
+def _positive_number(name: str, value: Any, hint: str, hi: float = math.inf) -> float:
+    """``value`` as a float in (0, ``hi``], else a ValueError naming ``name``, the value and ``hint``."""
+    if not (is_real(value) and math.isfinite(value) and 0 < value <= hi):
+        bounds = f"in (0, {hi:g}]" if math.isfinite(hi) else "> 0"
+        raise ValueError(f"{name} must be a finite number {bounds} ({hint}), got {value!r}")
+    return float(value)
+
+
+def _as_floats(name: str, value: Any) -> np.ndarray:
+    """``value`` as a float64 array, else a ValueError naming ``name`` (a string or a ragged list)."""
+    try:
+        return np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be numbers, got {value!r}") from None
+
+
+def _least(a: np.ndarray) -> str:
+    """The smallest of ``a``, for a message."""
+    return f"{float(a.min()):g}" + ("" if a.size < 2 else f" (the smallest of {a.size})")
+
+
+def _per_particle(name: str, value: Any, n: int, unit: str) -> np.ndarray:
+    """``value`` (one number or one per particle, shape (n,)) as float64 (n,), refused with a ValueError naming
+    ``name`` when it has another shape or a value that is not finite."""
+    a = _as_floats(name, value)
+    if a.ndim != 0 and a.shape != (n,):
+        raise ValueError(
+            f"{name} must be one number or one per particle, shape ({n},), got shape {a.shape}"
+            + (f": transpose or flatten it to ({n},)" if a.size == n else "")
+        )
+    if not np.isfinite(a).all():
+        if a.ndim == 0:
+            raise ValueError(f"{name} must be a finite number ({unit}), got {float(a)!r}")
+        bad = int(np.count_nonzero(~np.isfinite(a)))
+        raise ValueError(f"{name} must be finite ({unit}): {bad} of {n} values are not")
+    return np.broadcast_to(a, (n,))
 
 
 class SandSolver:
@@ -105,18 +146,27 @@ class SandSolver:
         self.shape = tuple(int(s) for s in shape)
         if len(self.shape) != 3 or min(self.shape) < 5:
             raise ValueError(f"shape must be (nz, ny, nx) with every extent >= 5, got {shape}")
-        if not dx > 0:
-            raise ValueError(f"dx must be > 0, got {dx}")
-        self.dx = float(dx)
+        if not isinstance(params, SandParams):
+            raise TypeError(
+                f"params must be a SandParams, got {type(params).__name__}: build one, e.g. "
+                "SandParams(density=1500, youngs_modulus=1e5), from the values"
+            )
+        self.dx = _positive_number("dx", dx, "the node spacing in m")
         self.params = params
         self.model = params.model()
-        self.gravity = tuple(float(g) for g in gravity)
+        g = _as_floats("gravity", gravity)
+        if g.shape != (3,) or not np.isfinite(g).all():
+            raise ValueError(f"gravity must be 3 finite numbers (x, y, z) in m/s², e.g. (0, 0, -9.81), got {gravity!r}")
+        self.gravity = tuple(float(c) for c in g)
         self.walls = walls if walls is not None else DomainWalls.uniform("separate", 0.5)
         self.colliders = list(colliders)
         self.sdf_collider = sdf_collider
-        self.cfl = float(cfl)
-        self.elastic_cfl = float(elastic_cfl)
-        self.cfl_check_every = int(cfl_check_every)
+        # the CFL numbers bound dt (max_stable_dt): a NaN one made the limit NaN, and "dt > NaN" never refused
+        self.cfl = _positive_number("cfl", cfl, "the particle CFL number C_v, usually 0.5", hi=1.0)
+        self.elastic_cfl = _positive_number(
+            "elastic_cfl", elastic_cfl, "the elastic CFL number C_e, usually 0.5", hi=1.0
+        )
+        self.cfl_check_every = whole_count("cfl_check_every", cfl_check_every, what="steps (0 = never)")
         self.time = 0.0
         self.steps = 0
 
@@ -179,16 +229,38 @@ class SandSolver:
                 f"{bad} of {n} particles lie outside the domain interior [{b}·dx, extent − {b}·dx] "
                 f"(extent {ext.tolist()} m, walls take {b} node layers); enlarge the grid or move the body"
             )
-        vol = np.broadcast_to(np.asarray(volumes, dtype=np.float64), (n,))
+        vol = _per_particle("volumes", volumes, n, "m³")
         if np.any(vol <= 0):
-            raise ValueError("particle volumes must be > 0")
-        vel = np.zeros((3, n)) if velocities is None else np.asarray(velocities, dtype=np.float64)
-        vel = np.broadcast_to(vel.reshape(3, -1) if vel.ndim == 1 else vel, (3, n))
-        sat = np.zeros(n) if saturation is None else np.broadcast_to(np.asarray(saturation, dtype=np.float64), (n,))
+            raise ValueError(f"particle volumes must be > 0 m³, got {_least(vol)}")
+        if velocities is None:
+            vel = np.zeros((3, n))
+        else:
+            vel = _as_floats("velocities", velocities)
+            if vel.shape == (3,):
+                vel = vel[:, None]
+            elif vel.shape != (3, n):
+                hint = ": transpose it (velocities.T)" if vel.shape == (n, 3) else ""
+                raise ValueError(
+                    f"velocities must be one 3-vector (x, y, z) or one per particle, shape (3, {n}), got shape "
+                    f"{vel.shape}{hint}"
+                )
+            if not np.isfinite(vel).all():
+                raise ValueError("velocities must be finite (m/s): some components are NaN or infinite")
+            vel = np.broadcast_to(vel, (3, n))
+        if saturation is None:
+            sat = np.zeros(n)
+        else:
+            sat = _per_particle("saturation", saturation, n, "water volume fraction")
+            if not np.all((sat >= 0) & (sat <= 1)):
+                bad = sat[(sat < 0) | (sat > 1)][0]
+                raise ValueError(
+                    f"saturation must be in [0, 1] (water per volume: 0 dry, at most 1 - packing fraction when the "
+                    f"pores are full, e.g. 0.1 for moist sand), got {bad:g}"
+                )
         dens = self.params.density if densities is None else densities
-        rho = np.broadcast_to(np.asarray(dens, dtype=np.float64), (n,))
+        rho = _per_particle("densities", dens, n, "kg/m³")
         if not np.all(rho > 0):
-            raise ValueError("particle densities must be > 0")
+            raise ValueError(f"particle densities must be > 0 kg/m³, got {_least(rho)}")
         return pos, vol, vel, sat, rho
 
     def append_particles(
@@ -260,14 +332,14 @@ class SandSolver:
 
     def set_dt(self, dt: float) -> None:
         """Change Δt; refused (TimeStepError, with the limit) when above :meth:`max_stable_dt`."""
-        if not dt > 0:
-            raise TimeStepError(f"dt must be > 0, got {dt}")
+        if not (is_real(dt) and math.isfinite(dt) and dt > 0):
+            raise TimeStepError(f"dt must be a finite number > 0 s, got {dt!r}")
         self._check_dt(float(dt))
         self.dt = float(dt)
 
     def _check_dt(self, dt: float) -> None:
         limit = self.max_stable_dt()
-        if dt > limit:
+        if not dt <= limit:  # a NaN limit refuses too ("dt > NaN" never fired)
             elastic = self.elastic_cfl * self.dx / self.p_wave_speed
             vmax = self._max_speed()
             raise TimeStepError(
@@ -352,8 +424,8 @@ class SandSolver:
             self.ops.sdf_project(self.x, self._sdf, self.dx, self.SDF_DEPTH * self.dx)
 
     def step(self, n: int = 1) -> None:
-        """Advance ``n`` MPM steps of Δt."""
-        for _ in range(int(n)):
+        """Advance ``n`` MPM steps of Δt; ``n`` a whole number >= 0 (as :meth:`couplekit.simulation.Simulation.step`)."""
+        for _ in range(whole_count("n", n)):
             self.p2g()
             self.grid_update()
             self.g2p()
