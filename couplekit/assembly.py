@@ -575,6 +575,15 @@ def retention_flags(scene: Scene) -> list[bool]:
     return [b.retention if b.retention is not None else sd.retention for b in scene.bodies if b.kind == "sand"]
 
 
+def sand_retention_flags(scene: Scene) -> set[bool]:
+    """Whether each kind of sand in the scene retains water: the bodies' flags (:func:`retention_flags`) and, when
+    inflows emit sand, ``sand.retention`` for the emitted particles (they have no body to override it)."""
+    flags = set(retention_flags(scene))
+    if scene.emits_sand:
+        flags.add(bool(scene.sand.retention))
+    return flags
+
+
 def build_sand(scene: Scene, backend: Backend, log: Callable[[str], Any]):
     """The :class:`~couplekit.sand.solver.SandSolver` of ``scene`` (bodies seeded as the module docstring says,
     walls on every face, obstacles as one SDF collider, the sand's Δt from the scheduler) and the particles'
@@ -759,7 +768,7 @@ def build_coupler(scene: Scene, sand, fluid, units: Units, retentive: np.ndarray
     from .coupling.params import CouplingParams
 
     sd = scene.sand
-    retention = any(retention_flags(scene))
+    retention = True in sand_retention_flags(scene)  # a body's sand, or the emitted sand (sand.retention)
     params = CouplingParams(
         retention=retention,
         r_max=sd.max_moisture,
@@ -768,7 +777,8 @@ def build_coupler(scene: Scene, sand, fluid, units: Units, retentive: np.ndarray
     )
     flags = retentive if retention and retentive is not None and retentive.size == sand.n_particles else None
     moisture = initial_moisture(scene, sand) if retention else 0.0
-    return SandFluidCoupler(sand, fluid, units, params, moisture=moisture, retentive=flags)
+    emitted = bool(sd.retention) if scene.emits_sand else None
+    return SandFluidCoupler(sand, fluid, units, params, moisture=moisture, retentive=flags, emitted_retentive=emitted)
 
 
 def build_scheduler(scene: Scene, fluid, sand, coupler, *, timing: bool = True, warm_up_steps: int = 1):
@@ -848,7 +858,7 @@ def memory_estimate(scene: Scene) -> dict[str, float]:
     retention = False
     if scene.fluid is not None and scene.has_sand:
         # fluid mixture inputs (fluid_fraction, sand_velocity, force) and the coupler's fields
-        flags = set(retention_flags(scene))
+        flags = sand_retention_flags(scene)
         retention, mixed = True in flags, len(flags) > 1  # mixed: + retentive fraction grid and flags
         # padded: the fluid's ε and force (4) and, except in lockstep (which folds Eq. 39's sand terms into the
         # pressure update), its sand velocity (3); the coupler's last ε (1, unless it lives in the source term's

@@ -92,9 +92,9 @@ def effect_memory(scene) -> dict[str, dict[str, float]]:
     fl, eff = scene.fluid, scene.effects
     two = bool(fl is not None and fl.phases == 2)
     coupled = scene.has_fluid and scene.has_sand
-    from .assembly import odd_ramp_applies, retention_flags
+    from .assembly import odd_ramp_applies, sand_retention_flags
 
-    retention = coupled and any(retention_flags(scene))
+    retention = coupled and True in sand_retention_flags(scene)
     on = {
         "phase_field": two,
         "surface_tension": two and eff.surface_tension and bool(fl.surface_tension),

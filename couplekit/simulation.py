@@ -354,7 +354,9 @@ class Simulation:
         ===================== ====================================================== ==========================
         field                 SI (default)                                           ``lattice=True``
         ===================== ====================================================== ==========================
-        ``velocity``          fluid velocity, m/s (0 in solid cells)                 Δx/Δt
+        ``velocity``          fluid velocity, m/s (0 in solid cells; Eq. 13's, of    Δx/Δt
+                              the last collision: half a step behind the
+                              populations, :meth:`diagnostics`)
         ``pressure``          gauge pressure p of Eqs. 39–40, Pa (p = 0: the         ρ_w (Δx/Δt)²
                               reference level of the start, the top of a
                               hydrostatic column or the initial state)
@@ -416,9 +418,10 @@ class Simulation:
         Fluid: ``fluid_volume`` (water volume in cells, Σ φ, with sand Σ ε φ + bound water; Δx³ = 1),
         ``fluid_volume_drift`` (relative to the start), ``max_lattice_speed`` (Δx/Δt), ``mach``, ``max_speed``
         (m/s), ``fluid_momentum_x/y/z`` (Σ ε ρ u dV, kg m/s: ε the fluid fraction where there is sand, else 1;
-        u = Σ_j f_j c_j, the velocity of the populations the drag exchange sees, which the Eq. 13 velocity of
-        :meth:`fields` leads by half the last step's force), ``fluid_kinetic_energy_si`` (½ Σ ε ρ |u|² dV with
-        the :meth:`fields` velocity, J), ``free_surface_height`` (two-phase, m); and the solver's lattice
+        u = Σ_j f_j c_j, the velocity of the populations the drag exchange sees; the Eq. 13 velocity of
+        :meth:`fields` is the last collision's, half a step behind it: from rest under a uniform body force g,
+        (N − ½) g Δt after N steps where Σ f c gives N g Δt), ``fluid_kinetic_energy_si`` (½ Σ ε ρ |u|² dV with
+        the :meth:`fields` velocity, J, so half a step behind the momentum), ``free_surface_height`` (two-phase, m); and the solver's lattice
         sums ``lattice_momentum_x/y/z`` (Σ ρ u over every fluid cell, not weighted by ε) and
         ``lattice_kinetic_energy`` (½ Σ ρ |u|²), in lattice units (ρ_w = Δx = Δt = 1), as
         :meth:`couplekit.fluid.solver.FluidSolver.diagnostics` gives them.

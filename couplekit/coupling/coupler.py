@@ -91,6 +91,8 @@ class SandFluidCoupler:
     some sand bodies only (paper Fig. 10), or None (every particle retains when ``params.retention``).  With
     flags, only retentive sand has retention capacity (r_max times the retentive sand fraction, a P2G of the
     flags) and only retentive particles gain bound water; flags all true are the one-setting model, bitwise.
+    ``emitted_retentive``: whether particles emitted later (at inflows) retain (the scene's ``sand.retention``);
+    None: they retain only when every seeded particle does.
     The fluid must be built with ``mixture=True`` and ``external_force=True``; its phase field (if any)
     receives the source term.
     """
@@ -103,6 +105,7 @@ class SandFluidCoupler:
         params: CouplingParams | None = None,
         moisture: np.ndarray | float = 0.0,
         retentive: np.ndarray | None = None,
+        emitted_retentive: bool | None = None,
     ):
         if tuple(sand.shape) != tuple(fluid.shape):
             raise ValueError(f"sand grid {tuple(sand.shape)} and fluid grid {tuple(fluid.shape)} must be the same")
@@ -131,7 +134,14 @@ class SandFluidCoupler:
             flags = None if retentive is None else np.asarray(retentive, dtype=bool).reshape(-1)
             if flags is not None and flags.shape != (sand.n_particles,):
                 raise ValueError(f"retentive has {flags.size} flags for {sand.n_particles} particles")
-            if flags is not None and not flags.all():
+            # particles emitted later retain as emitted_retentive says (sand.retention); None: as the bodies' do
+            # when all of those retain, not otherwise
+            self._emitted_retain = 0.0 if emitted_retentive is None else float(bool(emitted_retentive))
+            every = flags is None or flags.all()
+            if every and emitted_retentive is False:
+                flags = np.ones(sand.n_particles, bool)  # the bodies' sand retains, the emitted will not
+                every = False
+            if not every:
                 r = np.where(flags, r, 0.0)  # non-retentive particles hold no bound water
                 self.retain = fluid.backend.asarray(flags.astype(np.float32), np.float32)
                 self.retentive = xp.zeros(shape, dtype=np.float32)
@@ -226,11 +236,15 @@ class SandFluidCoupler:
         ``share``: the part of a fluid step this sand step covers (1/k for a substep, m for a multi-rate
         block; :meth:`couplekit.coupling.reference.ReferenceOps.fractions`)."""
         s, f = self.sand, self.fluid
-        if self.retention:
+        if self.retention and s.n_particles == 0:  # a jet's sand not emitted yet: no bound water to gather
+            self.bound_in[...] = 0.0
+            if self.retain is not None:
+                self.retentive[...] = 0.0
+        elif self.retention:
             self.ops.bound_water_p2g(s.x, self.moisture_ratio, s.volume, self.bound_in, s.dx)
             if self.retain is not None:  # the retentive sand's fraction: Eq. 53's P2G with r_p = flag
                 if self.retain.shape[0] != s.n_particles:  # particles emitted since (couplekit.sand.emission)
-                    self.retain = _resized(self.fluid.backend.xp, self.retain, s.n_particles)
+                    self.retain = _resized(self.fluid.backend.xp, self.retain, s.n_particles, self._emitted_retain)
                 self.ops.bound_water_p2g(s.x, self.retain, s.volume, self.retentive, s.dx)
         self.ops.fractions(
             s.grid_vol, f.phi, self.bound_in, self.eps_prev, f.fluid_fraction, self.d_bound, self.bound, s.dx,
@@ -282,6 +296,8 @@ class SandFluidCoupler:
     def moisture(self) -> None:
         """Saturation of every particle (Eq. 59 or its no-retention form) and, with retention, r_p (Eq. 58)."""
         s = self.sand
+        if s.n_particles == 0:  # a jet's sand not emitted yet
+            return
         self.ops.particle_moisture(
             s.x, self.moisture_ratio, s.saturation, self.fluid.fluid_fraction, self.fluid.phi, self.bound,
             self.d_bound, s.grid_vol, s.dx, self.retentive, self.retain,
@@ -384,10 +400,10 @@ class SandFluidCoupler:
         return out
 
 
-def _resized(xp, a, n: int):
-    """``a`` cut or grown to ``n`` entries, new entries 0: particles appended after construction (emitted at
-    inflows) are not retentive."""
-    out = xp.zeros(n, dtype=a.dtype)
+def _resized(xp, a, n: int, fill: float = 0.0):
+    """``a`` cut or grown to ``n`` entries, new entries ``fill``: particles appended after construction (emitted at
+    inflows) retain as ``sand.retention`` says (1) or not (0; SandFluidCoupler's ``emitted_retentive``)."""
+    out = xp.full(n, fill, dtype=a.dtype)
     keep = min(n, a.shape[0])
     out[:keep] = a[:keep]
     return out
