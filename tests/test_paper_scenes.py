@@ -83,9 +83,11 @@ def test_fig03_castle_loses_sand_downstream():
 def test_fig04_colander_passes_sand_and_water():
     """Fig. 4: a water jet carrying sand (fraction 0.2) falls into the perforated bowl; the whole small variant
     (20 frames, 0.67 s). Sand and water pass its holes: particles below the bowl's bottom (z < 0.13 m; measured
-    1008 at 0.37 s, 3523 at 0.67 s) and more water below it than the pool held (measured +3 % at 0.37 s, +18 %
-    at 0.67 s). The run stays stable to its end (it diverged at step ~1036 before the pressure filter's
-    three-point wall rule, docs/fluid-stability.md): max lattice speed measured 0.098, volume drift +2.7e-4."""
+    1132 at 0.37 s, 3820 at 0.67 s) and more water below it than the pool held (measured +3.0 % at 0.37 s,
+    +17.4 % at 0.67 s). The run stays stable to its end (it diverged at step ~1036 before the pressure filter's
+    three-point wall rule, docs/fluid-stability.md): max lattice speed measured 0.100, volume drift +2.4e-4.
+    Measured with the jet's sand retaining water (sand.retention = true, R_a = 0.003; session 22: until then the
+    emitted sand of a jet-only scene silently did not retain; then 1008 / 3523 particles, +3 / +18 %)."""
     sim = _sim("fig04_colander")
     zc = _grid(sim)[2]
     below0 = _water(sim)[zc < 0.13].sum()
