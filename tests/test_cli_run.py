@@ -151,25 +151,28 @@ def test_info_still_works(capsys):
     assert "backend: numpy" in capsys.readouterr().out
 
 
-def test_ctrl_c_writes_checkpoint_and_resume_finishes(tmp_path):
-    """SIGINT during a run: exit 130 with interrupted.h5; --resume from it completes the run."""
-    scene = _scene(tmp_path, frames=400)
-    out = tmp_path / "out"
-    env = dict(os.environ, PYTHONUNBUFFERED="1")
+def _interrupted_run(scene: Path, out: Path, sig: int) -> tuple[int, str, str]:
+    """``couplekit run scene --out out`` in a subprocess, sent ``sig`` a second after its first frame is logged:
+    (exit code, stdout, stderr)."""
     proc = subprocess.Popen(
         [sys.executable, "-m", "couplekit", "run", str(scene), "--out", str(out), "--backend", "cpu"],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        env=env,
-    )
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=dict(os.environ, PYTHONUNBUFFERED="1"),
+    )  # fmt: skip
     deadline = time.time() + 300  # a cold kernel cache compiles the sand kernels first
     while time.time() < deadline and not (out / "diagnostics.jsonl").exists():
         time.sleep(0.2)
     time.sleep(1.0)
-    proc.send_signal(signal.SIGINT)
+    proc.send_signal(sig)
     stdout, stderr = proc.communicate(timeout=120)
-    assert proc.returncode == 130, stdout + stderr
+    return proc.returncode, stdout, stderr
+
+
+def test_ctrl_c_writes_checkpoint_and_resume_finishes(tmp_path):
+    """SIGINT during a run: exit 130 with interrupted.h5; --resume from it completes the run."""
+    scene = _scene(tmp_path, frames=400)
+    out = tmp_path / "out"
+    rc, stdout, stderr = _interrupted_run(scene, out, signal.SIGINT)
+    assert rc == 130, stdout + stderr
     assert (out / "interrupted.h5").exists() and "--resume" in stdout
     rc = main(
         [
@@ -195,17 +198,8 @@ def test_sigterm_writes_checkpoint_and_resume_goes_on_in_the_same_folder(tmp_pat
     --out), not in the scene's default folder."""
     scene = _scene(tmp_path, frames=400)
     out = tmp_path / "given"
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "couplekit", "run", str(scene), "--out", str(out), "--backend", "cpu"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=dict(os.environ, PYTHONUNBUFFERED="1"),
-    )  # fmt: skip
-    deadline = time.time() + 300
-    while time.time() < deadline and not (out / "diagnostics.jsonl").exists():
-        time.sleep(0.2)
-    time.sleep(1.0)
-    proc.send_signal(signal.SIGTERM)
-    stdout, stderr = proc.communicate(timeout=120)
-    assert proc.returncode == 143, stdout + stderr
+    rc, stdout, stderr = _interrupted_run(scene, out, signal.SIGTERM)
+    assert rc == 143, stdout + stderr
     assert (out / "interrupted.h5").exists() and f"--out {out}" in stdout and "SIGTERM" in stdout
     frames_before = len(list(out.glob("fields_*.vti")))
     monkeypatch.chdir(tmp_path)  # the default folder would be runs/<name> here
