@@ -44,6 +44,7 @@ from .faces import solver_face, wall_face
 from .fluid import hydrostatic
 from .scene import Scene
 from .scene.geometry import Union, sdf_on_grid
+from .schedulers import folds_sand_velocity
 from .units import Units
 
 if TYPE_CHECKING:
@@ -551,7 +552,7 @@ def build_fluid(scene: Scene, backend: Backend, units: Units, coupled: bool, log
             source_term=coupled and scene.effects.source_term,
             storage=fl.storage,
             # lockstep folds Eq. 39's sand terms into the pressure update (SandFluidCoupler.fold_sand_velocity)
-            sand_velocity=scene.scheduler.kind != "lockstep",
+            sand_velocity=not folds_sand_velocity(scene.scheduler.kind),
         )
     for line in stability_cautions(scene):
         log(f"caution: {line}")
@@ -867,7 +868,7 @@ def memory_estimate(scene: Scene) -> dict[str, float]:
         # slip term (1 byte); interior: with retention the bound water R, R', dR (+ the retentive sand's
         # fraction with per-body retention)
         shared = scene.fluid.phases == 2 and scene.effects.source_term
-        stored_v = 0 if scene.scheduler.kind == "lockstep" else 3
+        stored_v = 0 if folds_sand_velocity(scene.scheduler.kind) else 3
         out["coupling"] = padded * (4.0 * (4 + stored_v + (0 if shared else 1)) + 1) + cells * 4.0 * (
             (3 + mixed) if retention else 0
         )

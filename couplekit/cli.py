@@ -79,54 +79,44 @@ def _cmd_info(args: argparse.Namespace) -> int:
     return 0 if all(r.ok for r in results) else 1
 
 
-def _with_sets(scene, args: argparse.Namespace, scheduler: str | None = None):
-    """``scene`` with ``scheduler`` (``run --scheduler``: its ``[scheduler]`` table replaced by
-    :func:`couplekit.schedulers.spec_table`'s) and the ``--set KEY=VALUE`` options of ``args`` applied, then
-    validated once, as a whole (``with_settings``; relative files resolve against the scene file's folder):
-    the scheduler's limits are checked with the sand the ``--set`` values give, not the file's. A ``--set
-    scheduler.<key>`` applies on top of ``--scheduler``'s table (``--scheduler subcycle:auto --set
-    scheduler.max_substeps=128``). Unchanged without either."""
-    from .simulation import parse_setting, with_settings
+def _settings(args: argparse.Namespace, scheduler: str | None = None) -> dict:
+    """The dotted settings of ``scheduler`` (``run --scheduler``: the ``[scheduler]`` table of
+    :func:`couplekit.schedulers.spec_table`) and the ``--set KEY=VALUE`` options of ``args``, in that order (a
+    ``--set scheduler.<key>`` applies on top of ``--scheduler``'s table: ``--scheduler subcycle:auto --set
+    scheduler.max_substeps=128``)."""
+    from .simulation import parse_setting
 
-    if not args.set and scheduler is None:
-        return scene
     settings: dict = {}
     if scheduler is not None:
         from .schedulers import spec_table
 
-        settings["scheduler"] = spec_table(scheduler)  # first: with_settings applies the keys in order
+        settings["scheduler"] = spec_table(scheduler)  # first: the keys are applied in order
     settings.update(parse_setting(s) for s in args.set)
-    return with_settings(scene, settings, base_dir=Path(args.scene).parent)
+    return settings
 
 
 def _load_with_sets(args: argparse.Namespace, scheduler: str | None = None):
-    """The scene file of ``args`` with ``scheduler`` and the ``--set`` options applied (:func:`_with_sets`).
-    A file that is invalid on its own but valid with the settings is taken: the settings are applied to the
-    file's own table and the result validated once (``--set time.dt=1e-4`` fixes a file whose time step breaks
-    a limit; validating the file first refused it with the value the option replaces).  Errors of the result
-    name the settings."""
+    """The scene file of ``args`` with ``scheduler`` and the ``--set`` options applied (:func:`_settings`), validated
+    once, as a whole (relative files resolve against the scene file's folder): the scheduler's limits are checked
+    with the sand the ``--set`` values give, not the file's. A file that is invalid on its own but valid with the
+    settings is taken: the settings are applied to the file's own table and the result validated once (``--set
+    time.dt=1e-4`` fixes a file whose time step breaks a limit; validating the file first refused it with the
+    value the option replaces).  Errors of the result name the settings."""
     from .scene import Scene, SceneError
     from .scene.schema import read_toml
-    from .simulation import parse_setting
-    from .sweep.keys import check_key, set_key
+    from .simulation import apply_settings, with_settings
 
+    settings = _settings(args, scheduler)
+    base_dir = Path(args.scene).parent
     try:
-        return _with_sets(Scene.load(args.scene), args, scheduler=scheduler)
+        scene = Scene.load(args.scene)
+        return with_settings(scene, settings, base_dir=base_dir) if settings else scene
     except SceneError:
-        if not args.set and scheduler is None:
+        if not settings:
             raise
     data = read_toml(Path(args.scene), SceneError)
-    settings: dict = {}
-    if scheduler is not None:
-        from .schedulers import spec_table
-
-        settings["scheduler"] = spec_table(scheduler)
-    settings.update(parse_setting(s) for s in args.set)
-    for key, value in settings.items():
-        check_key(key, data)
-        set_key(data, key, value)
-    shown = ", ".join(f"{k} = {v!r}" for k, v in settings.items())
-    return Scene.from_dict(data, base_dir=Path(args.scene).parent, source_name=f"{args.scene} with {shown}")
+    shown = apply_settings(data, settings)
+    return Scene.from_dict(data, base_dir=base_dir, source_name=f"{args.scene} with {shown}")
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:

@@ -93,6 +93,7 @@ def effect_memory(scene) -> dict[str, dict[str, float]]:
     two = bool(fl is not None and fl.phases == 2)
     coupled = scene.has_fluid and scene.has_sand
     from .assembly import odd_ramp_applies, sand_retention_flags
+    from .schedulers import folds_sand_velocity
 
     retention = coupled and True in sand_retention_flags(scene)
     on = {
@@ -127,7 +128,7 @@ def effect_memory(scene) -> dict[str, dict[str, float]]:
         extra = 0.0
         if name == "fp16_storage" and two:
             per_cell -= FP16_SAVING_H
-        if name == "coupling" and scene.scheduler.kind != "lockstep":
+        if name == "coupling" and not folds_sand_velocity(scene.scheduler.kind):
             per_cell += SAND_VELOCITY_BYTES
         if name == "stirring":
             if not scene.has_sand:

@@ -112,8 +112,6 @@ def with_settings(scene: Scene | str | Path, settings: Mapping[str, Any], base_d
     scene format does not have raises :class:`~couplekit.sweep.KeyPathError` (a ValueError) naming the nearest
     key; a value it refuses raises :class:`~couplekit.scene.SceneError`. ``scene`` may be a scene file's path
     (then ``base_dir`` defaults to its folder)."""
-    from .sweep.keys import check_key, set_key
-
     if isinstance(scene, (str, Path)):
         base_dir = Path(scene).parent if base_dir is None else base_dir
         scene = Scene.load(scene)
@@ -123,11 +121,21 @@ def with_settings(scene: Scene | str | Path, settings: Mapping[str, Any], base_d
     if not isinstance(settings, Mapping):
         raise TypeError(f"settings must be a mapping of dotted keys to values, got {type(settings).__name__}")
     data = scene.to_dict()
+    shown = apply_settings(data, settings)
+    return Scene.from_dict(data, base_dir=base_dir, source_name=f"scene {scene.name!r} with {shown}")
+
+
+def apply_settings(data: dict, settings: Mapping[str, Any]) -> str:
+    """Write the dotted keys of ``settings`` into the scene dict ``data`` (in place, in order; a key the scene
+    format does not have raises :class:`~couplekit.sweep.KeyPathError`) and return them as ``"key = value, ..."``
+    for messages. :func:`with_settings` applies them to a validated scene's dict; ``couplekit run --set`` to a
+    scene file's own table when the file alone does not validate."""
+    from .sweep.keys import check_key, set_key
+
     for key, value in settings.items():
         check_key(key, data)
         set_key(data, key, value)
-    shown = ", ".join(f"{k} = {v!r}" for k, v in settings.items())
-    return Scene.from_dict(data, base_dir=base_dir, source_name=f"scene {scene.name!r} with {shown}")
+    return ", ".join(f"{k} = {v!r}" for k, v in settings.items())
 
 
 class InsufficientMemoryError(MemoryError):

@@ -26,12 +26,20 @@ __all__ = [
     "Scheduler",
     "SubcycleScheduler",
     "SubstepLimitError",
+    "folds_sand_velocity",
     "make_scheduler",
     "sand_step",
     "spec_table",
 ]
 
 KINDS = ("lockstep", "subcycle", "multirate")
+_CLASSES = {"lockstep": LockstepScheduler, "subcycle": SubcycleScheduler, "multirate": MultirateScheduler}
+
+
+def folds_sand_velocity(kind: str) -> bool:
+    """Whether a coupled scene under scheduler ``kind`` keeps no stored sand velocity in its fluid
+    (:attr:`Scheduler.folds_sand_velocity`): what the solvers are built with and the memory estimate counts."""
+    return _CLASSES[kind].folds_sand_velocity
 
 
 def sand_step(kind: str, dt: float, substeps: int | str = 1, sand_every: int = 1) -> float:

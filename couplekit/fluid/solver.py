@@ -479,7 +479,9 @@ class FluidSolver:
         self.pbar = xp.zeros(pshape, dtype=np.float32)
 
         self.fluid_fraction = xp.ones(pshape, dtype=np.float32) if self.mixture else None
-        self.sand_velocity = xp.zeros((3,) + pshape, dtype=np.float32) if self.mixture and sand_velocity else None
+        self.sand_velocity = None
+        if sand_velocity:
+            self.keep_sand_velocity()  # with mixture only
         # the cells where Eq. 39 keeps its porosity-slip term: not in the layers next to a wall, 3 with the
         # odd-rate floor, 1 with the paper's collision (grid.slip_wall_layers)
         self._slip_cells = None

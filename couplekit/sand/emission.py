@@ -43,7 +43,14 @@ import numpy as np
 
 from ..faces import PLANE_AXES, face_plane_shape, region_mask, solver_face
 
-__all__ = ["JetSource", "InflowEmitter", "emission_sites", "expected_particles", "match_particle_count"]
+__all__ = [
+    "JetSource",
+    "InflowEmitter",
+    "emission_sites",
+    "expected_particles",
+    "inflow_sites",
+    "match_particle_count",
+]
 
 _AXIS = {"x": 0, "y": 1, "z": 2}
 _ROUND_OFF = 1e-9
@@ -74,6 +81,16 @@ def emission_sites(
     u = np.broadcast_to(ii[:, None, None] * dx + sub[None, None, :], shape)
     v = np.broadcast_to(jj[:, None, None] * dx + sub[None, :, None], shape)
     return np.stack([u.reshape(-1), v.reshape(-1)])
+
+
+def inflow_sites(inflow, grid: tuple[int, int, int], dx: float, per_axis: int, bound: int) -> tuple[str, np.ndarray]:
+    """(solver face, :func:`emission_sites`) of a scene inflow (:class:`couplekit.scene.model.Inflow`): its
+    outlet rasterised as the fluid does (:func:`couplekit.faces.region_mask`), or the whole face."""
+    face = solver_face(inflow.face)
+    mask = None
+    if inflow.shape != "face":
+        mask = region_mask(grid, dx, face, inflow.shape, inflow.center, inflow.size, inflow.radius)
+    return face, emission_sites(grid, dx, face, mask, per_axis, bound)
 
 
 @dataclass(frozen=True)
@@ -177,12 +194,8 @@ class InflowEmitter:
         for inf in scene.inflows:
             if inf.sand_fraction <= 0:
                 continue
-            face = solver_face(inf.face)
-            mask = None
-            if inf.shape != "face":
-                mask = region_mask(dom.shape, dom.dx, face, inf.shape, inf.center, inf.size, inf.radius)
             k = sd.particles_per_axis
-            sites = emission_sites(dom.shape, dom.dx, face, mask, k, bound)
+            face, sites = inflow_sites(inf, dom.shape, dom.dx, k, bound)
             sources.append(
                 JetSource(
                     face,

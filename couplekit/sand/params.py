@@ -37,7 +37,25 @@ import numpy as np
 
 from ..arguments import is_real
 
-__all__ = ["SandParams", "ConstitutiveModel"]
+__all__ = ["SandParams", "ConstitutiveModel", "friction_angle_range"]
+
+
+def friction_angle_range(h0: float, h1: float, h2: float, h3: float) -> tuple[float, float]:
+    """(lowest, highest) in degrees of the friction angle φ_F(q) = h0 + (h1 q − h3) exp(−h2 q) of Klar et al.'s
+    hardening over plastic strains q >= 0 (h2 >= 0), for any signs of h0, h1, h3: φ_F(0) = h0 − h3, the limit h0
+    as q grows (h2 > 0), and its one stationary point q* = 1/h2 + h3/h1 where q* > 0; with h2 = 0 a line,
+    unbounded unless h1 = 0. One rule for SandParams and the scene's ``sand.hardening`` check (assuming
+    h1, h3 >= 0 had let [10, -20, 0.2, 0] pass although the angle falls to −26.8 degrees)."""
+    values = [h0 - h3]
+    if h2 > 0:
+        values.append(h0)
+        if h1 != 0:
+            q = 1.0 / h2 + h3 / h1
+            if q > 0:
+                values.append(h0 + (h1 * q - h3) * math.exp(-h2 * q))
+    elif h1 != 0:  # h2 = 0: the angle changes without bound with the plastic strain
+        values.append(math.copysign(math.inf, h1))
+    return float(min(values)), float(max(values))
 
 
 @dataclass(frozen=True)
@@ -127,22 +145,10 @@ class SandParams:
 
     def friction_angle_range(self) -> tuple[float, float]:
         """(lowest, highest) friction angle in degrees over plastic strains q >= 0: h0 without hardening, else
-        the range of φ_F(q) = h0 + (h1 q − h3) exp(−h2 q) (h2 >= 0): φ_F(0) = h0 − h3, the limit h0 (h2 > 0), and
-        its one stationary point q* = 1/h2 + h3/h1 where q* > 0; with h2 = 0 a line, unbounded unless h1 = 0 (the
-        scene check of ``sand.hardening``, couplekit/scene/model.py)."""
-        h0, h1, h2, h3 = self.h0, self.h1, self.h2, self.h3
+        :func:`friction_angle_range` of (h0, h1, h2, h3)."""
         if not self.hardening:
-            return float(h0), float(h0)
-        values = [h0 - h3]
-        if h2 > 0:
-            values.append(h0)
-            if h1 != 0:
-                q = 1.0 / h2 + h3 / h1
-                if q > 0:
-                    values.append(h0 + (h1 * q - h3) * math.exp(-h2 * q))
-        elif h1 != 0:
-            values.append(math.copysign(math.inf, h1))
-        return float(min(values)), float(max(values))
+            return float(self.h0), float(self.h0)
+        return friction_angle_range(self.h0, self.h1, self.h2, self.h3)
 
     @property
     def mu(self) -> float:

@@ -38,7 +38,8 @@ import numpy as np
 
 from ..faces import PLANE_AXES, SCENE_FACES, face_extent, face_plane_shape, region_bounds, region_mask, solver_face
 from ..lattice import CS2
-from ..sand.emission import emission_sites
+from ..sand.emission import inflow_sites
+from ..sand.params import friction_angle_range
 from ..units import Units
 from .geometry import Box, Cylinder, Difference, Inverted, Shape, Sphere, Transformed
 from .schema import (
@@ -1049,20 +1050,8 @@ def _sand(snd: dict, problems: list[Problem]) -> Sand | None:
     if h[2] < 0:
         problems.append(Problem("sand.hardening[2]", f"h2 must be >= 0, got {h[2]:g}", "the paper uses h2 = 0.2"))
     else:
-        # the friction angle phi_F(q) = h0 + (h1 q - h3) exp(-h2 q) of Klar et al. over q >= 0 (couplekit.sand),
-        # for any signs of h0, h1, h3: phi_F(0) = h0 - h3, the limit h0 as q grows (h2 > 0), and the one
-        # stationary point q* = 1/h2 + h3/h1 where it lies at q* > 0; with h2 = 0 a line, unbounded unless h1 = 0
-        # (it assumed h1, h3 >= 0: [10, -20, 0.2, 0] passed although the angle falls to -26.8 degrees)
-        values = [h[0] - h[3]]
-        if h[2] > 0:
-            values.append(h[0])
-            if h[1] != 0:
-                q = 1.0 / h[2] + h[3] / h[1]
-                if q > 0:
-                    values.append(h[0] + (h[1] * q - h[3]) * math.exp(-h[2] * q))
-        elif h[1] != 0:  # h2 = 0: the angle changes without bound with the plastic strain
-            values.append(math.copysign(math.inf, h[1]))
-        lo_angle, hi_angle = min(values), max(values)
+        # the friction angle over q >= 0, for any signs of h0, h1, h3 (couplekit.sand.params)
+        lo_angle, hi_angle = friction_angle_range(*h)
         if not (0.0 < lo_angle and hi_angle < 90.0):
             problems.append(
                 Problem(
@@ -1887,18 +1876,13 @@ def _check_jets_clear(
     for n, inf in enumerate(inflows):
         if inf.sand_fraction <= 0 or _face_too_large(domain, inf.face):
             continue
-        face = solver_face(inf.face)
-        if inf.shape == "face":
-            mask = None
-        elif (
+        if inf.shape != "face" and (
             inf.center is None
             or (inf.shape == "rect" and inf.size is None)
             or (inf.shape == "disc" and inf.radius is None)
         ):
-            continue
-        else:
-            mask = region_mask(domain.shape, domain.dx, face, inf.shape, inf.center, inf.size, inf.radius)
-        sites = emission_sites(domain.shape, domain.dx, face, mask, 1, rim)  # one point per open cell
+            continue  # an outlet without its keys: refused by the inflow checks
+        face, sites = inflow_sites(inf, domain.shape, domain.dx, 1, rim)  # one point per open cell
         if sites.shape[1] == 0:
             continue
         axis = "xyz".index(face[0])
