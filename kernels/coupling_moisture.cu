@@ -4,9 +4,8 @@
 // N_i(x_p) exactly as the sand's transfers; x, V_p in SI (m, m^3), fractions dimensionless.
 //
 // coupling_bound_water_p2g:   R_i = (1 / V_cell) sum_p r_p V_p N_i(x_p)                       (Eq. 53)
-//   CUDA: float atomics into `bound` (cleared first by coupling_clear).  Host: deterministic: each OpenMP
-//   thread scatters its static block of particles into a private grid (scratch: nthreads * ncell floats),
-//   summed node by node in thread order (bitwise reproducible for a fixed thread count).
+//   CUDA: float atomics into `bound` (cleared first by coupling_clear).  Host: deterministic, by tiles of
+//   particles (host_scatter.cuh; scratch: host_scatter_scratch_size ints), bitwise the same for any thread count.
 // coupling_particle_moisture:  S_p = sum_i water_i N_i(x_p)                            (Eq. 59 / text after Eq. 28)
 //   water_i = R'_i + eps_f,i phi_i (coupling_water; eps_f phi without retention) from the porosity (padded),
 //   the phase field (padded; 1 single-phase, CK_TWO_PHASE=0) and the bound water R' of this step: not a stored
@@ -25,6 +24,7 @@
 // variants: CK_RETENTION=0,1 CK_TWO_PHASE=0,1
 #include "common.cuh"
 #include "coupling_fields.cuh"
+#include "host_scatter.cuh"
 
 #ifndef CK_RETENTION
 #define CK_RETENTION 0
@@ -52,7 +52,7 @@ DEVICE int coupling_bspline(const float X, float w[3]) {
 KERNEL void coupling_bound_water_p2g(const long long n, const float* RESTRICT x /* size: 3 * n */,
                                      const float* RESTRICT r /* size: n */, const float* RESTRICT vol /* size: n */,
                                      float* RESTRICT bound /* size: nx * ny * nz */,
-                                     float* RESTRICT scratch /* size >= 1 */, const int nthreads, const int nx,
+                                     int* RESTRICT scratch /* size >= 1 */, const int nthreads, const int nx,
                                      const int ny, const int nz, const float dx) {
     const long long np = n;
     const long long ncell = (long long)nx * ny * nz;
@@ -78,15 +78,19 @@ KERNEL void coupling_bound_water_p2g(const long long n, const float* RESTRICT x 
     (void)nthreads;
     (void)ncell;
 #else
-    CK_PRAGMA(omp parallel num_threads(nthreads)) {
-        const int t = omp_get_thread_num();
-        const int team = omp_get_num_threads();
-        float* RESTRICT g = scratch + (long long)t * ncell;
-        for (long long k = 0; k < ncell; ++k) g[k] = 0.f;
-        CK_PRAGMA(omp for schedule(static))
-        for (long long p = 0; p < np; ++p) {
+    // host: the tiles of host_scatter.cuh (plain additions, one summation order for any thread count)
+    host_scatter(
+        np, ny, nz, nthreads, scratch, nullptr,
+        [&](const long long p) -> long long {
+            const float Y = x[np + p] * inv_dx - 0.5f, Z = x[2 * np + p] * inv_dx - 0.5f;
+            return coupling_inside(x[p] * inv_dx - 0.5f, Y, Z, nx, ny, nz) ? host_scatter_tile(Y, Z, ny) : -1;
+        },
+        [&]() {
+            CK_PRAGMA(omp for schedule(static))
+            for (long long i = 0; i < ncell; ++i) bound[i] = 0.f;
+        },
+        [&](const long long p) {
             const float X = x[p] * inv_dx - 0.5f, Y = x[np + p] * inv_dx - 0.5f, Z = x[2 * np + p] * inv_dx - 0.5f;
-            if (!coupling_inside(X, Y, Z, nx, ny, nz)) continue;
             float wx[3], wy[3], wz[3];
             const int bx = coupling_bspline(X, wx);
             const int by = coupling_bspline(Y, wy);
@@ -96,17 +100,9 @@ KERNEL void coupling_bound_water_p2g(const long long n, const float* RESTRICT x 
                 for (int b = 0; b < 3; ++b) {
                     const long long row = (long long)nx * ((long long)(by + b) + (long long)ny * (bz + c)) + bx;
                     const float wyz = q * wy[b] * wz[c];
-                    for (int a = 0; a < 3; ++a) g[row + a] += wx[a] * wyz;
+                    for (int a = 0; a < 3; ++a) bound[row + a] += wx[a] * wyz;
                 }
-        }
-        // implicit barrier: every private grid is complete; sum them in thread order
-        CK_PRAGMA(omp for schedule(static))
-        for (long long i = 0; i < ncell; ++i) {
-            float s = 0.f;
-            for (int u = 0; u < team; ++u) s += scratch[(long long)u * ncell + i];
-            bound[i] = s;
-        }
-    }
+        });
 #endif
 }
 

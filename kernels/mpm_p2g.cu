@@ -16,14 +16,15 @@
 // positions inside that band, so only a diverged state gets here, and without the guard a NaN position
 // turned into a wild grid index (the host build wrote out of bounds and crashed with "double free").
 // CUDA: float atomics straight into the grid (order-dependent round-off, as any GPU MPM).
-// Host: deterministic.  Each OpenMP thread scatters its static block of particles into a private grid
-// (scratch: nthreads * 5 * ncell floats, node-interleaved), then the private grids are summed node by
-// node in thread order, so for a fixed thread count the result is bitwise reproducible (up to
-// MPM_SERIAL_PARTICLES particles the team is one thread: the same rule every run).
+// Host: deterministic, by tiles of particles (host_scatter.cuh; scratch: host_scatter_scratch_size ints): plain
+// additions into the grid in one order for any thread count, so the result is bitwise reproducible whatever the
+// number of threads.  (Until session 23 each thread scattered into a private grid of 5 floats per node, summed in
+// thread order: 20 B per node per thread, and a result that changed with the thread count.)
 // Define MPM_HOST_ATOMICS=1 to use `omp atomic` on the host instead (for benchmarking only:
 // not reproducible).
 // variants: MPM_HOST_ATOMICS=0,1
 #include "common.cuh"
+#include "host_scatter.cuh"
 #include "mpm_loops.cuh"
 
 #ifndef MPM_HOST_ATOMICS
@@ -40,17 +41,15 @@ DEVICE int mpm_bspline(const float X, float w[3], float& f) {
     return base;
 }
 
-// Per-particle quantities of the fused scatter: the affine matrix A_p (row-major) and m_p v_p - A_p x_p
-// (relative to the stencil base node, in units of dx) so that the momentum a node receives is
-// w * (mv0 + A dpos) with dpos = (node - base - f) dx.
+// grid coordinates of particle p (node i at i), and the guard: the whole stencil inside the grid, finite
+#define MPM_P2G_GRID_COORDS \
+    const float Xg = x[p] * inv_dx - 0.5f, Yg = x[np + p] * inv_dx - 0.5f, Zg = x[2 * np + p] * inv_dx - 0.5f;
+#define MPM_P2G_INSIDE \
+    (Xg >= 0.5f && Xg < (float)nx - 1.5f && Yg >= 0.5f && Yg < (float)ny - 1.5f && Zg >= 0.5f && Zg < (float)nz - 1.5f)
+// After MPM_P2G_GRID_COORDS, for a particle inside: the per-particle quantities of the fused scatter, the affine
+// matrix A_p (row-major) and m_p v_p - A_p x_p (relative to the stencil base node, in units of dx) so that the
+// momentum a node receives is w * (mv0 + A dpos) with dpos = (node - base - f) dx.
 #define MPM_P2G_PARTICLE_SETUP                                                                         \
-    const float xp = x[p], yp = x[np + p], zp = x[2 * np + p];                                         \
-    const float Xg = xp * inv_dx - 0.5f, Yg = yp * inv_dx - 0.5f, Zg = zp * inv_dx - 0.5f;             \
-    if (!(Xg >= 0.5f && Xg < (float)nx - 1.5f && Yg >= 0.5f && Yg < (float)ny - 1.5f && Zg >= 0.5f &&  \
-          Zg < (float)nz - 1.5f)) {                                                                    \
-        atomic_add(skipped, 1);                                                                        \
-        continue;                                                                                      \
-    }                                                                                                  \
     float wx[3], wy[3], wz[3], fx, fy, fz;                                                             \
     const int bx = mpm_bspline(Xg, wx, fx), by = mpm_bspline(Yg, wy, fy), bz = mpm_bspline(Zg, wz, fz); \
     const float mp = mass[p], vp = vol[p];                                                             \
@@ -68,7 +67,7 @@ DEVICE int mpm_bspline(const float X, float w[3], float& f) {
 KERNEL void mpm_p2g(const long long n, const float* RESTRICT x, const float* RESTRICT v,
                     const float* RESTRICT C, const float* RESTRICT tau, const float* RESTRICT mass,
                     const float* RESTRICT vol, float* RESTRICT grid_m, float* RESTRICT grid_mv,
-                    float* RESTRICT grid_vol, float* RESTRICT scratch, int* RESTRICT skipped /* size: 1 */,
+                    float* RESTRICT grid_vol, int* RESTRICT scratch, int* RESTRICT skipped /* size: 1 */,
                     const int nthreads, const int nx,
                     const int ny, const int nz, const float dx, const float dt) {
     const long long np = n;
@@ -77,6 +76,11 @@ KERNEL void mpm_p2g(const long long n, const float* RESTRICT x, const float* RES
 #if CK_ON_GPU || MPM_HOST_ATOMICS
     // the caller clears the grid on CUDA / host-atomics builds (mpm_clear_grid)
     FOR_EACH(p, n) {
+        MPM_P2G_GRID_COORDS
+        if (!MPM_P2G_INSIDE) {
+            atomic_add(skipped, 1);
+            continue;
+        }
         MPM_P2G_PARTICLE_SETUP
         for (int c = 0; c < 3; ++c) {
             const float dz = ((float)c - fz) * dx;
@@ -101,13 +105,25 @@ KERNEL void mpm_p2g(const long long n, const float* RESTRICT x, const float* RES
     (void)scratch;
     (void)nthreads;
 #else
-    CK_PRAGMA(omp parallel num_threads(np > MPM_SERIAL_PARTICLES ? nthreads : 1)) {
-        const int t = omp_get_thread_num();
-        const int team = omp_get_num_threads();
-        float* RESTRICT g = scratch + (long long)t * 5 * ncell;
-        for (long long k = 0; k < 5 * ncell; ++k) g[k] = 0.f;
-        CK_PRAGMA(omp for schedule(static))
-        for (long long p = 0; p < np; ++p) {
+    // host: the tiles of host_scatter.cuh (plain additions, one summation order for any thread count)
+    host_scatter(
+        np, ny, nz, np > MPM_SERIAL_PARTICLES ? nthreads : 1, scratch, skipped,
+        [&](const long long p) -> long long {
+            MPM_P2G_GRID_COORDS
+            return MPM_P2G_INSIDE ? host_scatter_tile(Yg, Zg, ny) : -1;
+        },
+        [&]() {
+            CK_PRAGMA(omp for schedule(static))
+            for (long long i = 0; i < ncell; ++i) {
+                grid_m[i] = 0.f;
+                grid_mv[i] = 0.f;
+                grid_mv[ncell + i] = 0.f;
+                grid_mv[2 * ncell + i] = 0.f;
+                grid_vol[i] = 0.f;
+            }
+        },
+        [&](const long long p) {
+            MPM_P2G_GRID_COORDS
             MPM_P2G_PARTICLE_SETUP
             for (int c = 0; c < 3; ++c) {
                 const float dz = ((float)c - fz) * dx;
@@ -118,38 +134,19 @@ KERNEL void mpm_p2g(const long long n, const float* RESTRICT x, const float* RES
                     const float bxv = mvx + A01 * dy + A02 * dz;
                     const float byv = mvy + A11 * dy + A12 * dz;
                     const float bzv = mvz + A21 * dy + A22 * dz;
-                    float* RESTRICT gr = g + 5 * ((long long)nx * (zoff + by + b) + bx);
+                    const long long row = (long long)nx * (zoff + by + b) + bx;
                     for (int a = 0; a < 3; ++a) {
                         const float ddx = ((float)a - fx) * dx;
                         const float w = wx[a] * wyz;
-                        gr[5 * a + 0] += w * mp;
-                        gr[5 * a + 1] += w * (bxv + A00 * ddx);
-                        gr[5 * a + 2] += w * (byv + A10 * ddx);
-                        gr[5 * a + 3] += w * (bzv + A20 * ddx);
-                        gr[5 * a + 4] += w * vp;
+                        grid_m[row + a] += w * mp;
+                        grid_mv[row + a] += w * (bxv + A00 * ddx);
+                        grid_mv[ncell + row + a] += w * (byv + A10 * ddx);
+                        grid_mv[2 * ncell + row + a] += w * (bzv + A20 * ddx);
+                        grid_vol[row + a] += w * vp;
                     }
                 }
             }
-        }
-        // implicit barrier: every private grid is complete; sum them in thread order
-        CK_PRAGMA(omp for schedule(static))
-        for (long long i = 0; i < ncell; ++i) {
-            float s0 = 0.f, s1 = 0.f, s2 = 0.f, s3 = 0.f, s4 = 0.f;
-            for (int u = 0; u < team; ++u) {
-                const float* RESTRICT h = scratch + (long long)u * 5 * ncell + 5 * i;
-                s0 += h[0];
-                s1 += h[1];
-                s2 += h[2];
-                s3 += h[3];
-                s4 += h[4];
-            }
-            grid_m[i] = s0;
-            grid_mv[i] = s1;
-            grid_mv[ncell + i] = s2;
-            grid_mv[2 * ncell + i] = s3;
-            grid_vol[i] = s4;
-        }
-    }
+        });
 #endif
 }
 

@@ -14,6 +14,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..backend import Backend
+from ..backend.host_scatter import host_scatter_scratch
 from ..units import Units
 from .params import CouplingParams
 from .reference import drag_scales
@@ -35,6 +36,7 @@ class KernelOps:
         self.retention = bool(self.params.retention)
         self._defines = {"CK_RETENTION": int(self.retention), "CK_TWO_PHASE": int(self.two_phase)}
         self._none = self.xp.zeros(1, dtype=np.float32)
+        self._no_scratch = self.xp.zeros(1, dtype=np.int32)  # the atomic bound-water scatter's unused scratch
         self._scratch = None
 
     def _fn(self, source: str, name: str, *keys: str):
@@ -161,11 +163,10 @@ class KernelOps:
         )
         if self.backend.gpu_code_paths:  # the atomic scatter (cuda, cpu-device) accumulates into a cleared grid
             mod.function("coupling_clear")(ncell, bound)
-            scratch, threads = self._none, 1
+            scratch, threads = self._no_scratch, 1
         else:
             threads = mod.num_threads()
-            if self._scratch is None or self._scratch.size != threads * ncell:
-                self._scratch = np.zeros(threads * ncell, dtype=np.float32)
+            self._scratch = host_scatter_scratch(self._scratch, x.shape[1], ny, nz, threads)
             scratch = self._scratch
         mod.function("coupling_bound_water_p2g")(
             x.shape[1], x, r, vol, bound, scratch, np.int32(threads), np.int32(nx), np.int32(ny), np.int32(nz),

@@ -1,8 +1,8 @@
 """The sand solver's stages as compiled kernels (cuda or cpu build of ``kernels/mpm_*.cu``).
 
 Same methods and arguments as :class:`couplekit.sand.reference.ReferenceOps`.  On the cpu backend the P2G
-is deterministic (per-thread private grids summed in thread order; kernels/mpm_p2g.cu), so a run is
-bitwise reproducible for a fixed thread count; ``host_atomics=True`` selects the `omp atomic` scatter
+is deterministic (particles scattered by tiles, one summation order: kernels/host_scatter.cuh), so a run is
+bitwise reproducible, with any thread count; ``host_atomics=True`` selects the `omp atomic` scatter
 instead (not reproducible; kept to measure what determinism costs).
 """
 
@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..backend import Backend
+from ..backend.host_scatter import host_scatter_scratch
 from .params import ConstitutiveModel
 
 __all__ = ["KernelOps"]
@@ -40,17 +41,15 @@ class KernelOps:
     def _module(self, source: str, defines: dict | None = None):
         return self.backend.module(source, defines)
 
-    def _scratch_for(self, ncell: int):
-        """Private grids of the deterministic host P2G: threads × 5 × ncell floats, kept between calls."""
+    def _scratch_for(self, n: int, ny: int, nz: int):
+        """(scratch, threads) of the P2G: on the host the tiled scatter's ints (kernels/host_scatter.cuh), kept
+        between calls; a 1-int placeholder for the atomic scatter."""
         if self._clear_first:
             if self._scratch is None:
-                self._scratch = self.backend.xp.zeros(1, dtype=np.float32)
+                self._scratch = self.backend.xp.zeros(1, dtype=np.int32)
             return self._scratch, 1
-        mod = self._module("mpm_p2g.cu", self._p2g_defines)
-        threads = mod.num_threads()
-        size = threads * 5 * ncell
-        if self._scratch is None or self._scratch.size != size:
-            self._scratch = np.zeros(size, dtype=np.float32)
+        threads = self._module("mpm_p2g.cu", self._p2g_defines).num_threads()
+        self._scratch = host_scatter_scratch(self._scratch, n, ny, nz, threads)
         return self._scratch, threads
 
     def p2g(self, x, v, C, tau, mass, vol, grid_m, grid_mv, grid_vol, dx: float, dt: float) -> None:
@@ -58,7 +57,7 @@ class KernelOps:
         nz, ny, nx = grid_m.shape
         ncell = nx * ny * nz
         mod = self._module("mpm_p2g.cu", self._p2g_defines)
-        scratch, threads = self._scratch_for(ncell)
+        scratch, threads = self._scratch_for(x.shape[1], ny, nz)
         if self._clear_first:
             mod.function("mpm_clear_grid")(ncell, grid_m, grid_mv, grid_vol)
         self._skipped.fill(0)
