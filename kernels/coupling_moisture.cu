@@ -78,18 +78,16 @@ KERNEL void coupling_bound_water_p2g(const long long n, const float* RESTRICT x 
     (void)nthreads;
     (void)ncell;
 #else
-    // host: the tiles of host_scatter.cuh (plain additions, one summation order for any thread count)
-    host_scatter(
-        np, ny, nz, nthreads, scratch, nullptr,
+    // host: the tiles of host_scatter.cuh (one summation order for any thread count)
+    float* const grid[1] = {bound};
+    (void)ncell;
+    host_scatter<1>(
+        np, nx, ny, nz, nthreads, scratch, nullptr, grid,
         [&](const long long p) -> long long {
             const float Y = x[np + p] * inv_dx - 0.5f, Z = x[2 * np + p] * inv_dx - 0.5f;
             return coupling_inside(x[p] * inv_dx - 0.5f, Y, Z, nx, ny, nz) ? host_scatter_tile(Y, Z, ny) : -1;
         },
-        [&]() {
-            CK_PRAGMA(omp for schedule(static))
-            for (long long i = 0; i < ncell; ++i) bound[i] = 0.f;
-        },
-        [&](const long long p) {
+        [&](const long long p, auto row) {
             const float X = x[p] * inv_dx - 0.5f, Y = x[np + p] * inv_dx - 0.5f, Z = x[2 * np + p] * inv_dx - 0.5f;
             float wx[3], wy[3], wz[3];
             const int bx = coupling_bspline(X, wx);
@@ -98,9 +96,9 @@ KERNEL void coupling_bound_water_p2g(const long long n, const float* RESTRICT x 
             const float q = r[p] * vol[p] * inv_cell;
             for (int c = 0; c < 3; ++c)
                 for (int b = 0; b < 3; ++b) {
-                    const long long row = (long long)nx * ((long long)(by + b) + (long long)ny * (bz + c)) + bx;
+                    float* RESTRICT gr = row(bz + c, by + b) + bx;
                     const float wyz = q * wy[b] * wz[c];
-                    for (int a = 0; a < 3; ++a) bound[row + a] += wx[a] * wyz;
+                    for (int a = 0; a < 3; ++a) gr[a] += wx[a] * wyz;
                 }
         });
 #endif

@@ -105,44 +105,34 @@ KERNEL void mpm_p2g(const long long n, const float* RESTRICT x, const float* RES
     (void)scratch;
     (void)nthreads;
 #else
-    // host: the tiles of host_scatter.cuh (plain additions, one summation order for any thread count)
-    host_scatter(
-        np, ny, nz, np > MPM_SERIAL_PARTICLES ? nthreads : 1, scratch, skipped,
+    // host: the tiles of host_scatter.cuh (one summation order for any thread count)
+    float* const grid[5] = {grid_m, grid_mv, grid_mv + ncell, grid_mv + 2 * ncell, grid_vol};
+    host_scatter<5>(
+        np, nx, ny, nz, np > MPM_SERIAL_PARTICLES ? nthreads : 1, scratch, skipped, grid,
         [&](const long long p) -> long long {
             MPM_P2G_GRID_COORDS
             return MPM_P2G_INSIDE ? host_scatter_tile(Yg, Zg, ny) : -1;
         },
-        [&]() {
-            CK_PRAGMA(omp for schedule(static))
-            for (long long i = 0; i < ncell; ++i) {
-                grid_m[i] = 0.f;
-                grid_mv[i] = 0.f;
-                grid_mv[ncell + i] = 0.f;
-                grid_mv[2 * ncell + i] = 0.f;
-                grid_vol[i] = 0.f;
-            }
-        },
-        [&](const long long p) {
+        [&](const long long p, auto row) {
             MPM_P2G_GRID_COORDS
             MPM_P2G_PARTICLE_SETUP
             for (int c = 0; c < 3; ++c) {
                 const float dz = ((float)c - fz) * dx;
-                const long long zoff = (long long)(bz + c) * ny;
                 for (int b = 0; b < 3; ++b) {
                     const float dy = ((float)b - fy) * dx;
                     const float wyz = wy[b] * wz[c];
                     const float bxv = mvx + A01 * dy + A02 * dz;
                     const float byv = mvy + A11 * dy + A12 * dz;
                     const float bzv = mvz + A21 * dy + A22 * dz;
-                    const long long row = (long long)nx * (zoff + by + b) + bx;
+                    float* RESTRICT gr = row(bz + c, by + b) + 5 * bx;
                     for (int a = 0; a < 3; ++a) {
                         const float ddx = ((float)a - fx) * dx;
                         const float w = wx[a] * wyz;
-                        grid_m[row + a] += w * mp;
-                        grid_mv[row + a] += w * (bxv + A00 * ddx);
-                        grid_mv[ncell + row + a] += w * (byv + A10 * ddx);
-                        grid_mv[2 * ncell + row + a] += w * (bzv + A20 * ddx);
-                        grid_vol[row + a] += w * vp;
+                        gr[5 * a + 0] += w * mp;
+                        gr[5 * a + 1] += w * (bxv + A00 * ddx);
+                        gr[5 * a + 2] += w * (byv + A10 * ddx);
+                        gr[5 * a + 3] += w * (bzv + A20 * ddx);
+                        gr[5 * a + 4] += w * vp;
                     }
                 }
             }
