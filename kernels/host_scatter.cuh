@@ -33,10 +33,13 @@ static inline long long host_scatter_tiles(const int ny, const int nz) {
            (long long)((nz + HOST_SCATTER_TILE - 1) / HOST_SCATTER_TILE);
 }
 
+// the stencil's first node along an axis, for grid coordinate X (node i at i): the quadratic B-spline's base
+static inline int host_scatter_base(const float X) { return (int)floorf(X - 0.5f); }
+
 // the tile of a particle at grid coordinates (Y, Z) (node i at i) whose stencil lies inside the grid: that of its
 // base node (floor(Y - 1/2), floor(Z - 1/2)), the quadratic B-spline's first node
 static inline long long host_scatter_tile(const float Y, const float Z, const int ny) {
-    const int by = (int)floorf(Y - 0.5f), bz = (int)floorf(Z - 0.5f);
+    const int by = host_scatter_base(Y), bz = host_scatter_base(Z);
     return (long long)(by / HOST_SCATTER_TILE) +
            (long long)((ny + HOST_SCATTER_TILE - 1) / HOST_SCATTER_TILE) * (long long)(bz / HOST_SCATTER_TILE);
 }
@@ -57,12 +60,13 @@ static inline long long host_scatter_scratch_size(const long long n, const int n
 
 // Scatter n particles into the F grid arrays grid[0 .. F) (nx * ny * nz floats each), which it overwrites.
 // tile_of(p): the tile of particle p (host_scatter_tile), or -1 to leave it out (counted in *skipped when skipped
-// is not null); body(p, row) as above.  scratch: host_scatter_scratch_size(n, ny, nz, nthreads) ints.  The team
+// is not null); x_base(p): the x index of its stencil's first node (called for particles in a tile only);
+// body(p, row) as above.  scratch: host_scatter_scratch_size(n, ny, nz, nthreads) ints.  The team
 // may be smaller than nthreads.
-template <int F, class TileOf, class Body>
+template <int F, class TileOf, class XBase, class Body>
 static inline void host_scatter(const long long n, const int nx, const int ny, const int nz, const int nthreads,
                                 int* RESTRICT scratch, int* RESTRICT skipped, float* const grid[F], TileOf tile_of,
-                                Body body) {
+                                XBase x_base, Body body) {
     const int tiles_y = (ny + HOST_SCATTER_TILE - 1) / HOST_SCATTER_TILE;
     const int tiles_z = (nz + HOST_SCATTER_TILE - 1) / HOST_SCATTER_TILE;
     const long long tiles = (long long)tiles_y * tiles_z;
@@ -119,8 +123,16 @@ static inline void host_scatter(const long long n, const int nx, const int ny, c
                 const long long k = ty + (long long)tiles_y * tz;
                 if (start[k] == start[k + 1]) continue;
                 const int y0 = ty * HOST_SCATTER_TILE, z0 = tz * HOST_SCATTER_TILE;
-                for (long long i = 0; i < (long long)HOST_SCATTER_ROWS * HOST_SCATTER_ROWS * row_floats; ++i)
-                    buf[i] = 0.f;
+                // the nodes [x_lo, x_hi) along x that the tile's particles reach: the buffer is cleared and added
+                // there only (a short column in a wide grid would otherwise pay for whole rows)
+                int x_lo = nx, x_hi = 0;
+                for (int q = start[k]; q < start[k + 1]; ++q) {
+                    const int bx = x_base(order[q]);
+                    x_lo = bx < x_lo ? bx : x_lo;
+                    x_hi = bx + 3 > x_hi ? bx + 3 : x_hi;
+                }
+                for (int r = 0; r < HOST_SCATTER_ROWS * HOST_SCATTER_ROWS; ++r)
+                    for (long long i = (long long)F * x_lo; i < (long long)F * x_hi; ++i) buf[row_floats * r + i] = 0.f;
                 for (int q = start[k]; q < start[k + 1]; ++q) {
                     const long long p = order[q];
                     body(p, [&](const int z, const int y) -> float* {
@@ -134,7 +146,7 @@ static inline void host_scatter(const long long n, const int nx, const int ny, c
                         const long long row = (long long)nx * ((y0 + b) + (long long)ny * (z0 + c));
                         for (int f = 0; f < F; ++f) {
                             float* RESTRICT dst = grid[f] + row;
-                            for (int x = 0; x < nx; ++x) dst[x] += src[(long long)F * x + f];
+                            for (int x = x_lo; x < x_hi; ++x) dst[x] += src[(long long)F * x + f];
                         }
                     }
             }
