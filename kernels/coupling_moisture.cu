@@ -88,7 +88,7 @@ KERNEL void coupling_bound_water_p2g(const long long n, const float* RESTRICT x 
             return coupling_inside(x[p] * inv_dx - 0.5f, Y, Z, nx, ny, nz) ? host_scatter_tile(Y, Z, ny) : -1;
         },
         [&](const long long p) { return host_scatter_base(x[p] * inv_dx - 0.5f); },
-        [&](const long long p, auto row) {
+        [=](const long long p, auto row) {
             const float X = x[p] * inv_dx - 0.5f, Y = x[np + p] * inv_dx - 0.5f, Z = x[2 * np + p] * inv_dx - 0.5f;
             float wx[3], wy[3], wz[3];
             const int bx = coupling_bspline(X, wx);

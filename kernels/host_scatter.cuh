@@ -5,10 +5,11 @@
 // A tile's particles write nodes of layers [t T, t T + T + 1] in y and in z, so two tiles whose y or z tile
 // indices differ by 2 or more never write the same node (T >= 2).  The tiles are coloured by the parity of their
 // (y, z) tile indices; colour by colour, the tiles of one colour run in parallel, each tile's particles one after
-// another in increasing particle index, and the grid takes plain (not atomic) additions.
+// another in increasing particle index into a buffer of the thread's own, which is then added into the grid
+// (plain, not atomic, additions).
 //
 // Every node therefore sums its contributions in one order that depends on the particles and the grid only: the
-// colours in turn, then the particle index.  The result is bitwise the same for any thread count and any
+// colours in turn, for each the sum of the one tile of that colour that reaches the node, in particle index order.  The result is bitwise the same for any thread count and any
 // schedule (the private grids it replaces were summed in thread order, so the result changed with the thread
 // count), and the memory is the particle order (1 int per particle) and the tile counts (1 int per tile and
 // thread) instead of a grid per thread (5 floats per node per thread for the MPM P2G: 160 B per node on 8 threads).
@@ -23,9 +24,12 @@
 #if !CK_ON_GPU
 #include <vector>
 
-// base-node layers per tile along y and z (>= 2; see above).  2 gives the most tiles per colour (parallel work for
-// a small body on many threads); the counting sort's cost grows with the number of tiles only through its counts.
-#define HOST_SCATTER_TILE 2
+// base-node layers per tile along y and z (>= 2; see above).  Measured on the host P2G, one run, old/new against
+// the private grids (scripts in the session 23 note): 4 gives 0.97-0.99x on a dense column (Fig. 17 small, 32,768
+// particles, 1 and 2 threads), 3 0.95x, 2 0.92x (a tile's buffer rows, (T + 2)^2 per T^2 base rows, are cleared and
+// added once per tile); sparse sand in a larger grid gains (Fig. 13 small 1.7x, Fig. 16 small 1.16x).  Smaller tiles
+// would give a small body more tiles per colour on many threads.
+#define HOST_SCATTER_TILE 4
 
 // the number of tiles of an (ny, nz) node grid
 static inline long long host_scatter_tiles(const int ny, const int nz) {
@@ -51,10 +55,11 @@ static inline long long host_scatter_scratch_size(const long long n, const int n
 }
 
 // A tile's particles add into a buffer of the thread's own first, F floats per node side by side over the
-// (T + 2) x (T + 2) node rows the tile reaches (16 rows of nx nodes: 12.8 KB for F = 5 and nx = 40, in L1),
+// (T + 2) x (T + 2) node rows the tile reaches (36 rows of nx nodes: 28.8 KB for F = 5 and nx = 40),
 // which is then added into the F grid arrays: scattered straight into five separate arrays the P2G of a dense
 // column ran 0.8x the speed of the private grids (whose nodes also held their 5 floats side by side).
-// body(p, row): particle p's additions, through row(z, y) = the buffer's F x nx floats of node row (y, z) of the
+// body(p, row): particle p's additions (a lambda capturing by value: with [&] its stores through float pointers
+// could alias the captured floats, which were then reloaded after each: 1.15x slower), through row(z, y) = the buffer's F x nx floats of node row (y, z) of the
 // grid, one its stencil reaches (float f + F x of that row: node x, field f).
 #define HOST_SCATTER_ROWS (HOST_SCATTER_TILE + 2)
 
@@ -135,7 +140,7 @@ static inline void host_scatter(const long long n, const int nx, const int ny, c
                     for (long long i = (long long)F * x_lo; i < (long long)F * x_hi; ++i) buf[row_floats * r + i] = 0.f;
                 for (int q = start[k]; q < start[k + 1]; ++q) {
                     const long long p = order[q];
-                    body(p, [&](const int z, const int y) -> float* {
+                    body(p, [=](const int z, const int y) -> float* {
                         return buf + row_floats * ((long long)HOST_SCATTER_ROWS * (z - z0) + (y - y0));
                     });
                 }

@@ -114,7 +114,7 @@ KERNEL void mpm_p2g(const long long n, const float* RESTRICT x, const float* RES
             return MPM_P2G_INSIDE ? host_scatter_tile(Yg, Zg, ny) : -1;
         },
         [&](const long long p) { return host_scatter_base(x[p] * inv_dx - 0.5f); },
-        [&](const long long p, auto row) {
+        [=](const long long p, auto row) {
             MPM_P2G_GRID_COORDS
             MPM_P2G_PARTICLE_SETUP
             for (int c = 0; c < 3; ++c) {
