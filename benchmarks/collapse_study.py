@@ -83,7 +83,8 @@ def run(args) -> dict:
     sol = SandSolver(backend, (nz, ny, nx), dx, dt, params, body.x, body.volume, walls=walls)
     if args.float64:
         for k in ("x", "v", "C", "F", "tau", "vc", "volume", "mass", "grid_m", "grid_mv", "grid_vol"):
-            setattr(sol, k, getattr(sol, k).astype(np.float64))
+            if getattr(sol, k) is not None:  # grid_vol: None with one particle density (SandSolver.node_volume)
+                setattr(sol, k, getattr(sol, k).astype(np.float64))
         sol.grid_v = sol.grid_mv  # one node array for momentum and velocity, as SandSolver allocates it
     if args.transfer == "pic":
         _pic(sol)

@@ -6,7 +6,7 @@ Scene (both codes): a block of sand, 2^3 particles per cell, dropped onto the fl
 (dx = 1/64 m), so the constitutive model is active (impact, plastic flow); 65 536 particles (32 x 16 x 16
 cells) and 262 144 (32^3 cells).  couplekit runs its full model: Hencky + Drucker-Prager return mapping
 with Klar hardening and volume correction, APIC, walls with friction; once with the deterministic host P2G
-(the default: per-thread private grids) and once with `omp atomic` P2G, to measure what bitwise
+(the default: particles scattered by tiles, kernels/host_scatter.cuh) and once with `omp atomic` P2G, to measure what bitwise
 reproducibility costs.
 
 Peers, written with warp-lang (``pip install warp-lang``; the benchmark extra) on ``device="cpu"``:
@@ -52,10 +52,10 @@ NOTE = (
     "compiles its kernels with LLVM and runs them on one thread, with a scalar wp.svd3 per particle; "
     "couplekit uses the backend's OpenMP threads (2 here, on cores shared with other processes: load "
     "average ~5, so couplekit's rounds scatter more than the single-threaded peer's, and at 65 536 "
-    "particles the per-step fork/joins and the private-grid clear/sum of the deterministic P2G weigh more "
+    "particles the per-step fork/joins and the grid clear of the deterministic P2G weigh more "
     "than at 262 144 — there one thread can beat two).  couplekit_1thread against warp_sand "
     "(ratio_1thread_vs_warp_sand) is the per-core comparison.  warp_mpm3d does no SVD or plasticity, so it bounds what a sand code can reach rather "
-    "than being a like-for-like peer.  The deterministic host P2G (private grids) is several times faster "
+    "than being a like-for-like peer.  The deterministic host P2G (by tiles) is several times faster "
     "than `omp atomic` (determinism_cost = atomic rate / deterministic rate < 1)."
 )
 

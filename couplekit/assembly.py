@@ -808,7 +808,8 @@ def build_scheduler(scene: Scene, fluid, sand, coupler, *, timing: bool = True, 
 _FLUID_FLOATS_PER_CELL = 27 + 3 + 1 + 1  # f, velocity (the walls' velocities in the wall cells), p, pbar
 _PHASE_FLOATS_PER_CELL = 7 + 1  # h, phi (grad phi and mu: computed in the collides); + the source term in coupled
 # scenes with it on (FluidSolver; effect_memory counts each effect's fields)
-_SAND_FLOATS_PER_NODE = 1 + 3 + 1 + 1  # mass, momentum (overwritten by the velocity: SandSolver.grid_v), volume, sdf
+_SAND_FLOATS_PER_NODE = 1 + 3 + 1  # mass, momentum (overwritten by the velocity: SandSolver.grid_v), sdf; + the
+# volume with sand of more than one density (SandSolver.node_volume: else the mass over the density)
 _SAND_FLOATS_PER_PARTICLE = 3 + 3 + 9 + 9 + 6 + 1 + 1 + 1 + 1 + 1  # x v C F tau q vc saturation mass volume
 
 
@@ -836,7 +837,9 @@ def memory_estimate(scene: Scene) -> dict[str, float]:
             out["fp16_saving"] = padded * 2.0 * populations
             out["fluid"] -= out["fp16_saving"]
     if scene.has_sand:
-        out["sand_grid"] = 4.0 * _SAND_FLOATS_PER_NODE * cells
+        densities = {b.density or scene.sand.density for b in scene.bodies if b.kind == "sand"}
+        densities |= {scene.sand.density} if scene.emits_sand else set()
+        out["sand_grid"] = 4.0 * (_SAND_FLOATS_PER_NODE + int(len(densities) > 1)) * cells
         count = 0.0
         for b in scene.bodies:
             if b.kind == "sand":

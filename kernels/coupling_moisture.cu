@@ -111,7 +111,8 @@ KERNEL void coupling_clear(const long long n, float* RESTRICT a /* size: n */) {
 }
 
 // n = number of particles.  Without retention r, bound, d_bound, grid_vol, retentive, retain are not used (pass
-// 1-element arrays), nor phi single-phase; retentive and retain are read only when masked.
+// 1-element arrays), nor phi single-phase; retentive and retain are read only when masked.  The node sand volume
+// is V_i = volume_scale grid_vol[i] (SandSolver.node_volume: the P2G's volume and 1, or the node mass and 1 / rho).
 KERNEL void coupling_particle_moisture(const long long n, const float* RESTRICT x /* size: 3 * n */,
                                        float* RESTRICT r /* size >= 1 */, float* RESTRICT saturation /* size: n */,
                                        const float* RESTRICT eps_fluid /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
@@ -121,13 +122,15 @@ KERNEL void coupling_particle_moisture(const long long n, const float* RESTRICT 
                                        const float* RESTRICT grid_vol /* size >= 1 */,
                                        const float* RESTRICT retentive /* size >= 1 */,
                                        const float* RESTRICT retain /* size >= 1 */, const int nx, const int ny,
-                                       const int nz, const float dx, const int masked) {
+                                       const int nz, const float dx, const float volume_scale, const int masked) {
     const long long np = n;
     const float inv_dx = 1.f / dx;
     const int PX = nx + 2;
     const long long PXY = (long long)PX * (ny + 2);
 #if CK_RETENTION
-    const float cell = dx * dx * dx;
+    const float cell = dx * dx * dx / volume_scale;  // V_cell / V_i = cell / grid_vol[i]: V_i = volume_scale grid_vol[i]
+#else
+    (void)volume_scale;
 #endif
     FOR_EACH(p, n) {
         const float X = x[p] * inv_dx - 0.5f, Y = x[np + p] * inv_dx - 0.5f, Z = x[2 * np + p] * inv_dx - 0.5f;

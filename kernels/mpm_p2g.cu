@@ -22,13 +22,19 @@
 // thread order: 20 B per node per thread, and a result that changed with the thread count.)
 // Define MPM_HOST_ATOMICS=1 to use `omp atomic` on the host instead (for benchmarking only:
 // not reproducible).
-// variants: MPM_HOST_ATOMICS=0,1
+// MPM_P2G_VOLUME=0: no node volume (grid_vol is a placeholder, never touched): when every particle has one density
+// rho, V_i = m_i / rho, and the callers take it from the node mass (SandSolver.node_volume): 4 B per node and a
+// fifth of the scatter's additions saved.
+// variants: MPM_HOST_ATOMICS=0,1 MPM_P2G_VOLUME=0,1
 #include "common.cuh"
 #include "host_scatter.cuh"
 #include "mpm_loops.cuh"
 
 #ifndef MPM_HOST_ATOMICS
 #define MPM_HOST_ATOMICS 0
+#endif
+#ifndef MPM_P2G_VOLUME
+#define MPM_P2G_VOLUME 1
 #endif
 
 // Quadratic B-spline weights along one axis for grid coordinate X (node i at X = i); base node index.
@@ -97,7 +103,9 @@ KERNEL void mpm_p2g(const long long n, const float* RESTRICT x, const float* RES
                     atomic_add(&grid_mv[i], w * (mvx + A00 * ddx + A01 * dy + A02 * dz));
                     atomic_add(&grid_mv[ncell + i], w * (mvy + A10 * ddx + A11 * dy + A12 * dz));
                     atomic_add(&grid_mv[2 * ncell + i], w * (mvz + A20 * ddx + A21 * dy + A22 * dz));
+#if MPM_P2G_VOLUME
                     atomic_add(&grid_vol[i], w * vp);
+#endif
                 }
             }
         }
@@ -106,8 +114,10 @@ KERNEL void mpm_p2g(const long long n, const float* RESTRICT x, const float* RES
     (void)nthreads;
 #else
     // host: the tiles of host_scatter.cuh (one summation order for any thread count)
+    // the node's fields side by side in the tile buffer: m, (mv)_x, (mv)_y, (mv)_z[, V]
+    constexpr int NF = 4 + MPM_P2G_VOLUME;
     float* const grid[5] = {grid_m, grid_mv, grid_mv + ncell, grid_mv + 2 * ncell, grid_vol};
-    host_scatter<5>(
+    host_scatter<NF>(
         np, nx, ny, nz, np > MPM_SERIAL_PARTICLES ? nthreads : 1, scratch, skipped, grid,
         [&](const long long p) -> long long {
             MPM_P2G_GRID_COORDS
@@ -125,15 +135,17 @@ KERNEL void mpm_p2g(const long long n, const float* RESTRICT x, const float* RES
                     const float bxv = mvx + A01 * dy + A02 * dz;
                     const float byv = mvy + A11 * dy + A12 * dz;
                     const float bzv = mvz + A21 * dy + A22 * dz;
-                    float* RESTRICT gr = row(bz + c, by + b) + 5 * bx;
+                    float* RESTRICT gr = row(bz + c, by + b) + NF * bx;
                     for (int a = 0; a < 3; ++a) {
                         const float ddx = ((float)a - fx) * dx;
                         const float w = wx[a] * wyz;
-                        gr[5 * a + 0] += w * mp;
-                        gr[5 * a + 1] += w * (bxv + A00 * ddx);
-                        gr[5 * a + 2] += w * (byv + A10 * ddx);
-                        gr[5 * a + 3] += w * (bzv + A20 * ddx);
-                        gr[5 * a + 4] += w * vp;
+                        gr[NF * a + 0] += w * mp;
+                        gr[NF * a + 1] += w * (bxv + A00 * ddx);
+                        gr[NF * a + 2] += w * (byv + A10 * ddx);
+                        gr[NF * a + 3] += w * (bzv + A20 * ddx);
+#if MPM_P2G_VOLUME
+                        gr[NF * a + 4] += w * vp;
+#endif
                     }
                 }
             }
@@ -149,6 +161,10 @@ KERNEL void mpm_clear_grid(const long long n, float* RESTRICT grid_m, float* RES
         grid_mv[i] = 0.f;
         grid_mv[n + i] = 0.f;
         grid_mv[2 * n + i] = 0.f;
+#if MPM_P2G_VOLUME
         grid_vol[i] = 0.f;
+#else
+        (void)grid_vol;
+#endif
     }
 }

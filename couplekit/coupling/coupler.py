@@ -246,9 +246,10 @@ class SandFluidCoupler:
                 if self.retain.shape[0] != s.n_particles:  # particles emitted since (couplekit.sand.emission)
                     self.retain = _resized(self.fluid.backend.xp, self.retain, s.n_particles, self._emitted_retain)
                 self.ops.bound_water_p2g(s.x, self.retain, s.volume, self.retentive, s.dx)
+        volume, scale = s.node_volume
         self.ops.fractions(
-            s.grid_vol, f.phi, self.bound_in, self.eps_prev, f.fluid_fraction, self.d_bound, self.bound, s.dx,
-            self.periodic, self.retentive, share,
+            volume, f.phi, self.bound_in, self.eps_prev, f.fluid_fraction, self.d_bound, self.bound, s.dx,
+            self.periodic, self.retentive, share, volume_scale=scale,
         )  # fmt: skip
         if not self._started:
             # first step: no sand motion yet, so last step's porosity is this one (without absorption)
@@ -288,9 +289,11 @@ class SandFluidCoupler:
         padded velocity: what a sand substep sees of the fluid, schedulers/subcycle.py)."""
         s, f = self.sand, self.fluid
         prm = f.params
+        volume, scale = s.node_volume
         self.ops.drag_buoyancy(
             s.grid_m, s.grid_mv, f.force if force is None else force, self.fluid_u if u is None else u,
-            f.phi, s.grid_vol, f.fluid_fraction, f.flags, self.units, s.gravity, prm.rho_h, prm.rho_l, s.dt,
+            f.phi, volume, f.fluid_fraction, f.flags, self.units, s.gravity, prm.rho_h, prm.rho_l, s.dt,
+            volume_scale=scale,
         )  # fmt: skip
 
     def moisture(self) -> None:
@@ -298,9 +301,10 @@ class SandFluidCoupler:
         s = self.sand
         if s.n_particles == 0:  # a jet's sand not emitted yet
             return
+        volume, scale = s.node_volume
         self.ops.particle_moisture(
             s.x, self.moisture_ratio, s.saturation, self.fluid.fluid_fraction, self.fluid.phi, self.bound,
-            self.d_bound, s.grid_vol, s.dx, self.retentive, self.retain,
+            self.d_bound, volume, s.dx, self.retentive, self.retain, volume_scale=scale,
         )  # fmt: skip
 
     def sand_velocity(self, grid_v=None) -> None:
@@ -370,7 +374,8 @@ class SandFluidCoupler:
         be = self.fluid.backend
         phi = be.to_host(self.fluid.phi) if self.two_phase else None
         if self._started:
-            eps_sand = sand_fraction(be.to_host(self.sand.grid_vol), self.sand.dx, self.params.eps_max)
+            volume, scale = self.sand.node_volume
+            eps_sand = sand_fraction(be.to_host(volume), self.sand.dx, self.params.eps_max, scale)
             eps_fluid = be.to_host(self.fluid.fluid_fraction)
             bound = be.to_host(self.bound) if self.retention else None
         else:

@@ -3,8 +3,8 @@
 Same methods and arguments as :class:`couplekit.coupling.reference.ReferenceOps`.  Effects are compile-time
 switches: ``CK_RETENTION`` (bound-water field and Eqs. 55–58) and ``CK_TWO_PHASE`` (φ read; else
 single-phase water).  Arrays of switched-off effects may be ``None``: a 1-element placeholder is passed.
-The bound-water scatter is deterministic on the cpu backend (per-thread private grids summed in thread
-order) and uses float atomics on CUDA.
+The bound-water scatter is deterministic on the cpu backend (particles by tiles, one summation order for any
+thread count: kernels/host_scatter.cuh) and uses float atomics on CUDA.
 """
 
 from __future__ import annotations
@@ -62,11 +62,13 @@ class KernelOps:
         periodic: Sequence[bool] = (True, True, True),
         retentive=None,
         share: float = 1.0,
+        volume_scale: float = 1.0,
     ) -> None:
         """The porosity (padded, ghosts filled), dR and R' (MPM grid): one pass of ``coupling_fractions``
         (Eqs. 25, 33, 54–56; the φ-scaled uptake rate of Eq. 55).
         ``retentive``: the retentive sand's fraction for per-body retention (None: all sand retains);
-        ``share``: the part of a fluid step this sand step covers (reference docstring)."""
+        ``share``: the part of a fluid step this sand step covers (reference docstring); ``volume_scale``: the
+        node sand volume is ``volume_scale`` × ``grid_vol`` (SandSolver.node_volume)."""
         nz, ny, nx = grid_vol.shape
         p = self.params
         ret = self.retention
@@ -76,7 +78,7 @@ class KernelOps:
             self._opt(eps_prev, ret, "eps_prev"), eps_fluid,
             self._opt(d_bound, ret, "d_bound"), self._opt(bound_out, ret, "bound_out"),
             np.int32(nx), np.int32(ny), np.int32(nz), *(np.int32(bool(v)) for v in periodic),
-            np.float32(1.0 / dx**3), np.float32(p.eps_max), np.float32(p.r_max),
+            np.float32(volume_scale / dx**3), np.float32(p.eps_max), np.float32(p.r_max),
             np.float32(p.absorption_rate * share), np.float32(min(share, 1.0)), np.int32(retentive is not None and ret),
         )  # fmt: skip
 
@@ -116,9 +118,10 @@ class KernelOps:
         rho_h: float,
         rho_l: float,
         dt: float | None = None,
+        volume_scale: float = 1.0,
     ) -> None:
         """Implicit drag impulse J + Δt × buoyancy into ``grid_mv`` and −J/Δt into ``force``; the sand fraction
-        from the P2G's ``grid_vol`` (Eq. 25, as :meth:`fractions`)."""
+        from the node volume ``volume_scale`` × ``grid_vol`` (Eq. 25, as :meth:`fractions`)."""
         nz, ny, nx = grid_m.shape
         p = self.params
         mass_scale, velocity_scale, dt, dt_lattice = drag_scales(units, dt)
@@ -127,7 +130,7 @@ class KernelOps:
             eps_fluid, flags, np.int32(nx), np.int32(ny), np.int32(nz), np.float32(dt), np.float32(dt_lattice),
             *(np.float32(g) for g in gravity), np.float32(mass_scale), np.float32(velocity_scale),
             np.float32(rho_h), np.float32(rho_l), np.float32(p.drag_coefficient), np.float32(p.drag_exponent),
-            np.float32(p.grain_diameter_lattice(units.dx)), np.float32(1.0 / units.dx**3), np.float32(p.eps_max),
+            np.float32(p.grain_diameter_lattice(units.dx)), np.float32(volume_scale / units.dx**3), np.float32(p.eps_max),
         )  # fmt: skip
 
     def fluid_view(self, u0, u_prev, impulse, phi, eps_fluid, flags, u_seen, theta: float, rho_h, rho_l) -> None:
@@ -174,11 +177,24 @@ class KernelOps:
         )  # fmt: skip
 
     def particle_moisture(
-        self, x, r, saturation, eps_fluid, phi, bound, d_bound, grid_vol, dx: float, retentive=None, retain=None
+        self,
+        x,
+        r,
+        saturation,
+        eps_fluid,
+        phi,
+        bound,
+        d_bound,
+        grid_vol,
+        dx: float,
+        retentive=None,
+        retain=None,
+        volume_scale: float = 1.0,
     ) -> None:
         """Saturation S_p (Eq. 59, the water fraction R' + ε φ from ``eps_fluid``, ``phi`` and ``bound``) and,
         with retention, the moisture update r_p (Eq. 58); per-body retention with ``retentive`` (retentive sand
-        fraction) and ``retain`` (1 on retentive particles, else 0)."""
+        fraction) and ``retain`` (1 on retentive particles, else 0); the node sand volume is ``volume_scale`` ×
+        ``grid_vol``."""
         nz, ny, nx = (s - 2 for s in eps_fluid.shape)
         ret = self.retention
         self._fn("coupling_moisture.cu", "coupling_particle_moisture", "CK_RETENTION", "CK_TWO_PHASE")(
@@ -186,5 +202,5 @@ class KernelOps:
             self._opt(bound, ret, "bound"), self._opt(d_bound, ret, "d_bound"),
             self._opt(grid_vol, ret, "grid_vol"), self._none if retentive is None else retentive,
             self._none if retain is None else retain, np.int32(nx), np.int32(ny), np.int32(nz), np.float32(dx),
-            np.int32(retentive is not None and ret),
+            np.float32(volume_scale), np.int32(retentive is not None and ret),
         )  # fmt: skip

@@ -109,10 +109,12 @@ def _isotropic_gradient(s: np.ndarray, flags: np.ndarray) -> np.ndarray:
     return grad
 
 
-def sand_fraction(grid_vol, dx: float, eps_max: float) -> np.ndarray:
-    """ε = min(ε_max, V_i / V_cell) (Eq. 25) of the P2G's node volume ``grid_vol`` (unpadded, float64): the
-    drag and the porosity both take it from there (kernels/coupling_fields.cuh)."""
-    return np.minimum(eps_max, np.asarray(grid_vol).astype(np.float64) / dx**3)
+def sand_fraction(grid_vol, dx: float, eps_max: float, volume_scale: float = 1.0) -> np.ndarray:
+    """ε = min(ε_max, V_i / V_cell) (Eq. 25) of the node volume V_i = ``volume_scale`` × ``grid_vol`` (unpadded;
+    float64): the P2G's node volume, or the node mass over the one particle density
+    (:attr:`couplekit.sand.SandSolver.node_volume`). The drag and the porosity both take it from there
+    (kernels/coupling_fields.cuh)."""
+    return np.minimum(eps_max, np.asarray(grid_vol).astype(np.float64) * (volume_scale / dx**3))
 
 
 def water_fraction(eps_fluid, phi=None, bound=None) -> np.ndarray:
@@ -158,8 +160,10 @@ class ReferenceOps:
         periodic: Sequence[bool] = (True, True, True),
         retentive=None,
         share: float = 1.0,
+        volume_scale: float = 1.0,
     ) -> None:
-        """The porosity (padded, ghosts filled) from the sand fraction ε (Eq. 25, :func:`sand_fraction`), and on
+        """The porosity (padded, ghosts filled) from the sand fraction ε (Eq. 25, :func:`sand_fraction` of the node
+        volume ``volume_scale`` × ``grid_vol``), and on
         the MPM grid the bound-water increment dR and bound water R'.  Neither ε nor the water fraction that
         drives cohesion (Eq. 59, :func:`water_fraction`) is stored: the drag and the moisture recompute them.
 
@@ -182,7 +186,7 @@ class ReferenceOps:
         iz = source_index(nz, periodic[2])[:, None, None]
         iy = source_index(ny, periodic[1])[None, :, None]
         ix = source_index(nx, periodic[0])[None, None, :]
-        eps_node = sand_fraction(grid_vol, dx, p.eps_max)  # Eq. 25
+        eps_node = sand_fraction(grid_vol, dx, p.eps_max, volume_scale)  # Eq. 25
         if self.retention:
             ph_node = self._phi_water(_interior(phi) if self.two_phase else None, grid_vol)
             R = bound_in.astype(np.float64)
@@ -242,6 +246,7 @@ class ReferenceOps:
         rho_h: float,
         rho_l: float,
         dt: float | None = None,
+        volume_scale: float = 1.0,
     ) -> None:
         """Implicit drag impulse J and Δt × buoyancy F_b (Eq. 31) added to ``grid_mv`` (kg·m/s), −J/Δt to the
         fluid ``force`` (lattice force density); the sand's grid update then takes v = (mv)/m + Δt g (Eq. 29).  See kernels/coupling_drag.cu for the formulas
@@ -249,7 +254,7 @@ class ReferenceOps:
         the last streaming, no force shift), not the post-collision velocity field of a Guo-forced step:
         with that stale value strong drag makes the LBM unstable (kernels/coupling_drag.cu).
 
-        ``grid_vol``: the P2G's node volume V_i, the sand fraction's source (Eq. 25); ``units``: the lattice
+        ``grid_vol``: the node volume V_i over ``volume_scale``, the sand fraction's source (Eq. 25); ``units``: the lattice
         unit system (dx, LBM step, reference density); ``gravity`` in m/s²;
         ``rho_h``, ``rho_l`` lattice densities; ``dt``: the MPM step in s (default: the LBM step).
         """
@@ -263,7 +268,7 @@ class ReferenceOps:
             rho = rho_l + (rho_h - rho_l) * np.clip(_interior(phi).astype(np.float64), 0.0, 1.0)  # Eq. 4
         else:
             rho = np.full(m.shape, float(rho_h))
-        es = sand_fraction(grid_vol, units.dx, p.eps_max)  # Eq. 25, as fractions computes it
+        es = sand_fraction(grid_vol, units.dx, p.eps_max, volume_scale)  # Eq. 25, as fractions computes it
         ef = _interior(eps_fluid).astype(np.float64)
         f_b = -es * rho * mass_scale * g  # Eq. 31: −V_cell ε ρ g  (ρ·mass_scale = ρ_SI V_cell)
         m_safe = np.where(active, m, 1.0)
@@ -347,12 +352,25 @@ class ReferenceOps:
         bound[...] = acc.reshape(bound.shape)
 
     def particle_moisture(
-        self, x, r, saturation, eps_fluid, phi, bound, d_bound, grid_vol, dx: float, retentive=None, retain=None
+        self,
+        x,
+        r,
+        saturation,
+        eps_fluid,
+        phi,
+        bound,
+        d_bound,
+        grid_vol,
+        dx: float,
+        retentive=None,
+        retain=None,
+        volume_scale: float = 1.0,
     ) -> None:
         """S_p = Σ_i water_i N_i(x_p) (Eq. 59), water_i = :func:`water_fraction` of this step's porosity
         ``eps_fluid`` (padded), ``phi`` (padded) and bound water ``bound`` (R', retention); with retention
         r_p += Σ_i dR_i / ε̂_i N_i(x_p) (Eq. 58),
-        ε̂_i = V_i / V_cell unclamped (so that bound water is conserved; see kernels/coupling_moisture.cu).
+        ε̂_i = V_i / V_cell unclamped, V_i = ``volume_scale`` × ``grid_vol`` (so that bound water is conserved; see
+        kernels/coupling_moisture.cu).
 
         Per-body retention: ``retain`` (P,) is 1 on retentive particles, 0 elsewhere, ``retentive`` their
         fraction ε_r (see :meth:`fractions`); then r_p += retain_p Σ_i dR_i / ε_r,i N_i(x_p): the bound water
@@ -363,7 +381,7 @@ class ReferenceOps:
         saturation[...] = np.where(lost, np.nan, (w * water.astype(np.float64).ravel()[index]).sum(axis=1))
         if self.retention:
             if retentive is None:
-                vol = grid_vol.astype(np.float64).ravel() / dx**3
+                vol = grid_vol.astype(np.float64).ravel() * (volume_scale / dx**3)
                 keep = 1.0
             else:
                 vol = retentive.astype(np.float64).ravel()

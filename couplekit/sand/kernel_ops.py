@@ -41,25 +41,29 @@ class KernelOps:
     def _module(self, source: str, defines: dict | None = None):
         return self.backend.module(source, defines)
 
-    def _scratch_for(self, n: int, ny: int, nz: int):
+    def _scratch_for(self, mod, n: int, ny: int, nz: int):
         """(scratch, threads) of the P2G: on the host the tiled scatter's ints (kernels/host_scatter.cuh), kept
         between calls; a 1-int placeholder for the atomic scatter."""
         if self._clear_first:
             if self._scratch is None:
                 self._scratch = self.backend.xp.zeros(1, dtype=np.int32)
             return self._scratch, 1
-        threads = self._module("mpm_p2g.cu", self._p2g_defines).num_threads()
+        threads = mod.num_threads()
         self._scratch = host_scatter_scratch(self._scratch, n, ny, nz, threads)
         return self._scratch, threads
 
     def p2g(self, x, v, C, tau, mass, vol, grid_m, grid_mv, grid_vol, dx: float, dt: float) -> None:
-        """Overwrite node mass, momentum (with the stress impulse) and sand volume from the particles."""
+        """Overwrite node mass, momentum (with the stress impulse) and sand volume from the particles
+        (``grid_vol`` None: no node volume, the MPM_P2G_VOLUME=0 build)."""
         nz, ny, nx = grid_m.shape
         ncell = nx * ny * nz
-        mod = self._module("mpm_p2g.cu", self._p2g_defines)
-        scratch, threads = self._scratch_for(x.shape[1], ny, nz)
+        # the volume build is the source's default (one library whether it is named or not)
+        defines = self._p2g_defines if grid_vol is not None else {**self._p2g_defines, "MPM_P2G_VOLUME": 0}
+        mod = self._module("mpm_p2g.cu", defines)
+        scratch, threads = self._scratch_for(mod, x.shape[1], ny, nz)
+        volume = self._no_field if grid_vol is None else grid_vol
         if self._clear_first:
-            mod.function("mpm_clear_grid")(ncell, grid_m, grid_mv, grid_vol)
+            mod.function("mpm_clear_grid")(ncell, grid_m, grid_mv, volume)
         self._skipped.fill(0)
         mod.function("mpm_p2g")(
             x.shape[1],
@@ -71,7 +75,7 @@ class KernelOps:
             vol,
             grid_m,
             grid_mv,
-            grid_vol,
+            volume,
             scratch,
             self._skipped,
             np.int32(threads),

@@ -144,7 +144,8 @@ class ReferenceOps:
 
     # ------------------------------------------------------------------ P2G (Eqs. 24, 25, 27)
     def p2g(self, x, v, C, tau, mass, vol, grid_m, grid_mv, grid_vol, dx: float, dt: float) -> None:
-        """Overwrite node mass, momentum (with the stress impulse) and sand volume from the particles."""
+        """Overwrite node mass, momentum (with the stress impulse) and sand volume from the particles (``grid_vol``
+        None: no node volume, kernels/mpm_p2g.cu MPM_P2G_VOLUME=0)."""
         shape = grid_m.shape
         n = grid_m.size
         index, w, off = _stencil(x, dx, shape)
@@ -159,11 +160,12 @@ class ReferenceOps:
         gmv = np.zeros((3, n))
         for a in range(3):
             np.add.at(gmv[a], flat, node_mom[..., a].ravel())  # (mv)_i  (Eq. 24 + Δt 𝔽_e, Eq. 27)
-        gvol = np.zeros(n)
-        np.add.at(gvol, flat, (w * vol.astype(np.float64)[:, None]).ravel())  # Σ V_p w_ip  (Eq. 25)
         grid_m[...] = gm.reshape(shape)
         grid_mv[...] = gmv.reshape(grid_mv.shape)
-        grid_vol[...] = gvol.reshape(shape)
+        if grid_vol is not None:
+            gvol = np.zeros(n)
+            np.add.at(gvol, flat, (w * vol.astype(np.float64)[:, None]).ravel())  # Σ V_p w_ip  (Eq. 25)
+            grid_vol[...] = gvol.reshape(shape)
 
     # ------------------------------------------------------------------ grid update (Eqs. 26, 29)
     def grid_update(

@@ -201,7 +201,12 @@ class SandSolver:
         self.grid_m = xp.zeros(self.shape, dtype=f32)
         self.grid_mv = xp.zeros((3, *self.shape), dtype=f32)
         """Node momentum (kg m/s) from P2G to the grid update, which overwrites it with the node velocity."""
-        self.grid_vol = xp.zeros(self.shape, dtype=f32)
+        # one density ϱ for every particle: the node volume is m_i / ϱ (node_volume), no volume grid is kept
+        self._one_density = float(rho[0]) if n and bool(np.all(rho == rho[0])) else None
+        if n == 0:
+            self._one_density = float(params.density)  # until particles of another density arrive
+        self.grid_vol = None if self._one_density is not None else xp.zeros(self.shape, dtype=f32)
+        """The P2G's node sand volume Σ_p w_ip V_p (m³), or None where :attr:`node_volume` takes it from the mass."""
         self.grid_v = self.grid_mv
         """Node velocity (m/s) after the grid update: the same array as ``grid_mv`` (module docstring)."""
 
@@ -298,6 +303,8 @@ class SandSolver:
                 self.min_density = old
                 raise
         self.min_density = min_density
+        if self._one_density is not None and not bool(np.all(rho == self._one_density)):
+            self._keep_volume_grid()
         f32 = np.float32
         new = {
             "x": pos,
@@ -317,6 +324,25 @@ class SandSolver:
             setattr(self, name, xp.ascontiguousarray(grown))
         self.n_particles = first + k
         return first
+
+    @property
+    def node_volume(self) -> tuple[Any, float]:
+        """(array, scale): the node sand volume V_i = Σ_p w_ip V_p of the last P2G (Eq. 25's numerator, m³) is
+        scale × array. Where every particle has one density ϱ, V_p = m_p / ϱ, so V_i = m_i / ϱ: the node mass and
+        1/ϱ, and no volume grid is kept (4 B per node; the P2G scatters four fields instead of five). Else the
+        P2G's own volume grid and 1. Particles of another density (:meth:`append_particles`, a loaded state)
+        make the solver keep the volume grid from then on."""
+        if self.grid_vol is not None:
+            return self.grid_vol, 1.0
+        return self.grid_m, 1.0 / self._one_density
+
+    def _keep_volume_grid(self) -> None:
+        """Keep the P2G's volume grid from now on (particles of more than one density), filled from the mass of
+        the last P2G so that :attr:`node_volume` holds until the next one."""
+        if self.grid_vol is None:
+            arr, scale = self.node_volume
+            self.grid_vol = (arr * np.float32(scale)).astype(np.float32)
+            self._one_density = None
 
     # ------------------------------------------------------------------ time step
     @property
@@ -451,7 +477,8 @@ class SandSolver:
             v = np.divide(mv, mass, out=np.zeros_like(mv), where=mass > 0).astype(np.float32)
             mass, vol = mass.astype(np.float32), vol.astype(np.float32)
         else:
-            vol = self.backend.to_host(self.grid_vol)
+            arr, scale = self.node_volume
+            vol = (self.backend.to_host(arr).astype(np.float64) * scale).astype(np.float32)
             v, mass = self.backend.to_host(self.grid_v), self.backend.to_host(self.grid_m)
         return {"sand_fraction": np.minimum(EPS_MAX, vol / self.dx**3), "velocity": v, "mass": mass, "sand_volume": vol}
 
@@ -518,10 +545,12 @@ class SandSolver:
         st["steps"] = np.array(self.steps)
         st["dt"] = np.array(self.dt)
         st["min_density"] = np.array(self.min_density)
+        st["one_density"] = np.array(np.nan if self._one_density is None else self._one_density)
         st["collider_centres"] = np.array([c.centre for c in self.colliders]).reshape(-1, 3)
         to_host = self.backend.to_host
         m = np.ascontiguousarray(to_host(self.grid_m), np.float32).reshape(-1)
-        vol = np.ascontiguousarray(to_host(self.grid_vol), np.float32).reshape(-1)
+        arr, scale = self.node_volume  # the state keeps the node volume either way (its format is one)
+        vol = np.ascontiguousarray(to_host(arr).astype(np.float64) * scale, np.float32).reshape(-1)
         v = np.ascontiguousarray(to_host(self.grid_v), np.float32).reshape(3, -1)
         touched = (m.view(np.uint32) != 0) | (vol.view(np.uint32) != 0) | (v.view(np.uint32) != 0).any(axis=0)
         nodes = np.flatnonzero(touched)
@@ -554,6 +583,8 @@ class SandSolver:
         self.dt = float(st["dt"])
         if "min_density" in st:
             self.min_density = float(st["min_density"])
+        if "one_density" in st and not np.isfinite(float(st["one_density"])):
+            self._keep_volume_grid()  # the state's particles have several densities (before this solver's)
         for c, centre in zip(self.colliders, centres, strict=True):
             c.centre = centre.astype(np.float64)
         self._upload_colliders()
@@ -584,7 +615,8 @@ class SandSolver:
                 )
             m[nodes], vol[nodes], v[:, nodes] = given["grid_m"], given["grid_vol"], given["grid_v"]
         self.grid_m[...] = self.backend.asarray(m.reshape(self.shape), np.float32)
-        self.grid_vol[...] = self.backend.asarray(vol.reshape(self.shape), np.float32)
+        if self.grid_vol is not None:  # else the node volume is the mass over the one density (node_volume)
+            self.grid_vol[...] = self.backend.asarray(vol.reshape(self.shape), np.float32)
         self.grid_v[...] = self.backend.asarray(v.reshape((3, *self.shape)), np.float32)  # grid_v is grid_mv
 
     # ------------------------------------------------------------------ helpers

@@ -24,7 +24,7 @@ IDS = [f"retention={r}-two_phase={t}" for r, t in VARIANTS]
 
 @pytest.fixture(scope="module")
 def cpu(kernel_backend):
-    """cpu and cpu-device in turn: the host code paths (private scratch grids) and the CUDA ones (atomics)."""
+    """cpu and cpu-device in turn: the host code paths (the tiled scatter, kernels/host_scatter.cuh) and the CUDA ones (atomics)."""
     return kernel_backend
 
 

@@ -78,7 +78,8 @@ def test_retention_on_one_body_only():
     bound = c.fields()["bound_water"].astype(np.float64)
     right = bound[:, :, 9:]  # the right block's nodes and its stencil (x >= 9 cells)
     assert (right == 0).all(), float(right.max())
-    eps = np.minimum(c.params.eps_max, c.fluid.backend.to_host(sim.sand.grid_vol).astype(np.float64) / DX**3)
+    volume, scale = sim.sand.node_volume
+    eps = np.minimum(c.params.eps_max, c.fluid.backend.to_host(volume).astype(np.float64) * scale / DX**3)
     cap = c.params.r_max * np.minimum(eps, c.fluid.backend.to_host(c.retentive).astype(np.float64))
     assert (bound <= cap * (1 + 1e-5) + 1e-6).all()
     drift = sum(_water(sim)) / w0 - 1

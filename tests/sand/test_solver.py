@@ -93,7 +93,7 @@ def _collapse(cpu, **kw):
 
 def test_cpu_run_is_bitwise_deterministic_and_restartable(cpu):
     """Issue 6 needs a resumed run to equal an uninterrupted one bit for bit on the cpu backend: the
-    host P2G sums per-thread private grids in thread order (kernels/mpm_p2g.cu), everything else is
+    host P2G sums each node in one order for any thread count (kernels/host_scatter.cuh), everything else is
     per particle or per node."""
     a = _collapse(cpu)
     a.step(25)

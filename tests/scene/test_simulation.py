@@ -189,6 +189,10 @@ def _variant(d: dict, **changes) -> dict:
         ("coupled, multirate", _variant(tiny_coupled(), **{"scheduler.kind": "multirate", "scheduler.sand_every": 2})),
         ("coupled, multirate 1", _variant(tiny_coupled(), **{"scheduler.kind": "multirate", "scheduler.sand_every": 1})),
         ("sand", tiny_sand()),
+        # two sand densities: the P2G's volume grid is kept (one density: the node mass over it, SandSolver.node_volume)
+        ("coupled, two densities", _variant(tiny_coupled(retention=False), **{"bodies": tiny_coupled()["bodies"] + [
+            {"kind": "sand", "density": 900.0,
+             "geometry": {"type": "box", "min": [0.012, 0.006, 0.012], "max": [0.016, 0.014, 0.016]}}]})),
     ],
 )  # fmt: skip
 def test_memory_estimate_matches_the_allocated_arrays(name, data):
