@@ -58,9 +58,10 @@ static inline long long host_scatter_scratch_size(const long long n, const int n
 // (T + 2) x (T + 2) node rows the tile reaches (36 rows of nx nodes: 28.8 KB for F = 5 and nx = 40),
 // which is then added into the F grid arrays: scattered straight into five separate arrays the P2G of a dense
 // column ran 0.8x the speed of the private grids (whose nodes also held their 5 floats side by side).
-// body(p, row): particle p's additions (a lambda capturing by value: with [&] its stores through float pointers
-// could alias the captured floats, which were then reloaded after each: 1.15x slower), through row(z, y) = the buffer's F x nx floats of node row (y, z) of the
-// grid, one its stencil reaches (float f + F x of that row: node x, field f).
+// body(p, row): particle p's additions, through row(z, y) = the buffer's F x nx floats of node row (y, z) of the
+// grid, one its stencil reaches (float f + F x of that row: node x, field f).  A lambda capturing by value: with
+// [&] its stores through float pointers could alias the captured floats, which were then reloaded after each
+// store (1.15x slower).
 #define HOST_SCATTER_ROWS (HOST_SCATTER_TILE + 2)
 
 // Scatter n particles into the F grid arrays grid[0 .. F) (nx * ny * nz floats each), which it overwrites.

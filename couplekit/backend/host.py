@@ -222,5 +222,7 @@ class HostModule:
         return self._functions[name]
 
     def num_threads(self) -> int:
-        """OpenMP threads the host kernels run on."""
-        return int(self._lib.couplekit_get_num_threads())
+        """OpenMP threads the host kernels run on: this module's ``threads``, or OpenMP's current default. (The
+        default is the process's: reading it for a module with its own count returned the count another module
+        had set last, and the P2G sized its scratch and team from that.)"""
+        return self.threads if self.threads else int(self._lib.couplekit_get_num_threads())

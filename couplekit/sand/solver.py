@@ -266,6 +266,14 @@ class SandSolver:
         rho = _per_particle("densities", dens, n, "kg/m³")
         if not np.all(rho > 0):
             raise ValueError(f"particle densities must be > 0 kg/m³, got {_least(rho)}")
+        with np.errstate(over="ignore"):
+            stored = np.concatenate([vol, vol * rho]).astype(np.float32)  # volume and mass as the solver holds them
+        if not np.isfinite(stored).all():
+            raise ValueError(
+                f"particle volume and mass ϱ V must fit float32 (at most 3.4e38 m³ / kg), got up to "
+                f"{float(np.max(vol)):.3g} m³ and {float(np.max(vol * rho)):.3g} kg: check the densities (kg/m³) "
+                "and volumes (m³)"
+            )
         return pos, vol, vel, sat, rho
 
     def append_particles(
@@ -560,15 +568,11 @@ class SandSolver:
 
     def load_state(self, st: dict, resize: bool = False) -> None:
         """Restore a :meth:`state` dict (same colliders; same particle count unless ``resize``, which
-        reallocates the particle arrays to the state's count: a run whose inflows emitted particles)."""
+        reallocates the particle arrays to the state's count: a run whose inflows emitted particles). A state
+        that does not fit is refused before anything of this solver changes."""
         n = np.asarray(st["x"]).shape[1]
-        if n != self.n_particles:
-            if not resize:
-                raise ValueError(f"state has {n} particles, this solver {self.n_particles}")
-            xp = self.backend.xp
-            for k in self._fields():
-                setattr(self, k, xp.zeros(np.asarray(st[k]).shape[:-1] + (n,), dtype=np.float32))
-            self.n_particles = n
+        if n != self.n_particles and not resize:
+            raise ValueError(f"state has {n} particles, this solver {self.n_particles}")
         centres = np.asarray(st["collider_centres"]).reshape(-1, 3)
         if len(centres) != len(self.colliders):
             raise ValueError(f"state has {len(centres)} colliders, this solver {len(self.colliders)}")
@@ -577,25 +581,50 @@ class SandSolver:
         for k in self._fields():
             if k not in st:
                 raise ValueError(f"state has no {k!r}: it was written with an effect off that is on here")
+            want = tuple(getattr(self, k).shape[:-1]) + (n,)
+            if np.asarray(st[k]).shape != want:
+                raise ValueError(f"state's {k!r} has shape {np.asarray(st[k]).shape}, expected {want}")
+        grid = self._state_grid(st)
+        # from here on nothing is refused
+        if n != self.n_particles:
+            xp = self.backend.xp
+            for k in self._fields():
+                setattr(self, k, xp.zeros(np.asarray(st[k]).shape[:-1] + (n,), dtype=np.float32))
+            self.n_particles = n
+        for k in self._fields():
             getattr(self, k)[...] = self.backend.asarray(np.asarray(st[k]), np.float32)
         self.time = float(st["time"])
         self.steps = int(st["steps"])
         self.dt = float(st["dt"])
         if "min_density" in st:
             self.min_density = float(st["min_density"])
-        if "one_density" in st and not np.isfinite(float(st["one_density"])):
-            self._keep_volume_grid()  # the state's particles have several densities (before this solver's)
+        if self._one_density is not None and self._state_densities_differ(st):
+            self._keep_volume_grid()
         for c, centre in zip(self.colliders, centres, strict=True):
             c.centre = centre.astype(np.float64)
         self._upload_colliders()
         if self.sdf_collider is not None:
             self._sample_sdf()
-        self._load_grid(st)
+        self._set_grid(*grid)
 
-    def _load_grid(self, st: dict) -> None:
-        """The grid of :meth:`state` (sparse: ``grid_nodes`` and the values there), +0.0 elsewhere; a state
-        written before the grid was saved sets the whole grid to +0.0, as a fresh solver holds it (the restart
-        is the same: the next P2G overwrites the grid)."""
+    def _state_densities_differ(self, st: dict) -> bool:
+        """Whether the particles of a loaded state are not all of this solver's one density: the state's
+        ``one_density`` (NaN once its solver kept the volume grid), or, in a state written before that key (session
+        23), the particles' mass over volume, which float32 rounds to ~6e-8 of ϱ (a density within 1e-5 of this
+        one passes: such a state's restart is then not bitwise, its results the same to round-off)."""
+        if "one_density" in st:
+            rho = float(st["one_density"])
+            return not rho == self._one_density  # NaN: several densities
+        if not self.n_particles:
+            return False
+        ratio = self.backend.to_host(self.mass).astype(np.float64) / self.backend.to_host(self.volume)
+        return not bool(np.abs(ratio / self._one_density - 1.0).max() <= 1e-5)  # NaN counts as different
+
+    def _state_grid(self, st: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The grid of :meth:`state` as host arrays (m, vol, v) (sparse in the state: ``grid_nodes`` and the values
+        there), +0.0 elsewhere; a state written before the grid was saved gives the whole grid +0.0, as a fresh
+        solver holds it (the restart is the same: the next P2G overwrites the grid). Refuses a grid that does not
+        fit this solver's."""
         size = int(np.prod(self.shape))
         m, vol, v = np.zeros(size, np.float32), np.zeros(size, np.float32), np.zeros((3, size), np.float32)
         if "grid_nodes" in st:
@@ -614,6 +643,10 @@ class SandSolver:
                     f"{self.shape}"
                 )
             m[nodes], vol[nodes], v[:, nodes] = given["grid_m"], given["grid_vol"], given["grid_v"]
+        return m, vol, v
+
+    def _set_grid(self, m: np.ndarray, vol: np.ndarray, v: np.ndarray) -> None:
+        """Write :meth:`_state_grid`'s arrays into the solver's grid."""
         self.grid_m[...] = self.backend.asarray(m.reshape(self.shape), np.float32)
         if self.grid_vol is not None:  # else the node volume is the mass over the one density (node_volume)
             self.grid_vol[...] = self.backend.asarray(vol.reshape(self.shape), np.float32)

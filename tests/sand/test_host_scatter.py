@@ -121,3 +121,17 @@ def test_scratch_grows_with_the_particles_not_with_the_grid():
 def test_scratch_refuses_more_particles_than_32_bit_ints_index():
     with pytest.raises(ValueError, match="cuda backend"):
         host_scatter_scratch(None, 2**31, 10, 10, 2)
+
+
+def test_each_backend_reports_its_own_thread_count():
+    """OpenMP's default count is the process's: a module asked for its count returned what another backend's
+    module had set last, and the P2G sized its team and scratch from that (probe, session 23)."""
+    one, four = _backend(1), _backend(4)
+    m1, m4 = one.module("mpm_p2g.cu"), four.module("mpm_p2g.cu")
+    shape = SHAPES[0]
+    p = particles(np.random.default_rng(12), 9000, shape)
+    for ops, module, want in ((KernelOps(one), m1, 1), (KernelOps(four), m4, 4), (KernelOps(one), m1, 1)):
+        grids = tuple(np.zeros(s, np.float32) for s in (shape, (3, *shape), shape))
+        ops.p2g(p["x"], p["v"], p["C"], p["tau"], p["mass"], p["volume"], *grids, DX, DT)
+        assert module.num_threads() == want
+        assert ops._scratch.size >= host_scatter_scratch_size(9000, shape[1], shape[0], want)

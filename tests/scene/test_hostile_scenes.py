@@ -379,8 +379,8 @@ def test_validate_refuses_what_run_refuses_for_memory(tmp_path, capsys):
     assert main(["validate", str(f)]) == 3
     err = capsys.readouterr().err
     assert err.startswith(
-        "refused: scene 'scene' needs about 2.24e+07 GiB but only"
-    )  # 24 B per sand-grid cell (grid_v is grid_mv)
+        "refused: scene 'scene' needs about 1.86e+07 GiB but only"
+    )  # 20 B per sand-grid cell (grid_v is grid_mv; one density: no volume grid, SandSolver.node_volume)
     assert main(["run", str(f), "--backend", "numpy", "--out", str(tmp_path / "o")]) == 3
     run_err = capsys.readouterr().err
     assert run_err.split(" but only")[0] == err.split(" but only")[0]
