@@ -79,7 +79,9 @@ SAND_STAGE_BYTES_PER_PARTICLE = {
     "mpm_g2p": (3 + 3 + 9 + 9 + 1 + 1 + 1) * F32 + (3 + 3 + 9 + 9 + 6 + 1 + 1) * F32,  # read, write
 }
 SAND_STAGE_BYTES_PER_NODE = {
-    "mpm_p2g": (1 + 3 + 1) * F32 * 2,  # clear and accumulate mass, momentum, volume
+    # clear and accumulate mass and momentum; the volume only with sand of several densities (+8 B; one density:
+    # the node volume is the mass over it, SandSolver.node_volume)
+    "mpm_p2g": (1 + 3) * F32 * 2,
     "mpm_grid_update": (1 + 3 + 3 + 1) * F32,  # mass, momentum read, velocity written over it, sdf
     "mpm_g2p": 3 * F32,  # velocity read
 }
