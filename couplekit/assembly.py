@@ -423,10 +423,30 @@ def _small_drop_cautions(scene: Scene) -> list[str]:
     return out
 
 
+def _multirate_frame_caution(scene: Scene) -> list[str]:
+    """A multi-rate block of m fluid steps takes its one sand step at its first fluid step, so inside a block the
+    sand is ahead of the fluid's clock by up to m − 1 steps. Where m does not divide the steps of a frame, frames
+    fall inside blocks and show (and their diagnostics stamp) the sand that far ahead of the frame's time (a probe:
+    m = 3, 5 steps per frame, the sand's velocity that of t + dt at t); a caution naming the divisors that align.
+    Sand steps longer than a frame are refused (couplekit.scene.model)."""
+    sch, n = scene.scheduler, scene.time.steps_per_frame
+    if sch.kind != "multirate" or sch.sand_every <= 1 or n % sch.sand_every == 0 or sch.sand_every > n:
+        return []
+    m = sch.sand_every
+    fit = [d for d in range(2, m) if n % d == 0]
+    fix = f"scheduler.sand_every = {fit[-1]} divides them" if fit else f"no sand_every in 2..{m} divides them"
+    return [
+        f"scheduler.sand_every = {m} does not divide the {n} fluid steps of a frame: frames inside a block show the "
+        f"sand up to {m - 1} fluid steps ({(m - 1) * scene.time.dt:.3g} s) ahead of the frame's time (a block's sand "
+        f"step is taken at its first fluid step); {fix}, or make time.frame_duration a multiple of {m} steps"
+    ]
+
+
 def _input_cautions(scene: Scene) -> list[str]:
     """Cautions about what a scene asks of the fluid beyond what was measured or what can have a steady state:
     a density ratio beyond :data:`MEASURED_DENSITY_RATIO`; a water body smaller than its interface
-    (:func:`_small_drop_cautions`); a water outlet in an outflow face (the zero-gradient
+    (:func:`_small_drop_cautions`); multi-rate blocks that do not fit a frame (:func:`_multirate_frame_caution`);
+    a water outlet in an outflow face (the zero-gradient
     outflow cells around it copy the jet's inward velocity and let water in too: a 4 × 4-cell outlet delivered
     1.4-1.9× its flux, exactly its flux in a wall face); a single-phase fluid let in through an inflow with no
     outflow face (the liquid has nowhere to go: its pressure rises for as long as the inflow runs)."""
@@ -449,6 +469,7 @@ def _input_cautions(scene: Scene) -> list[str]:
             )
     if fl.phases == 2:
         out += _small_drop_cautions(scene)
+    out += _multirate_frame_caution(scene)
     if fl.phases == 1 and scene.inflows and "outflow" not in scene.domain.boundary.values():
         out.append(
             "a single-phase fluid enters through inflows[0] but no face is an outflow: the liquid has nowhere to "

@@ -899,7 +899,7 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
                     f"{stirring.acceleration:g} m/s² at the rim for {acts:.3g} s can spin the water up to "
                     f"{speed:.3g} m/s: lattice Mach {units.mach(speed):.3g} at dt = {time.dt:g} s (limit "
                     f"time.mach_limit = {time.mach_limit:g})",
-                    f"lower the acceleration or stirring.duration, use dt <= {units.max_dt(speed, time.mach_limit):.3g} s, "
+                    f"lower the acceleration or stirring.duration, use dt <= {_at_most(units.max_dt(speed, time.mach_limit))} s, "
                     "or set time.max_speed if the water will turn slower (friction, the sand)",
                 )
             )
@@ -2174,7 +2174,7 @@ def _check_time_step(
                 Problem(
                     "time.dt",
                     f"dt = {dt:g} s makes the fastest expected flow ({speed:.3g} m/s, from {why}) Mach {units.mach(speed):.3g} on the lattice (limit time.mach_limit = {time.mach_limit:g})",
-                    f"use dt <= {units.max_dt(speed, time.mach_limit):.3g} s, or a larger dx; if the flow is slower than estimated, set time.max_speed",
+                    f"use dt <= {_at_most(units.max_dt(speed, time.mach_limit))} s, or a larger dx; if the flow is slower than estimated, set time.max_speed",
                 )
             )
         g_lat = units.to_lattice(float(np.linalg.norm(domain.gravity)), "acceleration")
@@ -2188,7 +2188,7 @@ def _check_time_step(
                 Problem(
                     "time.dt",
                     f"gravity in lattice units ({g_lat:.3g}) over {height_cells} cells compresses the fluid by {100 * variation:.0f}% (limit {100 * LIMITS['max_density_variation']:.0f}%: weakly compressible LBM)",
-                    f"use dt <= {limit:.3g} s",
+                    f"use dt <= {_at_most(limit)} s",
                 )
             )
         if fluid.phases == 2 and fluid.surface_tension > 0:
@@ -2201,7 +2201,7 @@ def _check_time_step(
                     Problem(
                         "time.dt",
                         f"surface tension {fluid.surface_tension:g} N/m is {sigma_lat:.3g} in lattice units, above the capillary-wave limit (ρ_h + ρ_l)/(4π) = {cap:.3g} (Brackbill et al. 1992)",
-                        f"use dt <= {limit:.3g} s, or lower fluid.surface_tension",
+                        f"use dt <= {_at_most(limit)} s, or lower fluid.surface_tension",
                     )
                 )
     jets = [i for i, inf in enumerate(inflows) if inf.sand_fraction > 0]
@@ -2240,6 +2240,15 @@ def _check_time_step(
             return
 
 
+def _at_most(x: float) -> str:
+    """``x`` rounded down to 3 significant digits, as a fix's bound is printed: rounded to nearest (``:.3g``) it
+    could lie above the limit, and following the fix was refused again."""
+    if not (x > 0 and math.isfinite(x)):
+        return f"{x:.3g}"
+    scale = 10.0 ** (math.floor(math.log10(x)) - 2)
+    return f"{math.floor(x / scale * (1 + 1e-12)) * scale:.3g}"
+
+
 def _sand_step_problem(dt: float, limit: float, what: str, hint: str, scheduler: Scheduler) -> Problem | None:
     """The problem (naming the key the scheduler's sand step comes from) when the sand's step breaks ``limit``."""
     tol = 1.0 + 1e-9
@@ -2267,7 +2276,14 @@ def _sand_step_problem(dt: float, limit: float, what: str, hint: str, scheduler:
         if m * dt <= limit * tol:
             return None
         most = math.floor(limit * tol / dt)
-        fix = f"use scheduler.sand_every <= {most}" if most >= 1 else f"lower time.dt to <= {limit:.3g} s"
+        # dt above the limit itself: no sand_every helps; the sand step m dt needs dt <= limit / m, or fewer fluid
+        # steps per sand step (a probe followed "lower time.dt to <= limit" and was refused again)
+        fix = (
+            f"use scheduler.sand_every <= {most}"
+            if most >= 1
+            else f"lower time.dt to <= {_at_most(limit / m)} s (limit / sand_every), or sub-cycle the sand ([scheduler] "
+            f'kind = "subcycle")'
+        )
         return Problem(
             "scheduler.sand_every",
             f"the sand step sand_every x dt = {m} x {dt:g} = {m * dt:.3g} s breaks {what}",
@@ -2278,7 +2294,7 @@ def _sand_step_problem(dt: float, limit: float, what: str, hint: str, scheduler:
     return Problem(
         "time.dt",
         f"dt = {dt:g} s breaks {what}",
-        f'use dt <= {limit:.3g} s, {hint}; or sub-cycle the sand ([scheduler] kind = "subcycle")',
+        f'use dt <= {_at_most(limit)} s, {hint}; or sub-cycle the sand ([scheduler] kind = "subcycle")',
     )
 
 
