@@ -323,9 +323,10 @@ def stability_cautions(scene: Scene) -> list[str]:
       still 800:1 tank blew up near step 2500; ν = 1e-3 is stable). Flat walls on one axis only and periodic
       faces are stable."""
     fl = scene.fluid
+    out = _frame_caution(scene)
     if fl is None:
-        return []
-    out = _input_cautions(scene)
+        return out
+    out += _input_cautions(scene)
     prm = fluid_params(scene, scene.units())
     two = fl.phases == 2
     nu_ref = prm.odd_reference_viscosity(two)
@@ -421,6 +422,20 @@ def _small_drop_cautions(scene: Scene) -> list[str]:
                 f"{amount}; make it at least {2 * w:g} cells across (or lower domain.dx)"
             )
     return out
+
+
+def _frame_caution(scene: Scene) -> list[str]:
+    """A frame is a whole number of steps (round(frame_duration / dt), at least 1); a caution when that is more
+    than 2 % off the frame_duration asked for (the shipped examples are within 1.0 %) (a probe: 5e-5 s at dt = 2e-5 s ran frames of 4e-5 s, silently)."""
+    t = scene.time
+    got = t.steps_per_frame * t.dt
+    if abs(got - t.frame_duration) <= 0.02 * t.frame_duration:
+        return []
+    return [
+        f"time.frame_duration = {t.frame_duration:g} s is {t.frame_duration / t.dt:.3g} steps of dt = {t.dt:g} s: "
+        f"frames are {t.steps_per_frame} steps ({got:g} s, {100 * (got / t.frame_duration - 1):+.0f} %); make "
+        "time.frame_duration a multiple of time.dt"
+    ]
 
 
 def _multirate_frame_caution(scene: Scene) -> list[str]:

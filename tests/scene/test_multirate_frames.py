@@ -67,3 +67,12 @@ def test_the_elastic_refusal_names_a_time_step_that_works():
     fix = float(msg.split("lower time.dt to <= ")[1].split(" s")[0])
     d["time"].update({"dt": fix, "frame_duration": 10 * fix})
     Scene.from_dict(d)  # following the fix is accepted
+
+
+def test_a_frame_that_is_not_a_whole_number_of_steps_is_a_caution():
+    d = tiny_sand()
+    d["time"].update({"dt": 2e-5, "frame_duration": 5e-5})  # 2.5 steps: frames of 2 steps, 20 % short
+    lines = [c for c in stability_cautions(Scene.from_dict(d)) if "frame_duration" in c]
+    assert len(lines) == 1 and "frames are 2 steps" in lines[0] and "-20 %" in lines[0]
+    d["time"]["frame_duration"] = 4e-5
+    assert not [c for c in stability_cautions(Scene.from_dict(d)) if "frame_duration" in c]
