@@ -101,7 +101,13 @@ class FluidParams:
     ``store_filtered_pressure``: True (default, the paper's reading of Eq. 40: "a filter is applied to the
     pressure field") replaces p by p̄ every step; False keeps p unfiltered and uses p̄ only for the force.
     The stored filter is what keeps the 800:1, ν_h = 1e-4 regime stable: without it the pressure of the
-    light phase grows exponentially within ~300 steps of a column collapse (measured at 32³).
+    light phase grows exponentially within ~300 steps of a column collapse (measured at 32³). Unfiltered, even a
+    single-phase periodic box is linearly unstable at low viscosity (an acoustic mode; a shear wave, which has no
+    pressure perturbation, is stable): 1e-6 noise on 16³ blows up by step ~1400 at ν = 0.02 and ~2000 at 0.03, and
+    still grows at 0.05; it decays at 0.1 and 0.3, and with the filter stored at every viscosity (a probe, session 23;
+    ``tests/fluid/test_unfiltered_pressure.py``). A Taylor–Green vortex at N = 32 blows up by step ~800 at
+    ν = 0.005 and ~1700 at 0.02: the unfiltered Taylor–Green accuracy of tests/fluid/test_flow_validation.py holds for
+    its runs of at most ~700 steps only. A study option, not for scenes.
     ``odd_lambda``: floor Λ of the two-relaxation-time product (1/r_s − ½)(1/r_o − ½) that sets the rate r_o of
     the odd central moments (orders 3, 5; :func:`~couplekit.fluid.reference.odd_rate`). The paper relaxes
     them at 1, which at its ν_h = 1e-4 makes the edges and corners of no-slip walls linearly unstable (a
