@@ -905,8 +905,10 @@ class Simulation:
                 self._log(self.cost_summary())
             if log_file is not None:
                 log_file.close()
-                if summary:
+                if summary and (steps_done or result.status != "done"):
                     self._write_summary_plot(out)
+                elif summary:  # a finished checkpoint resumed: its diagnostics are in the folder it ran in
+                    self._log(f"nothing left to run: the state is at frame {self.frame} of {total}; no summary.png")
             for sig, handler in (previous or {}).items():
                 signal.signal(sig, handler)
 

@@ -339,3 +339,18 @@ def test_a_requested_field_the_scene_does_not_make_is_noted(tmp_path):
     sim.run(frames=1, out=tmp_path / "r", progress=False)
     assert any("outputs.fields lists solid" in line and "not written" in line for line in lines)
     assert (tmp_path / "r" / "fields_0001.vti").exists()  # the field it makes is written
+
+
+def test_a_finished_checkpoint_run_again_says_there_is_nothing_left(tmp_path):
+    """A probe (session 23): a finished run's checkpoint run again into a new folder printed a warning that its
+    diagnostics.jsonl was empty "because the run stopped before it wrote its first frame"."""
+    sim = _sim(tiny_sand(frames=1))
+    first = sim.run(out=tmp_path / "a", progress=False)
+    assert first.status == "done"
+    messages: list[str] = []
+    again = Simulation.load(first["checkpoint"], backend="cpu", log=messages.append)
+    r = again.run(out=tmp_path / "b", progress=False)
+    assert r.status == "done" and r["steps"] == 0
+    text = "\n".join(messages)
+    assert "nothing left to run: the state is at frame 1 of 1" in text
+    assert "empty" not in text and "warning" not in text
