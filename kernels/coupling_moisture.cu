@@ -5,7 +5,7 @@
 //
 // coupling_bound_water_p2g:   R_i = (1 / V_cell) sum_p r_p V_p N_i(x_p)                       (Eq. 53)
 //   CUDA: float atomics into `bound` (cleared first by coupling_clear).  Host: deterministic, by tiles of
-//   particles (host_scatter.cuh; scratch: host_scatter_scratch_size ints), bitwise the same for any thread count.
+//   particles (host_scatter.cuh; scratch sized by couplekit/backend/host_scatter.py), bitwise the same for any thread count.
 // coupling_particle_moisture:  S_p = sum_i water_i N_i(x_p)                            (Eq. 59 / text after Eq. 28)
 //   water_i = R'_i + eps_f,i phi_i (coupling_water; eps_f phi without retention) from the porosity (padded),
 //   the phase field (padded; 1 single-phase, CK_TWO_PHASE=0) and the bound water R' of this step: not a stored

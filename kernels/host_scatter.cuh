@@ -25,17 +25,14 @@
 #include <vector>
 
 // base-node layers per tile along y and z (>= 2; see above).  Measured on the host P2G, one run, old/new against
-// the private grids (scripts in the session 23 note): 4 gives 0.97-0.99x on a dense column (Fig. 17 small, 32,768
+// the private grids (a scratch timing of the kernel alone, session 23): 4 gives 0.97-0.99x on a dense column (Fig. 17 small, 32,768
 // particles, 1 and 2 threads), 3 0.95x, 2 0.92x (a tile's buffer rows, (T + 2)^2 per T^2 base rows, are cleared and
 // added once per tile); sparse sand in a larger grid gains (Fig. 13 small 1.7x, Fig. 16 small 1.16x).  Smaller tiles
 // would give a small body more tiles per colour on many threads.
 #define HOST_SCATTER_TILE 4
 
-// the number of tiles of an (ny, nz) node grid
-static inline long long host_scatter_tiles(const int ny, const int nz) {
-    return (long long)((ny + HOST_SCATTER_TILE - 1) / HOST_SCATTER_TILE) *
-           (long long)((nz + HOST_SCATTER_TILE - 1) / HOST_SCATTER_TILE);
-}
+// tiles along an axis of n nodes
+static inline int host_scatter_tiles_along(const int n) { return (n + HOST_SCATTER_TILE - 1) / HOST_SCATTER_TILE; }
 
 // the stencil's first node along an axis, for grid coordinate X (node i at i): the quadratic B-spline's base
 static inline int host_scatter_base(const float X) { return (int)floorf(X - 0.5f); }
@@ -44,14 +41,7 @@ static inline int host_scatter_base(const float X) { return (int)floorf(X - 0.5f
 // base node (floor(Y - 1/2), floor(Z - 1/2)), the quadratic B-spline's first node
 static inline long long host_scatter_tile(const float Y, const float Z, const int ny) {
     const int by = host_scatter_base(Y), bz = host_scatter_base(Z);
-    return (long long)(by / HOST_SCATTER_TILE) +
-           (long long)((ny + HOST_SCATTER_TILE - 1) / HOST_SCATTER_TILE) * (long long)(bz / HOST_SCATTER_TILE);
-}
-
-// ints the scratch must hold: the particle order (n), the counts of each thread per tile and the tiles' starts
-static inline long long host_scatter_scratch_size(const long long n, const int ny, const int nz, const int nthreads) {
-    const long long tiles = host_scatter_tiles(ny, nz);
-    return n + (long long)nthreads * tiles + tiles + 1;
+    return (long long)(by / HOST_SCATTER_TILE) + (long long)host_scatter_tiles_along(ny) * (bz / HOST_SCATTER_TILE);
 }
 
 // A tile's particles add into a buffer of the thread's own first, F floats per node side by side over the
@@ -67,14 +57,14 @@ static inline long long host_scatter_scratch_size(const long long n, const int n
 // Scatter n particles into the F grid arrays grid[0 .. F) (nx * ny * nz floats each), which it overwrites.
 // tile_of(p): the tile of particle p (host_scatter_tile), or -1 to leave it out (counted in *skipped when skipped
 // is not null); x_base(p): the x index of its stencil's first node (called for particles in a tile only);
-// body(p, row) as above.  scratch: host_scatter_scratch_size(n, ny, nz, nthreads) ints.  The team
+// body(p, row) as above.  scratch: n + (nthreads + 1) tiles + 1 ints, the particle order, each thread's count per
+// tile and the tiles' starts (couplekit/backend/host_scatter.py sizes it).  The team
 // may be smaller than nthreads.
 template <int F, class TileOf, class XBase, class Body>
 static inline void host_scatter(const long long n, const int nx, const int ny, const int nz, const int nthreads,
                                 int* RESTRICT scratch, int* RESTRICT skipped, float* const grid[F], TileOf tile_of,
                                 XBase x_base, Body body) {
-    const int tiles_y = (ny + HOST_SCATTER_TILE - 1) / HOST_SCATTER_TILE;
-    const int tiles_z = (nz + HOST_SCATTER_TILE - 1) / HOST_SCATTER_TILE;
+    const int tiles_y = host_scatter_tiles_along(ny), tiles_z = host_scatter_tiles_along(nz);
     const long long tiles = (long long)tiles_y * tiles_z;
     const long long ncell = (long long)nx * ny * nz;
     int* RESTRICT order = scratch;

@@ -16,7 +16,7 @@
 // positions inside that band, so only a diverged state gets here, and without the guard a NaN position
 // turned into a wild grid index (the host build wrote out of bounds and crashed with "double free").
 // CUDA: float atomics straight into the grid (order-dependent round-off, as any GPU MPM).
-// Host: deterministic, by tiles of particles (host_scatter.cuh; scratch: host_scatter_scratch_size ints): plain
+// Host: deterministic, by tiles of particles (host_scatter.cuh; scratch sized by couplekit/backend/host_scatter.py): plain
 // additions into the grid in one order for any thread count, so the result is bitwise reproducible whatever the
 // number of threads.  (Until session 23 each thread scattered into a private grid of 5 floats per node, summed in
 // thread order: 20 B per node per thread, and a result that changed with the thread count.)

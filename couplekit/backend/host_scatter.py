@@ -26,8 +26,8 @@ def _tile() -> int:
 
 def host_scatter_scratch_size(n: int, ny: int, nz: int, threads: int) -> int:
     """Ints the scatter of ``n`` particles into a grid of ``ny`` × ``nz`` node rows needs with ``threads``
-    threads: the particle order, each thread's count per tile and the tiles' starts (host_scatter_scratch_size
-    in the header)."""
+    threads: the particle order, each thread's count per tile and the tiles' starts (kernels/host_scatter.cuh's
+    host_scatter reads them in that order)."""
     t = _tile()
     tiles = -(-ny // t) * -(-nz // t)
     return n + threads * tiles + tiles + 1

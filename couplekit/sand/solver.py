@@ -344,6 +344,11 @@ class SandSolver:
             return self.grid_vol, 1.0
         return self.grid_m, 1.0 / self._one_density
 
+    def _host_node_volume(self) -> np.ndarray:
+        """:attr:`node_volume` as a float32 host array (m³)."""
+        arr, scale = self.node_volume
+        return (self.backend.to_host(arr).astype(np.float64) * scale).astype(np.float32)
+
     def _keep_volume_grid(self) -> None:
         """Keep the P2G's volume grid from now on (particles of more than one density), filled from the mass of
         the last P2G so that :attr:`node_volume` holds until the next one."""
@@ -485,8 +490,7 @@ class SandSolver:
             v = np.divide(mv, mass, out=np.zeros_like(mv), where=mass > 0).astype(np.float32)
             mass, vol = mass.astype(np.float32), vol.astype(np.float32)
         else:
-            arr, scale = self.node_volume
-            vol = (self.backend.to_host(arr).astype(np.float64) * scale).astype(np.float32)
+            vol = self._host_node_volume()
             v, mass = self.backend.to_host(self.grid_v), self.backend.to_host(self.grid_m)
         return {"sand_fraction": np.minimum(EPS_MAX, vol / self.dx**3), "velocity": v, "mass": mass, "sand_volume": vol}
 
@@ -557,8 +561,7 @@ class SandSolver:
         st["collider_centres"] = np.array([c.centre for c in self.colliders]).reshape(-1, 3)
         to_host = self.backend.to_host
         m = np.ascontiguousarray(to_host(self.grid_m), np.float32).reshape(-1)
-        arr, scale = self.node_volume  # the state keeps the node volume either way (its format is one)
-        vol = np.ascontiguousarray(to_host(arr).astype(np.float64) * scale, np.float32).reshape(-1)
+        vol = self._host_node_volume().reshape(-1)  # the state keeps the node volume either way (its format is one)
         v = np.ascontiguousarray(to_host(self.grid_v), np.float32).reshape(3, -1)
         touched = (m.view(np.uint32) != 0) | (vol.view(np.uint32) != 0) | (v.view(np.uint32) != 0).any(axis=0)
         nodes = np.flatnonzero(touched)
