@@ -587,8 +587,10 @@ def build_fluid(scene: Scene, backend: Backend, units: Units, coupled: bool, log
             external_force=coupled or scene.stirring is not None,
             source_term=coupled and scene.effects.source_term,
             storage=fl.storage,
-            # lockstep folds Eq. 39's sand terms into the pressure update (SandFluidCoupler.fold_sand_velocity)
+            # lockstep folds Eq. 39's sand terms into the pressure update and keeps the force in the velocity's
+            # buffer (SandFluidCoupler.fold_sand_velocity)
             sand_velocity=not folds_sand_velocity(scene.scheduler.kind),
+            force_in_velocity=coupled and folds_sand_velocity(scene.scheduler.kind),
         )
     for line in stability_cautions(scene):
         log(f"caution: {line}")
@@ -900,15 +902,15 @@ def memory_estimate(scene: Scene) -> dict[str, float]:
         # fluid mixture inputs (fluid_fraction, sand_velocity, force) and the coupler's fields
         flags = sand_retention_flags(scene)
         retention, mixed = True in flags, len(flags) > 1  # mixed: + retentive fraction grid and flags
-        # padded: the fluid's ε and force (4) and, except in lockstep (which folds Eq. 39's sand terms into the
-        # pressure update), its sand velocity (3); the coupler's last ε (1, unless it lives in the source term's
-        # buffer, counted with the fluid; its exchange velocity shares the sand velocity's buffer, or in lockstep
-        # the force's, the sand and water fractions are recomputed, SandFluidCoupler), the cells of Eq. 39's
-        # slip term (1 byte); interior: with retention the bound water R, R', dR (+ the retentive sand's
-        # fraction with per-body retention)
+        # padded: the fluid's ε (1) and, except in lockstep (which folds Eq. 39's sand terms into the pressure
+        # update and keeps the force in the fluid velocity's buffer), its sand velocity and force (6); the coupler's
+        # last ε (1, unless it lives in the source term's buffer, counted with the fluid; its exchange velocity
+        # shares the sand velocity's buffer, or in lockstep the fluid velocity's; the sand and water fractions are
+        # recomputed, SandFluidCoupler), the cells of Eq. 39's slip term (1 byte); interior: with retention the
+        # bound water R, R', dR (+ the retentive sand's fraction with per-body retention)
         shared = scene.fluid.phases == 2 and scene.effects.source_term
-        stored_v = 0 if folds_sand_velocity(scene.scheduler.kind) else 3
-        out["coupling"] = padded * (4.0 * (4 + stored_v + (0 if shared else 1)) + 1) + cells * 4.0 * (
+        unfolded = 0 if folds_sand_velocity(scene.scheduler.kind) else 6
+        out["coupling"] = padded * (4.0 * (1 + unfolded + (0 if shared else 1)) + 1) + cells * 4.0 * (
             (3 + mixed) if retention else 0
         )
         out["particles"] += 4.0 * count * ((1 + mixed) if retention else 0)

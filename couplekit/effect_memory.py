@@ -29,10 +29,11 @@ EFFECT_BYTES = {
     # S_phi (coupled two-phase scenes; compiled out otherwise, CK_PF_SOURCE=0) lives in the buffer of last step's
     # porosity, which the coupling counts (SandFluidCoupler.share_source_buffer)
     "source_term": (0, 0, 0),
-    # ε, force (which in lockstep also holds the exchange's fluid u), ε_prev, slip (the sand and water fractions
-    # are recomputed where they are read: SandFluidCoupler); other schedulers add the stored sand velocity
-    # (SAND_VELOCITY_BYTES), lockstep folds Eq. 39's sand terms into the pressure update instead
-    "coupling": (F32 * (1 + 3 + 1) + 1, 0, 0),
+    # ε, ε_prev, slip (the sand and water fractions are recomputed where they are read: SandFluidCoupler); other
+    # schedulers than lockstep add the stored sand velocity and a force buffer of its own (UNFOLDED_BYTES);
+    # lockstep folds Eq. 39's sand terms into the pressure update and keeps the force (and the exchange's Σ f c) in
+    # the fluid velocity's buffer (SandFluidCoupler.fold_sand_velocity)
+    "coupling": (F32 * (1 + 1) + 1, 0, 0),
     "drag_buoyancy": (0, 0, 0),
     "retention": (0, F32 * 3, F32 * 1),  # bound_in, bound, d_bound; moisture ratio per particle
     "odd_rate_floor": (0, 0, 0),
@@ -50,9 +51,9 @@ EFFECT_BYTES = {
     "fp16_storage": (-(F32 - 2) * 27, 0, 0),
 }
 
-SAND_VELOCITY_BYTES = F32 * 3
-"""Bytes per padded cell of the fluid's stored sand velocity, which a coupled scene keeps unless its scheduler is
-lockstep (SandFluidCoupler.fold_sand_velocity); counted with the coupling."""
+UNFOLDED_BYTES = F32 * (3 + 3)
+"""Bytes per padded cell of the fluid's stored sand velocity and its force buffer of its own, which a coupled scene
+keeps unless its scheduler is lockstep (SandFluidCoupler.fold_sand_velocity); counted with the coupling."""
 
 FP16_SAVING_H = (F32 - 2) * 7
 """Bytes per padded cell fp16 storage saves on h (two-phase scenes), besides f's 54."""
@@ -129,7 +130,7 @@ def effect_memory(scene) -> dict[str, dict[str, float]]:
         if name == "fp16_storage" and two:
             per_cell -= FP16_SAVING_H
         if name == "coupling" and not folds_sand_velocity(scene.scheduler.kind):
-            per_cell += SAND_VELOCITY_BYTES
+            per_cell += UNFOLDED_BYTES
         if name == "stirring":
             if not scene.has_sand:
                 per_cell += F32 * 3  # the force input a coupled scene has anyway

@@ -1,19 +1,28 @@
-// The sand's terms of the mixture pressure update (paper 000 Eq. 39), taken straight from the MPM grid velocity
-// into the fluid's kept population sum: fsum <- fsum - ((1 - eps) div v + (u - v).grad eps) / eps on every
-// interior FLUID cell (lbm_pressure_sand_terms, the function lbm_macro_pressure adds them with).
-// Spec: couplekit/coupling/reference.py ReferenceOps.pressure_sand_terms.
+// The sand's terms of the mixture pressure update (paper 000 Eq. 39) folded into the fluid's kept population sum, in
+// two parts (the lockstep step, schedulers/lockstep.py; SandFluidCoupler docstring):
 //
-// Why: the lockstep step (schedulers/lockstep.py) then keeps no padded copy of the sand velocity in lattice
-// units (12 B per cell, SandFluidCoupler docstring).  The sand velocity a stencil reads at padded cell (X, Y, Z)
-// is the one coupling_sand_velocity would have stored there, grid_v[source node] * inv_velocity_scale (the same
-// float product), the source node a ghost's periodic image or nearest interior node (coupling_source_index).
-// With those values and the same stencil choice per cell (host: LBM_NB_BULK on rows whose 9-row neighbourhood is
-// all fluid, except their tail vector; the GPU: LBM_NB_MASK) the terms are bitwise the pressure kernel's; it then
-// runs with use_fsum = 2 and adds none: 0 - (s0 - t) equals (0 - s0) + t exactly (IEEE rounding is
-// sign-symmetric).  Host rows with no sand around them (eps = 1 and v = 0 on the 9 rows: terms exactly 0) are left
-// as they are, as the pressure kernel's sand-free rows are.
-// fsum: Σ_j (f_j - w_j) of the current populations (lbm_momentum's keep_fsum), padded; vel: the velocity of
-// Eq. 13 the last collision wrote; eps: the porosity of this step (ghosts filled); slip_cells: the fluid's.
+//   coupling_pressure_slip_fluid   fsum <- [phi] u.grad eps / eps in every interior FLUID cell (0 outside the slip
+//                                  cells): the part that reads the fluid velocity u of Eq. 13 (the last collision's),
+//                                  run after this step's porosity and before lbm_momentum (want_fsum = 2) turns fsum
+//                                  into sum_j (f_j - w_j) - that part; u's buffer then takes the exchange velocity
+//                                  sum f c and, after the exchange, the force (one buffer for the three, 12 B per cell)
+//   coupling_pressure_sand_terms   fsum <- fsum - ((1 - eps) div v + [phi] (0 - v).grad eps) / eps from the MPM grid
+//                                  velocity, after G2P
+//
+// so that fsum = sum_j (f_j - w_j) - (the terms lbm_pressure_sand_terms would add from a stored sand velocity), to
+// float32 round-off (the slip term's two parts are divided and subtracted apart), and the pressure update runs with
+// use_fsum = 2, adding none.  Both through lbm_sand_terms.cuh.  Spec: couplekit/coupling/reference.py
+// ReferenceOps.pressure_slip_fluid / pressure_sand_terms.
+//
+// Why: the lockstep step then keeps no padded copy of the sand velocity in lattice units (12 B per cell) and no
+// force buffer besides the velocity's (12 B).  The sand velocity a stencil reads at padded cell (X, Y, Z) is the one
+// coupling_sand_velocity would have stored there, grid_v[source node] * inv_velocity_scale (the same float
+// product), the source node a ghost's periodic image or nearest interior node (coupling_source_index).  The host
+// runs lbm_macro_pressure's row scheme (LBM_NB_BULK on rows whose 9-row neighbourhood is all fluid, except their
+// tail vector; the GPU: LBM_NB_MASK).  Host rows with no sand around them (eps = 1 and v = 0 on the 9 rows: terms
+// exactly 0) are left as they are by the second kernel and take 0 from the first.
+// fsum: padded, its non-fluid cells left as they are; vel: the velocity of Eq. 13 the last collision wrote; eps: the
+// porosity of this step (ghosts filled); slip_cells: the fluid's.
 // variants: CK_TWO_PHASE=0,1
 #include "common.cuh"
 #include "lattice.cuh"
@@ -32,11 +41,11 @@
 KERNEL void coupling_pressure_sand_terms(
     const long long n, const float* RESTRICT grid_v /* size: 3 * nx * ny * nz */,
     const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
-    const float* RESTRICT vel /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */, const float* RESTRICT phi /* size >= 1 */,
-    const float* RESTRICT eps /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+    const float* RESTRICT phi /* size >= 1 */, const float* RESTRICT eps /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
     const unsigned char* RESTRICT slip_cells /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
     float* RESTRICT fsum /* size: (nx + 2) * (ny + 2) * (nz + 2) */, const int nx, const int ny, const int nz,
     const int per_x, const int per_y, const int per_z, const float inv_velocity_scale) {
+    const float* vel = nullptr;  // WITH_U = 0: the fluid velocity's part is coupling_pressure_slip_fluid's
     const long long ncell = (long long)nx * ny * nz;
 #if CK_ON_GPU
     FOR_EACH_CELL(x, y, z, nx, ny, nz) {
@@ -58,7 +67,7 @@ KERNEL void coupling_pressure_sand_terms(
                     sv[27 + k] = grid_v[ncell + node] * inv_velocity_scale;
                     sv[54 + k] = grid_v[2 * ncell + node] * inv_velocity_scale;
                 }
-        fsum[c] = fsum[c] - lbm_pressure_sand_terms<LBM_NB_MASK, CK_TWO_PHASE, 1>(
+        fsum[c] = fsum[c] - lbm_pressure_sand_terms<LBM_NB_MASK, CK_TWO_PHASE, 1, 0>(
                                 c, flags, vel, phi, eps, px, pxy, N, sv, 13, 3, 9, 27, 0u, 0u, slip_cells);
     }
 #else
@@ -110,7 +119,7 @@ KERNEL void coupling_pressure_sand_terms(
                 if (bulk && !tail) {
                     CK_PRAGMA(omp simd)
                     for (int i = 0; i < len; ++i)
-                        fsum[c0 + i] = fsum[c0 + i] - lbm_pressure_sand_terms<LBM_NB_BULK, CK_TWO_PHASE>(
+                        fsum[c0 + i] = fsum[c0 + i] - lbm_pressure_sand_terms<LBM_NB_BULK, CK_TWO_PHASE, 0, 0>(
                                                           c0 + i, flags, vel, phi, eps, px, pxy, N, sv, i + 1 + 4 * w,
                                                           w, 3 * w, 9 * w, LBM_FULL_MASK, slipw[i], slip_cells);
                     continue;
@@ -121,10 +130,84 @@ KERNEL void coupling_pressure_sand_terms(
                     lbm_link_masks(flags, c0, len, px, pxy, masks, scratch);
                 CK_PRAGMA(omp simd)
                 for (int i = 0; i < len; ++i) {
-                    const float t = lbm_pressure_sand_terms<LBM_NB_MASK, CK_TWO_PHASE>(
+                    const float t = lbm_pressure_sand_terms<LBM_NB_MASK, CK_TWO_PHASE, 0, 0>(
                         c0 + i, flags, vel, phi, eps, px, pxy, N, sv, i + 1 + 4 * w, w, 3 * w, 9 * w, masks[i],
                         slipw[i], slip_cells);
                     fsum[c0 + i] = ck_select(masks[i] & 1u, fsum[c0 + i] - t, fsum[c0 + i]);
+                }
+            }
+        }
+    (void)n;
+#endif
+}
+
+// fsum <- the fluid velocity's part of Eq. 39's slip term, [phi] u.grad eps / eps (lbm_pressure_slip_fluid), in every
+// interior FLUID cell: 0 outside the slip cells and, on the host, in rows with eps = 1 on their 9 rows; fsum's other
+// cells are left as they are (p-bar's boundary values).  lbm_momentum (want_fsum = 2) then subtracts it from the
+// population sum.  Host: coupling_pressure_sand_terms's rows, spans, chunks and stencil modes.
+KERNEL void coupling_pressure_slip_fluid(const long long n,
+                                         const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                                         const float* RESTRICT vel /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */,
+                                         const float* RESTRICT phi /* size >= 1 */,
+                                         const float* RESTRICT eps /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                                         const unsigned char* RESTRICT slip_cells /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
+                                         float* RESTRICT fsum /* size: (nx + 2) * (ny + 2) * (nz + 2) */, const int nx,
+                                         const int ny, const int nz) {
+#if CK_ON_GPU
+    FOR_EACH_CELL(x, y, z, nx, ny, nz) {
+        const int px = CK_PER_ITEM(nx + 2);
+        const long long pxy = (long long)px * (ny + 2);
+        const long long N = pxy * (nz + 2);
+        const long long c = (x + 1) + px * (long long)(y + 1) + pxy * (z + 1);
+        if (flags[c] != FLAG_FLUID) continue;
+        fsum[c] = lbm_pressure_slip_fluid<LBM_NB_MASK, CK_TWO_PHASE, 1>(c, flags, vel, phi, eps, px, pxy, N, 0u, 0u,
+                                                                        slip_cells);
+    }
+#else
+    const int px = nx + 2;
+    const long long pxy = (long long)px * (ny + 2);
+    const long long N = pxy * (nz + 2);
+    CK_PRAGMA(omp parallel for collapse(2) schedule(static))
+    for (int z = 0; z < nz; ++z)
+        for (int y = 0; y < ny; ++y) {
+            const long long row = px * (long long)(y + 1) + pxy * (z + 1);
+            int lo = 1, hi = nx;
+            const bool bulk = lbm_rows_all_fluid(flags, row, 0, nx + 1, px, pxy);
+            if (!bulk) lbm_row_fluid_span(flags, row, nx, lo, hi);
+            if (lo > hi) continue;
+            unsigned int any = 0;  // eps = 1 on the 9 rows: the gradient is exactly 0
+            for (int r = 0; r < 9; ++r)
+                any |= ck_any_differs(eps + row + (long long)(r % 3 - 1) * px + (long long)(r / 3 - 1) * pxy, nx + 2,
+                                      1.f);
+            if (any == 0) {
+                CK_SIMD_SHORT
+                for (int x = lo; x <= hi; ++x) fsum[row + x] = flags[row + x] == FLAG_FLUID ? 0.f : fsum[row + x];
+                continue;
+            }
+            const int rem = lbm_row_tail(lo, hi);
+            unsigned int masks[CPL_P_CHUNK], scratch[10 * (CPL_P_CHUNK + 2)], slipw[CPL_P_CHUNK];
+            for (int x0 = lo; x0 <= hi;) {
+                int len;
+                long long c0;
+                const int tail = lbm_row_chunk(x0, hi, rem, CPL_P_CHUNK, row, len, c0);
+                CK_SIMD_SHORT
+                for (int i = 0; i < len; ++i) slipw[i] = slip_cells[c0 + i] != 0 ? 1u : 0u;
+                if (bulk && !tail) {
+                    CK_PRAGMA(omp simd)
+                    for (int i = 0; i < len; ++i)
+                        fsum[c0 + i] = lbm_pressure_slip_fluid<LBM_NB_BULK, CK_TWO_PHASE>(
+                            c0 + i, flags, vel, phi, eps, px, pxy, N, LBM_FULL_MASK, slipw[i], slip_cells);
+                    continue;
+                }
+                if (tail)
+                    lbm_tail_masks(flags, c0, rem, px, pxy, masks, scratch);
+                else
+                    lbm_link_masks(flags, c0, len, px, pxy, masks, scratch);
+                CK_PRAGMA(omp simd)
+                for (int i = 0; i < len; ++i) {
+                    const float t = lbm_pressure_slip_fluid<LBM_NB_MASK, CK_TWO_PHASE>(
+                        c0 + i, flags, vel, phi, eps, px, pxy, N, masks[i], slipw[i], slip_cells);
+                    fsum[c0 + i] = ck_select(masks[i] & 1u, t, fsum[c0 + i]);
                 }
             }
         }

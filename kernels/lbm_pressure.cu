@@ -327,7 +327,10 @@ KERNEL void lbm_filter_wall_rule(const long long n, const float* RESTRICT p /* s
 // cells: the fluid velocity "now", as the sand-fluid exchange needs it (odd parity: ghosts and wall links
 // must have been prepared as before an odd step).  want_fsum != 0: also fsum = sum_j (f_j - w_j) there, summed
 // in lbm_pressure_cell's order (q = 0 .. 26), so that the next pressure update can take it instead of reading
-// f again (use_fsum of lbm_macro_pressure); fsum's other cells are left as they are.
+// f again (use_fsum of lbm_macro_pressure); fsum's other cells are left as they are.  want_fsum = 2: fsum = that
+// sum minus the value fsum held there (the fluid velocity's part of Eq. 39's slip term, which
+// coupling_pressure_slip_fluid put there: the lockstep step).  `out` may be the buffer that velocity's part was
+// read from: it is written only after.
 KERNEL void lbm_momentum(const long long n, const ck_store_t* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
                          const unsigned char* RESTRICT flags /* size: (nx + 2) * (ny + 2) * (nz + 2) */,
                          float* RESTRICT out /* size: 3 * (nx + 2) * (ny + 2) * (nz + 2) */, float* RESTRICT fsum,
@@ -357,7 +360,7 @@ KERNEL void lbm_momentum(const long long n, const ck_store_t* RESTRICT f /* size
 #define LBM_FSUM(q) s0 += fj[q];
             LBM_FOR27(LBM_FSUM)
 #undef LBM_FSUM
-            fsum[c] = s0;
+            fsum[c] = want_fsum == 2 ? s0 - fsum[c] : s0;
         }
     }
 #else
@@ -403,11 +406,17 @@ KERNEL void lbm_momentum(const long long n, const ck_store_t* RESTRICT f /* size
                     out[c] = ck_select(live[i], ux, out[c]);                                       \
                     out[N + c] = ck_select(live[i], uy, out[N + c]);                               \
                     out[2 * N + c] = ck_select(live[i], uz, out[2 * N + c]);                       \
-                    if (FSUM) fsum[c] = ck_select(live[i], s0, fsum[c]);                           \
+                    if (FSUM) fsum[c] = ck_select(live[i], FSUM == 2 ? s0 - fsum[c] : s0, fsum[c]);  \
                 }                                                                                  \
             }                                                                                      \
         }
-    if (want_fsum) {
+    if (want_fsum == 2) {
+        if (odd) {
+            LBM_MOM_LOOP(1, 2)
+        } else {
+            LBM_MOM_LOOP(0, 2)
+        }
+    } else if (want_fsum) {
         if (odd) {
             LBM_MOM_LOOP(1, 1)
         } else {

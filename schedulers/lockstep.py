@@ -8,10 +8,11 @@ as reported by :meth:`LockstepScheduler.stage_times`:
 stage                                 Algorithm 1 line (paper 000 equations)
 ====================================  =================================================================
 ``mpm_p2g``                           MPM_ParticlesToGrid (Eq. 24)
-``fluid_velocity``                    u = Σ f c of the current populations for the exchange (Eq. 13,
-                                      no force shift; SandFluidCoupler docstring)
 ``volume_fractions``                  ComputeVolumeFractions (Eqs. 25, 33, 54; with retention the
                                       bound-water P2G, Eq. 53, and absorption, Eqs. 55–56)
+``fluid_velocity``                    u = Σ f c of the current populations for the exchange (Eq. 13,
+                                      no force shift; SandFluidCoupler docstring), over the last
+                                      collision's u once its part of Eq. 39's slip term is taken
 ``retention_source``                  UpdateWaterRetentionAndSource: S_φ (Eqs. 45, 57)
 ``drag_buoyancy``                     the total force on the sand (buoyancy Eq. 31, implicit drag §4.3)
 ``mpm_grid_update``                   MPM_UpdateGridMomenta (Eqs. 26, 29, boundaries)
@@ -54,8 +55,8 @@ __all__ = ["LockstepScheduler", "COUPLED_STAGES", "FLUID_STAGES", "SAND_STAGES",
 
 COUPLED_STAGES = (
     "mpm_p2g",
-    "fluid_velocity",
     "volume_fractions",
+    "fluid_velocity",
     "retention_source",
     "drag_buoyancy",
     "mpm_grid_update",
@@ -103,10 +104,12 @@ def algorithm1_step(sched: Scheduler, share: float = 1.0) -> None:
     c, sand, stage = sched.coupler, sched.sand, sched._stage
     with stage("mpm_p2g"):
         sand.p2g()
-    with stage("fluid_velocity"):
-        c.fluid_velocity()
+    # the porosity before Σ f c: in lockstep the fluid velocity's part of Eq. 39's slip term (u·∇ε) is taken
+    # before Σ f c is written over u (SandFluidCoupler.fold_sand_velocity); neither stage reads what the other writes
     with stage("volume_fractions"):
         c.fractions(share=share)
+    with stage("fluid_velocity"):
+        c.fluid_velocity()
     if c.two_phase and sched.source_term:
         with stage("retention_source"):
             c.phase_source()

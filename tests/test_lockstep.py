@@ -64,8 +64,8 @@ def _record(obj, names, log, prefix=""):
 
 
 def test_coupled_step_runs_algorithm_1_in_order(cpu1):
-    """Call order of one coupled step: MPM P2G → fractions → source → drag/buoyancy → grid update →
-    moisture → G2P → sand velocity → LBM pressure (Eq. 39) → filter (Eq. 40) → controller sums →
+    """Call order of one coupled step: MPM P2G → fractions → fluid velocity (Σ f c) → source → drag/buoyancy →
+    grid update → moisture → G2P → sand velocity → LBM pressure (Eq. 39) → filter (Eq. 40) → controller sums →
     fluid collide/stream → phase-field collide/stream → φ macroscopic → finish."""
     fl, sd, cp = _solvers(cpu1, retention=True)
     log: list[str] = []
@@ -83,7 +83,7 @@ def test_coupled_step_runs_algorithm_1_in_order(cpu1):
     log.clear()
     sched.step(1)
     expected = [
-        "sand.p2g", "coupler.fluid_velocity", "coupler.fractions", "coupler.phase_source", "coupler.exchange",
+        "sand.p2g", "coupler.fractions", "coupler.fluid_velocity", "coupler.phase_source", "coupler.exchange",
         "sand.grid_update", "coupler.moisture", "sand.g2p", "coupler.sand_velocity", "lbm.macro_pressure",
         "lbm.pressure_filter", "lbm.collide_stream", "pf.mixture_sums", "pf.collide_stream", "pf.macroscopic",
         "coupler.finish",

@@ -65,13 +65,16 @@ def test_reload_into_a_fresh_simulation_continues_bitwise():
 
 
 def test_a_checkpoint_holding_the_exchange_velocity_still_loads_and_continues_bitwise():
-    """Checkpoints before session 13 hold ``fluid_u``, ``eps_sand`` and ``water``: they load (and are ignored,
-    every step recomputes them), and the run continues as one from a checkpoint without them."""
+    """Checkpoints before session 13 hold ``fluid_u``, ``eps_sand`` and ``water``, lockstep checkpoints before
+    session 24 the fluid's ``force``: they load (and are ignored, every step recomputes them; the force lives in the
+    velocity's buffer now), and the run continues as one from a checkpoint without them."""
     a, b, c = _sim(), _sim(), _sim()
     a.step(4)
     saved = a._states()
+    assert "force" not in saved["fluid"]
     old = {solver: dict(arrays) for solver, arrays in saved.items()}
-    old["coupler"]["fluid_u"] = np.full_like(saved["fluid"]["force"], np.nan)  # any value: not read
+    old["fluid"]["force"] = np.full_like(saved["fluid"]["velocity"], np.nan)  # any value: not read
+    old["coupler"]["fluid_u"] = np.full_like(saved["fluid"]["velocity"], np.nan)  # any value: not read
     old["coupler"]["eps_sand"] = np.full_like(saved["fluid"]["fluid_fraction"], np.nan)
     old["coupler"]["water"] = np.full_like(saved["coupler"]["bound"], np.nan)
     b._load_states(saved, 4)

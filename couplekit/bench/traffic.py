@@ -56,12 +56,14 @@ COUPLED_PRESSURE_BYTES_PER_CELL = KERNEL_TRAFFIC["lbm_macro_pressure (kept Σ)"]
 # ---------------------------------------------------------------------------------------------- coupling
 COUPLING_STAGE_BYTES_PER_CELL = {
     "volume_fractions": 2 * F32,  # node volume read, ε̃ write (the sand and water fractions are not stored)
-    "fluid_velocity": KERNEL_TRAFFIC["lbm_momentum"].bytes,  # f read, Σ f c and Σ (f − w) written
+    # f read, Σ f c and Σ (f − w) written; before it the slip term's fluid part (kernels/coupling_pressure.cu
+    # coupling_pressure_slip_fluid): u, ε, φ read and the part written into the sum, which the momentum reads back
+    "fluid_velocity": KERNEL_TRAFFIC["lbm_momentum"].bytes + (3 + 1 + 1 + 1 + 1) * F32 + 2,
     "drag_buoyancy": 3 * F32 + 3 * F32 + F32 + F32,  # force write, sand velocity read, ε, p
     "retention_source": 4 * F32 + F32,  # ε, ε_prev, φ, source write, d_bound
-    # Eq. 39's sand terms into the kept sum: grid velocity, ε, the last collision's u, φ read, the sum read and
-    # written, the slip-cell and flag bytes (kernels/coupling_pressure.cu)
-    "sand_velocity": (3 + 1 + 3 + 1 + 2) * F32 + 2,
+    # the rest of Eq. 39's sand terms into the kept sum: grid velocity, ε, φ read, the sum read and written, the
+    # slip-cell and flag bytes (kernels/coupling_pressure.cu; the fluid velocity's part: fluid_velocity's)
+    "sand_velocity": (3 + 1 + 1 + 2) * F32 + 2,
     "coupling_finish": 2 * F32,  # ε_prev ← ε
     "moisture": 2 * F32,  # ε̃ and φ, from which the gather computes the water fraction of Eq. 59
 }

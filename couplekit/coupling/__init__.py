@@ -8,10 +8,12 @@ phase-field source term S_φ and water retention with the saturation that drives
   FluidSolver in Algorithm 1's order.
 
 Per lockstep step (paper Algorithm 1), with the MPM grid after P2G:
-``bound_water_p2g`` (retention only) → ``fractions`` → ``phase_source`` → ``drag_buoyancy`` (before the
+``bound_water_p2g`` (retention only) → ``fractions`` → ``pressure_slip_fluid`` (the part of Eq. 39's slip
+term that reads the fluid velocity, into the pressure update's kept population sum, before the fluid's Σ f c
+is written over its velocity) → ``phase_source`` → ``drag_buoyancy`` (before the
 sand's grid update, which then divides the momentum by the mass and applies the boundaries) → ``particle_moisture`` (before the
-sand's G2P, which reads the saturation) → ``pressure_sand_terms`` (after the grid update: Eq. 39's sand terms
-into the pressure update's kept population sum; the sub-cycling and multi-rate schedulers store the fluid's
+sand's G2P, which reads the saturation) → ``pressure_sand_terms`` (after the grid update: the rest of Eq. 39's
+sand terms into the kept sum; the sub-cycling and multi-rate schedulers store the fluid's
 ``sand_velocity`` input instead).  The outputs map onto :class:`couplekit.fluid.solver.FluidSolver`'s inputs:
 ``eps_fluid`` → ``fluid_fraction``, ``force`` → ``force``, ``source`` → ``source_term``, ``sand_v`` →
 ``sand_velocity``.  :func:`make_coupling_ops` picks the implementation.

@@ -10,8 +10,8 @@ sand terms folded into the pressure update) and the sand's (``grid_mv``: drag an
 ``saturation``).  One lockstep step, in Algorithm 1's order::
 
     sand.p2g()                 # Eq. 24
-    coupler.fluid_velocity()   # u = Σ_j f_j c_j of the fluid's current populations (Eq. 13, no force shift)
     coupler.fractions()        # Eqs. 25, 33, 53–56 (retention), fluid_fraction
+    coupler.fluid_velocity()   # u = Σ_j f_j c_j of the fluid's current populations (Eq. 13, no force shift)
     coupler.phase_source()     # Eqs. 45 / 57 -> fluid.source_term (two-phase fluid only)
     coupler.exchange()         # Eq. 31 buoyancy and implicit drag -> sand.grid_mv, drag -> fluid.force
     sand.grid_update()         # Eqs. 26, 29 and the sand's boundaries
@@ -44,24 +44,31 @@ saves under both names).
 Where the sand velocity goes (:meth:`SandFluidCoupler.fold_sand_velocity`): in lockstep nowhere, 12 B per cell
 less.  Its only reader in the fluid step is the pressure update (Eq. 39: (1 − ε) ∇·v and the slip (u − v)·∇ε),
 which runs first and sums the populations that :meth:`fluid_velocity` already summed for the exchange (the kept
-Σ (f − w), FluidSolver.current_velocity).  So :meth:`sand_velocity` computes those terms right away from the
+Σ (f − w), FluidSolver.current_velocity).  So :meth:`sand_velocity` computes the sand's terms right away from the
 MPM grid velocity (kernels/coupling_pressure.cu, the pressure kernel's own function on the values it would have
-read) and subtracts them from the kept sum, and the pressure update adds none: bitwise the same pressure
-(tests/coupling/test_exchange_velocity_buffer.py).  The sub-cycling and multi-rate schedulers keep the stored
-sand velocity: their fluid steps read the substeps' mean, or one sand step's velocity over a block.
+read) and subtracts them from the kept sum, and the pressure update adds none.  The sub-cycling and multi-rate
+schedulers keep the stored sand velocity: their fluid steps read the substeps' mean, or one sand step's velocity
+over a block.
 
-Where Σ f c lives (:attr:`SandFluidCoupler.fluid_u`): in lockstep in the fluid's ``force`` buffer, which
-:meth:`exchange` overwrites with the drag cell by cell (each cell reads its own Σ f c before it writes its
-force; kernels/coupling_drag.cu); otherwise in the fluid's ``sand_velocity`` buffer.  Either way 12 B per cell
-not stored twice: Σ f c is written by :meth:`fluid_velocity` and last read by :meth:`exchange` (and
-:meth:`phase_source`), the force is written by :meth:`exchange` and read by the fluid step's collision, the
-sand velocity is written after G2P by :meth:`sand_velocity` and read by the fluid step, and every scheduler's
-step computes Σ f c afresh before it reads it (so it is not in a checkpoint either).  The one order where Σ f c
-and the sand velocity overlap is a multi-rate block of m > 1 fluid steps, whose other steps recompute Σ f c for
-the source term while the fluid still needs the sand velocity of the block's sand step: that scheduler calls
-:meth:`own_fluid_velocity` (:mod:`couplekit.schedulers.multirate`).  The sub-cycling scheduler keeps its
-last-step copy before the sand velocity is written and reads the force in its substeps' fluid view
-(:mod:`couplekit.schedulers.subcycle`).
+Where Σ f c and the force live (:attr:`SandFluidCoupler.fluid_u`): in lockstep in the fluid's ``velocity`` buffer,
+which also holds the force (FluidSolver.share_force_buffer), 12 B per cell less again.  The buffer holds the last
+collision's u between steps (what ``fields()`` shows); :meth:`fluid_velocity` (after :meth:`fractions`, which
+gives this step's porosity) first takes the part of Eq. 39's slip term that reads u, φ u·∇ε / ε, into the kept
+sum (``coupling_pressure_slip_fluid``), then writes Σ f c over u; :meth:`phase_source` and :meth:`exchange` read
+Σ f c, and the exchange writes the drag force over it cell by cell (each cell reads its own Σ f c first;
+kernels/coupling_drag.cu); the collision reads the force cell by cell and writes u there; the walls' and inflows'
+velocities in the ghost cells are never written.  :meth:`sand_velocity` then subtracts the rest of the terms,
+((1 − ε) ∇·v − φ v·∇ε) / ε, so the slip term is rounded in two parts: the same results as a stored sand velocity
+to float32 round-off, not bitwise (tests/coupling/test_exchange_velocity_buffer.py).  Neither Σ f c nor the force
+is in a checkpoint of a lockstep run (every step writes both before reading them).  Otherwise Σ f c lives in the
+fluid's ``sand_velocity`` buffer and the force in one of its own: Σ f c is written by :meth:`fluid_velocity` and
+last read by :meth:`exchange` (and :meth:`phase_source`), the sand velocity is written after G2P by
+:meth:`sand_velocity` and read by the fluid step, and every scheduler's step computes Σ f c afresh before it
+reads it.  The one order where Σ f c and the sand velocity overlap is a multi-rate block of m > 1 fluid steps,
+whose other steps recompute Σ f c for the source term while the fluid still needs the sand velocity of the
+block's sand step: that scheduler calls :meth:`own_fluid_velocity` (:mod:`couplekit.schedulers.multirate`).  The
+sub-cycling scheduler keeps its last-step copy before the sand velocity is written and reads the force in its
+substeps' fluid view (:mod:`couplekit.schedulers.subcycle`).
 """
 
 from __future__ import annotations
@@ -152,13 +159,16 @@ class SandFluidCoupler:
             self.bound_in = self.bound = self.d_bound = self.moisture_ratio = None
             self.retain = self.retentive = None
         self._started = False
+        self._fractions_step = None  # the fluid step at which fractions() last ran (fluid_velocity's order check)
+        self._velocity_step = None  # the fluid step whose u a folding fluid_velocity() replaced by Σ f c
         self._scheduler = None  # built by step()
 
     @property
     def fluid_u(self):
         """The exchange velocity Σ_j f_j c_j (padded, lattice units): the fluid's ``sand_velocity`` buffer, its
-        ``force`` buffer when the sand velocity is folded into the pressure update (:meth:`fold_sand_velocity`),
-        or a buffer of its own after :meth:`own_fluid_velocity` (module docstring)."""
+        ``force`` buffer, which is its ``velocity`` buffer, when the sand velocity is folded into the pressure
+        update (:meth:`fold_sand_velocity`), or a buffer of its own after :meth:`own_fluid_velocity` (module
+        docstring)."""
         if self._fluid_u is not None:
             return self._fluid_u
         return self.fluid.force if self.fluid.sand_velocity is None else self.fluid.sand_velocity
@@ -170,21 +180,25 @@ class SandFluidCoupler:
         return self.fluid.sand_velocity is None
 
     def fold_sand_velocity(self, fold: bool) -> None:
-        """Keep no padded sand velocity in the fluid (``fold``; 12 B per cell less): :meth:`sand_velocity` then
-        subtracts Eq. 39's sand terms, computed from the MPM grid velocity, from the population sum that
-        :meth:`fluid_velocity` kept for the pressure update, and Σ f c lives in the fluid's ``force`` buffer,
-        which :meth:`exchange` overwrites cell by cell with the drag (module docstring).  For a scheduler whose
-        every fluid step follows this step's :meth:`fluid_velocity` and :meth:`exchange` (lockstep); the
-        sub-cycling and multi-rate schedulers call it with False (their fluid steps read a stored sand velocity).
-        Bitwise the same results either way."""
+        """Keep no padded sand velocity and no force buffer of its own in the fluid (``fold``; 24 B per cell
+        less): the fluid's velocity, Σ f c and the force share one buffer; :meth:`fluid_velocity` first takes
+        the part of Eq. 39's slip term that reads the fluid velocity out of it into the kept population sum, then
+        writes Σ f c over it; :meth:`exchange` writes the force over that cell by cell; :meth:`sand_velocity`
+        subtracts the rest of Eq. 39's sand terms, computed from the MPM grid velocity (module docstring).  For a
+        scheduler whose every fluid step follows this step's :meth:`fractions`, :meth:`fluid_velocity` and
+        :meth:`exchange` in that order (lockstep); the sub-cycling and multi-rate schedulers call it with False
+        (their fluid steps read a stored sand velocity).  The same results either way to float32 round-off (the
+        slip term's two parts are subtracted apart; tests/coupling/test_exchange_velocity_buffer.py)."""
         if fold:
             if self._fluid_u is not None:
                 raise RuntimeError(
                     "the exchange velocity has a buffer of its own (a multi-rate block): keep the sand velocity"
                 )
             self.fluid.release_sand_velocity()
+            self.fluid.share_force_buffer(True)
         else:
             self.fluid.keep_sand_velocity()
+            self.fluid.share_force_buffer(False)
 
     @property
     def eps_prev(self):
@@ -225,10 +239,31 @@ class SandFluidCoupler:
     # ------------------------------------------------------------------ stages
     def fluid_velocity(self) -> None:
         """``fluid_u`` := Σ_j f_j c_j of the fluid's current populations on interior fluid cells (solid cells
-        and ghosts keep what the buffer held, the sand velocity; no coupling stage reads them there):
+        and ghosts keep what the buffer held; no coupling stage reads them there):
         FluidSolver.current_velocity (module docstring). The same pass keeps Σ_j (f_j − w_j) for the fluid
-        step's pressure update (``keep_fsum``), which then does not read the populations again."""
-        self.fluid.current_velocity(out=self.fluid_u, keep_fsum=True)
+        step's pressure update (``keep_fsum``), which then does not read the populations again.  With the sand
+        velocity folded (:meth:`fold_sand_velocity`), ``fluid_u`` is the fluid's velocity buffer: first the part of
+        Eq. 39's slip term that reads the last collision's u (φ u·∇ε / ε) goes into the kept sum, so this step's
+        :meth:`fractions` (the porosity ε) must have run."""
+        f = self.fluid
+        if self.folds_sand_velocity:
+            if self._fractions_step != f.step_count:
+                raise RuntimeError(
+                    "fluid_velocity() of a folding coupler (lockstep) needs this step's porosity: call fractions() "
+                    "first in the same step (the lockstep scheduler's order)"
+                )
+            if self._velocity_step == f.step_count:
+                raise RuntimeError(
+                    "fluid_velocity() ran already at this step: its velocity buffer now holds Σ f c (or the force), "
+                    "not the last collision's u that Eq. 39's slip term reads; call it once per step"
+                )
+            self._velocity_step = f.step_count
+            f.take_slip_fluid_part(
+                lambda fsum: self.ops.pressure_slip_fluid(
+                    f.flags, f.velocity, f.phi, f.fluid_fraction, f.slip_cells, fsum
+                )
+            )
+        f.current_velocity(out=self.fluid_u, keep_fsum=True)
 
     def fractions(self, share: float = 1.0) -> None:
         """ε (Eq. 25), bound water (Eqs. 53–56, retention) and the porosity into ``fluid.fluid_fraction``.
@@ -264,6 +299,7 @@ class SandFluidCoupler:
             self._started = True
         if self.retention and self.two_phase:
             f.held_volume = self._sum(self.bound)  # bound water after this step's absorption (Eq. 56)
+        self._fractions_step = f.step_count
 
     @staticmethod
     def _sum(a) -> float:
@@ -290,6 +326,13 @@ class SandFluidCoupler:
         s, f = self.sand, self.fluid
         prm = f.params
         volume, scale = s.node_volume
+        if force is None:
+            if f.force_shares_velocity and f.force_was_written:
+                raise RuntimeError(
+                    "exchange() ran already at this step: the force lives in the fluid velocity's buffer (lockstep), "
+                    "so a second exchange would read the force as the fluid velocity; call it once per step"
+                )
+            f.force_written()
         self.ops.drag_buoyancy(
             s.grid_m, s.grid_mv, f.force if force is None else force, self.fluid_u if u is None else u,
             f.phi, volume, f.fluid_fraction, f.flags, self.units, s.gravity, prm.rho_h, prm.rho_l, s.dt,
@@ -318,7 +361,7 @@ class SandFluidCoupler:
             return
         f.fold_sand_pressure_terms(
             lambda fsum: self.ops.pressure_sand_terms(
-                v, f.flags, f.velocity, f.phi, f.fluid_fraction, f.slip_cells, fsum, self.units, self.periodic
+                v, f.flags, f.phi, f.fluid_fraction, f.slip_cells, fsum, self.units, self.periodic
             )
         )
 

@@ -90,15 +90,24 @@ class KernelOps:
             *(np.int32(bool(v)) for v in periodic), np.float32(units.dt / units.dx),
         )  # fmt: skip
 
+    def pressure_slip_fluid(self, flags, velocity, phi, eps, slip, fsum) -> None:
+        """``fsum`` := the fluid velocity's part of Eq. 39's slip term on the interior fluid cells:
+        ``coupling_pressure_slip_fluid`` (see ReferenceOps.pressure_slip_fluid)."""
+        nz, ny, nx = (s - 2 for s in flags.shape)
+        self._fn("coupling_pressure.cu", "coupling_pressure_slip_fluid", "CK_TWO_PHASE")(
+            (nx + 2) * (ny + 2) * (nz + 2), flags, velocity, self._opt(phi, self.two_phase, "phi"), eps, slip, fsum,
+            np.int32(nx), np.int32(ny), np.int32(nz),
+        )  # fmt: skip
+
     def pressure_sand_terms(
-        self, grid_v, flags, velocity, phi, eps, slip, fsum, units: Units, periodic: Sequence[bool] = (True, True, True)
+        self, grid_v, flags, phi, eps, slip, fsum, units: Units, periodic: Sequence[bool] = (True, True, True)
     ) -> None:
-        """``fsum`` −= Eq. 39's sand terms on the interior fluid cells, the sand velocity read from the MPM grid
-        velocity ``grid_v`` (SI) with :meth:`sand_velocity`'s ghost rule: ``coupling_pressure_sand_terms``
-        (see ReferenceOps.pressure_sand_terms)."""
+        """``fsum`` −= Eq. 39's sand terms without the fluid velocity's part on the interior fluid cells, the sand
+        velocity read from the MPM grid velocity ``grid_v`` (SI) with :meth:`sand_velocity`'s ghost rule:
+        ``coupling_pressure_sand_terms`` (see ReferenceOps.pressure_sand_terms)."""
         nz, ny, nx = grid_v.shape[1:]
         self._fn("coupling_pressure.cu", "coupling_pressure_sand_terms", "CK_TWO_PHASE")(
-            (nx + 2) * (ny + 2) * (nz + 2), grid_v, flags, velocity, self._opt(phi, self.two_phase, "phi"), eps,
+            (nx + 2) * (ny + 2) * (nz + 2), grid_v, flags, self._opt(phi, self.two_phase, "phi"), eps,
             slip, fsum, np.int32(nx), np.int32(ny), np.int32(nz), *(np.int32(bool(v)) for v in periodic),
             np.float32(units.dt / units.dx),
         )  # fmt: skip

@@ -213,20 +213,34 @@ class ReferenceOps:
         ix = source_index(nx, periodic[0])[None, None, :]
         sand_v[...] = grid_v.astype(np.float64)[:, iz, iy, ix] / (units.dx / units.dt)
 
+    def pressure_slip_fluid(self, flags, velocity, phi, eps, slip, fsum) -> None:
+        """``fsum`` := the fluid velocity's part of Eq. 39's slip term, φ u·∇ε / ε (:func:`couplekit.fluid.
+        reference.slip_fluid_term`), on the interior fluid cells (0 outside the slip cells), its other cells left
+        as they are: taken before u's buffer takes the exchange velocity and the force (lockstep, where the three
+        share one); the fluid's ``momentum`` (``held``) then subtracts it from the population sum it keeps, and
+        :meth:`pressure_sand_terms` the rest of the terms."""
+        from ..fluid.grid import FLUID
+        from ..fluid.reference import interior, slip_fluid_term
+
+        terms = slip_fluid_term(velocity, phi, eps, slip, flags, self.two_phase)
+        fluid = interior(flags) == FLUID
+        interior(fsum)[fluid] = terms[fluid]
+
     def pressure_sand_terms(
-        self, grid_v, flags, velocity, phi, eps, slip, fsum, units: Units, periodic: Sequence[bool] = (True, True, True)
+        self, grid_v, flags, phi, eps, slip, fsum, units: Units, periodic: Sequence[bool] = (True, True, True)
     ) -> None:
-        """Fold Eq. 39's sand terms into the kept population sum: ``fsum`` −= ((1 − ε) ∇·v + φ (u − v)·∇ε) / ε
-        on the interior fluid cells (:func:`couplekit.fluid.reference.sand_pressure_terms`), v the MPM grid
-        velocity ``grid_v`` in lattice units with the ghosts of :meth:`sand_velocity`.  The fluid's pressure
-        update then adds none (``sand_in_fsum``): the same update as from a stored ``sand_velocity``, without
-        keeping one (the lockstep step; :meth:`couplekit.fluid.solver.FluidSolver.fold_sand_pressure_terms`)."""
+        """Fold the rest of Eq. 39's sand terms into the kept population sum: ``fsum`` −= ((1 − ε) ∇·v − φ v·∇ε) / ε
+        on the interior fluid cells (:func:`couplekit.fluid.reference.sand_pressure_terms` without the fluid
+        velocity's part, which :meth:`pressure_slip_fluid` took out), v the MPM grid velocity ``grid_v`` in
+        lattice units with the ghosts of :meth:`sand_velocity`.  The fluid's pressure update then adds none
+        (``sand_in_fsum``): the update from a stored ``sand_velocity`` to round-off, without keeping one (the
+        lockstep step; :meth:`couplekit.fluid.solver.FluidSolver.fold_sand_pressure_terms`)."""
         from ..fluid.grid import FLUID
         from ..fluid.reference import interior, sand_pressure_terms
 
         sand_v = np.zeros((3,) + tuple(flags.shape))
         self.sand_velocity(grid_v, sand_v, units, periodic)
-        terms = sand_pressure_terms(velocity, phi, eps, sand_v, slip, flags, self.two_phase)
+        terms = sand_pressure_terms(None, phi, eps, sand_v, slip, flags, self.two_phase)
         fluid = interior(flags) == FLUID
         interior(fsum)[fluid] = (interior(fsum).astype(np.float64) - terms)[fluid]
 

@@ -186,14 +186,15 @@ class KernelOps:
             np.float32(rho_l),
         )
 
-    def momentum(self, f, flags, velocity, out, parity: int, fsum=None) -> None:
-        """Σ_j f_j c_j of the current populations into ``out``, and Σ_j (f_j − w_j) into ``fsum`` if given (see
-        ReferenceOps.momentum)."""
+    def momentum(self, f, flags, velocity, out, parity: int, fsum=None, held: bool = False) -> None:
+        """Σ_j f_j c_j of the current populations into ``out``, and Σ_j (f_j − w_j) into ``fsum`` if given, minus
+        what ``fsum`` held with ``held`` (see ReferenceOps.momentum)."""
         n, nx, ny, nz = self._interior(flags)
         if parity & 1:
             self._wall_call(self._prefill, f, flags, velocity)
+        mode = 0 if fsum is None else (2 if held else 1)
         self._momentum(
-            n, f, flags, out, self._dummy if fsum is None else fsum, np.int32(parity), np.int32(fsum is not None),
+            n, f, flags, out, self._dummy if fsum is None else fsum, np.int32(parity), np.int32(mode),
             np.int32(nx), np.int32(ny), np.int32(nz),
         )  # fmt: skip
 

@@ -282,11 +282,13 @@ def from_stored(stored: np.ndarray) -> np.ndarray:
 def sand_pressure_terms(velocity, phi, eps, sand_v, slip, flags, two_phase: bool) -> np.ndarray:
     """The sand's terms of Eq. 39 on the interior (float64): ((1 − ε) ∇·v + (u − v)·∇ε) / ε, the slip term
     (u − v)·∇ε only in the cells of ``slip`` and weighted by the clamped water fraction φ in two-phase flow
-    (why both: :meth:`ReferenceOps.macro_pressure`).  ``velocity``: the Eq. 13 velocity of the last collision;
+    (why both: :meth:`ReferenceOps.macro_pressure`).  ``velocity``: the Eq. 13 velocity of the last collision,
+    or None for the terms without its part (u = 0: what is left once :func:`slip_fluid_term` is taken out);
     ``eps``, ``sand_v``: the padded porosity and sand velocity (lattice units), ghosts filled."""
     e = interior(eps).astype(np.float64)
-    u = interior(velocity).astype(np.float64)  # Eq. 13 velocity of the last collision (macro_pressure)
     v = interior(sand_v).astype(np.float64)
+    # Eq. 13 velocity of the last collision (macro_pressure)
+    u = np.zeros_like(v) if velocity is None else interior(velocity).astype(np.float64)
     grad_e = isotropic_gradient(eps, flags)
     div_v = sum(isotropic_gradient(sand_v[d], flags)[d] for d in range(3))
     u_grad_e = sum((u[d] - v[d]) * grad_e[d] for d in range(3))
@@ -294,6 +296,19 @@ def sand_pressure_terms(velocity, phi, eps, sand_v, slip, flags, two_phase: bool
     if two_phase:
         u_grad_e = np.clip(interior(phi).astype(np.float64), 0.0, 1.0) * u_grad_e  # macro_pressure: light phase
     return ((1.0 - e) * div_v + u_grad_e) / e
+
+
+def slip_fluid_term(velocity, phi, eps, slip, flags, two_phase: bool) -> np.ndarray:
+    """The fluid velocity's part of Eq. 39's slip term on the interior (float64): φ u·∇ε / ε in the cells of
+    ``slip`` (without φ single-phase), 0 elsewhere; :func:`sand_pressure_terms` with ``velocity`` minus the same
+    without it (the lockstep step takes this part out while u is still stored, kernels/coupling_pressure.cu)."""
+    e = interior(eps).astype(np.float64)
+    u = interior(velocity).astype(np.float64)
+    grad_e = isotropic_gradient(eps, flags)
+    u_grad_e = np.where(interior(slip) != 0, sum(u[d] * grad_e[d] for d in range(3)), 0.0)
+    if two_phase:
+        u_grad_e = np.clip(interior(phi).astype(np.float64), 0.0, 1.0) * u_grad_e
+    return u_grad_e / e
 
 
 def _pull_links(f, ghost):
@@ -482,18 +497,23 @@ class ReferenceOps:
         new = interior(p).astype(np.float64) - CS2 * rho * divergence
         interior(p)[fluid] = new[fluid]
 
-    def momentum(self, f, flags, velocity, out, parity: int, fsum=None) -> None:
+    def momentum(self, f, flags, velocity, out, parity: int, fsum=None, held: bool = False) -> None:
         """out = Σ_j f_j c_j of the current populations (Eq. 13 without the force shift) on interior fluid
         cells: the velocity "now", between two steps, as the sand–fluid exchange needs it; and ``fsum`` (if given)
         = Σ_j f_j − 1 = Σ_j (f_j − w_j) there, for :meth:`macro_pressure` (Eq. 38's 1 − Σ_j f_j with the sign
-        turned)."""
+        turned), minus the value ``fsum`` held there with ``held`` (the fluid velocity's part of Eq. 39's slip
+        term, :meth:`couplekit.coupling.reference.ReferenceOps.pressure_slip_fluid`).  ``out`` may be
+        ``velocity`` itself (its wall cells are read, its fluid cells written)."""
         fi = self.load(f, flags, velocity, parity)
         u = np.einsum("jd,j...->d...", C27.astype(np.float64), fi)
         fluid = interior(flags) == FLUID
         for d in range(3):
             interior(out[d])[fluid] = u[d][fluid]
         if fsum is not None:
-            interior(fsum)[fluid] = (fi.sum(axis=0) - 1.0)[fluid]
+            s0 = fi.sum(axis=0) - 1.0
+            if held:
+                s0 = s0 - interior(fsum).astype(np.float64)
+            interior(fsum)[fluid] = s0[fluid]
 
     def pressure_filter(self, p, flags, pbar, axes=(True, True, True)) -> None:
         """Eq. 40: p̄ = Σ_j w_j p(x + c_j) on interior fluid cells, with :func:`local_average`'s wall rules (the

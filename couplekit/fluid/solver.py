@@ -361,6 +361,8 @@ class FluidSolver:
         (:meth:`fold_sand_pressure_terms`; the lockstep scheduler does), 12 B per cell less;
         :meth:`keep_sand_velocity` allocates it later.
     external_force: allocate the ``force`` input (force density, e.g. drag; zeros).
+    force_in_velocity: with ``external_force``, keep the force in the ``velocity`` buffer (:meth:`share_force_buffer`;
+        the lockstep scheduler does), 12 B per cell less.
     source_term: allocate the phase field's source ``source_term`` (S_φ, zeros; two-phase only); default
         ``None`` = with ``mixture`` (the coupling writes it). Without it the phase-field kernels are built with
         ``CK_PF_SOURCE=0`` (S_φ compiled out) and ``source_term`` is ``None``.
@@ -389,6 +391,7 @@ class FluidSolver:
         source_term: bool | None = None,
         storage: str = "fp32",
         sand_velocity: bool = True,
+        force_in_velocity: bool = False,
     ):
         self.backend = backend = backend if isinstance(backend, Backend) else get_backend(backend)
         self.storage = check_storage(storage, "FluidSolver storage")
@@ -494,7 +497,11 @@ class FluidSolver:
         if self.mixture:
             layers = slip_wall_layers(self.odd_floor_active)
             self._slip_cells = backend.asarray(slip_cells(flags, periodic_axes, layers))
-        self.force = xp.zeros((3,) + pshape, dtype=np.float32) if self.external_force else None
+        self.force = None
+        if self.external_force:
+            self.force = self.velocity if force_in_velocity else xp.zeros((3,) + pshape, dtype=np.float32)
+        self._force_step = None  # the step whose force the coupling wrote into the velocity's buffer (shared)
+        self._slip_step = None  # the step whose slip part take_slip_fluid_part left in p̄
         # the walls whose flat layers take the pressure filter's three-point rule: those normal to gravity
         self._wall_rule_axes = wall_rule_axes(self.params.gravity)
 
@@ -645,24 +652,18 @@ class FluidSolver:
         ops, prm = self.ops, self.params
         for _ in range(whole_count("n", n)):
             parity = self.step_count & 1
-            if parity:
-                ops.halo_pull(self.f, self._ghost, self._image, self._link_boxes)
-                ops.halo_copy(self.f, self._out_ghost, self._out_src)
             # Σ (f − w) of these populations, if current_velocity(keep_fsum=True) left it in p̄ at this step
             fsum = self.pbar if self._fsum_step == self.step_count else None
             sand_in_fsum = fsum is not None and self._fsum_sand
-            self._fsum_step, self._fsum_sand = None, False
+            self._check_coupled_inputs(sand_in_fsum)  # before anything changes: a refused step changes nothing
+            self._fsum_step, self._fsum_sand, self._force_step = None, False, None
+            if parity:
+                ops.halo_pull(self.f, self._ghost, self._image, self._link_boxes)
+                ops.halo_copy(self.f, self._out_ghost, self._out_src)
             if self.mixture:
                 ops.halo_copy(self.fluid_fraction, self._ghost, self._image)
                 if self.sand_velocity is not None:
                     ops.halo_copy(self.sand_velocity, self._ghost, self._image)
-                elif not sand_in_fsum:
-                    raise RuntimeError(
-                        "this fluid keeps no sand velocity (FluidSolver(sand_velocity=False)) and Eq. 39's sand "
-                        "terms were not folded into this step's pressure update: call "
-                        "SandFluidCoupler.sand_velocity() after the fluid_velocity() of the same step, or build "
-                        "the fluid with sand_velocity=True (keep_sand_velocity())"
-                    )
             ops.macro_pressure(
                 self.f, self.flags, self.velocity, self.phi, self.fluid_fraction, self.sand_velocity,
                 self._slip_cells, self.p, parity, prm.rho_h, prm.rho_l, fsum=fsum, sand_in_fsum=sand_in_fsum,
@@ -704,6 +705,23 @@ class FluidSolver:
             if self.two_phase:
                 self._phase_macroscopic()
 
+    def _check_coupled_inputs(self, sand_in_fsum: bool) -> None:
+        """Refuse a step whose coupling inputs were not written at this step: Eq. 39's sand terms of a fluid that
+        keeps no sand velocity, the force of a fluid that keeps it in the velocity's buffer."""
+        if self.mixture and self.sand_velocity is None and not sand_in_fsum:
+            raise RuntimeError(
+                "this fluid keeps no sand velocity (FluidSolver(sand_velocity=False)) and Eq. 39's sand "
+                "terms were not folded into this step's pressure update: call "
+                "SandFluidCoupler.sand_velocity() after the fluid_velocity() of the same step, or build "
+                "the fluid with sand_velocity=True (keep_sand_velocity())"
+            )
+        if self.force_shares_velocity and not self.force_was_written:
+            raise RuntimeError(
+                "this fluid keeps its force in the velocity's buffer (share_force_buffer) and no force was "
+                "written into it at this step: call SandFluidCoupler.exchange() after fluid_velocity() in "
+                "the same step (the lockstep scheduler's order), or share_force_buffer(False)"
+            )
+
     def current_velocity(self, out=None, keep_fsum: bool = False):
         """Σ_j f_j c_j of the current populations (before the next collision, no force shift) as a padded
         backend array (3, Pz, Py, Px), interior fluid cells set: the velocity the sand–fluid exchange must
@@ -723,10 +741,49 @@ class FluidSolver:
             self.ops.halo_pull(self.f, self._ghost, self._image, self._link_boxes)
             self.ops.halo_copy(self.f, self._out_ghost, self._out_src)
         fsum = self.pbar if keep_fsum else None
-        self.ops.momentum(self.f, self.flags, self.velocity, out, parity, fsum=fsum)
+        held = keep_fsum and self._slip_step == self.step_count
+        self.ops.momentum(self.f, self.flags, self.velocity, out, parity, fsum=fsum, held=held)
         self._fsum_step = self.step_count if keep_fsum else None
         self._fsum_sand = False
+        self._slip_step = None
         return out
+
+    def take_slip_fluid_part(self, take) -> None:
+        """Have ``take(pbar)`` write the fluid velocity's part of Eq. 39's slip term (φ u·∇ε / ε from this
+        :attr:`velocity`, the last collision's) into p̄'s fluid cells, for the :meth:`current_velocity`
+        (``keep_fsum=True``) of the same step to subtract from the population sum it keeps: the coupling takes it
+        while u is still stored, when the velocity's buffer is about to hold Σ f c and the force
+        (:meth:`share_force_buffer`; kernels/coupling_pressure.cu).  :meth:`fold_sand_pressure_terms` then
+        subtracts the rest of the sand's terms."""
+        take(self.pbar)
+        self._slip_step = self.step_count
+
+    @property
+    def force_shares_velocity(self) -> bool:
+        """Whether the ``force`` input is the ``velocity`` buffer (:meth:`share_force_buffer`)."""
+        return self.force is not None and self.force is self.velocity
+
+    def share_force_buffer(self, share: bool) -> None:
+        """Keep the ``force`` input in the ``velocity`` buffer (``share``), 12 B per padded cell less, or give it
+        one of its own (zeros).  For a coupling step in which nothing reads the velocity of the last collision
+        once the exchange velocity Σ f c has been written over it (:meth:`current_velocity` with ``out=velocity``),
+        and the force is written over that (each cell reading its own Σ f c first) before this step's collision
+        reads it cell by cell and writes u there: the lockstep step (SandFluidCoupler.fold_sand_velocity).  Wall
+        and ghost cells keep the walls' velocities (neither writes them).  A step of a sharing fluid whose force
+        was not written at this step (:meth:`force_written`) is refused.  No-op without a force input."""
+        if self.force is None or share == self.force_shares_velocity:
+            return
+        self.force = self.velocity if share else self.xp.zeros_like(self.velocity)
+        self._force_step = None
+
+    def force_written(self) -> None:
+        """Record that the coupling wrote this step's force (into the velocity's buffer, when shared)."""
+        self._force_step = self.step_count
+
+    @property
+    def force_was_written(self) -> bool:
+        """Whether the coupling wrote a force at this step (:meth:`force_written`) that no step has used yet."""
+        return self._force_step == self.step_count
 
     @property
     def slip_cells(self):
@@ -854,11 +911,13 @@ class FluidSolver:
         """Host copies of the interior fields: velocity (3, nz, ny, nx), pressure, density, solid, and phi
         (two-phase only). Velocity includes the half-force shift (Eq. 13 with Guo forcing); pressure is the
         stored p of Eqs. 39-40."""
+        fluid = self._fluid_host
         out = {
-            "velocity": self._host_interior(self.velocity) * self._fluid_host[None],
+            # 0 outside the fluid (where, not a product: a lockstep drag writes −0 into obstacle cells' u buffer)
+            "velocity": np.where(fluid[None], self._host_interior(self.velocity), np.float32(0.0)),
             "pressure": self._host_interior(self.p),
             "density": self.density(),
-            "solid": ~self._fluid_host,
+            "solid": ~fluid,
         }
         if self.two_phase:
             out["phi"] = self._host_interior(self.phi)
@@ -897,7 +956,12 @@ class FluidSolver:
         ``f`` is the stored form f − w of the populations (shifted storage; :func:`couplekit.fluid.from_stored`
         gives the full f), as :attr:`f` itself is; ``f`` and ``h`` keep their storage dtype (float16 with
         fp16 storage, which is how a checkpoint records the storage)."""
-        out = {k: self.backend.to_host(getattr(self, k)) for k in self._STATE_ARRAYS if getattr(self, k) is not None}
+        shared = self.force_shares_velocity  # the force in the velocity's buffer: saved once, as the velocity
+        out = {
+            k: self.backend.to_host(getattr(self, k))
+            for k in self._STATE_ARRAYS
+            if getattr(self, k) is not None and not (shared and k == "force")
+        }
         out["step_count"] = np.array(self.step_count, np.int64)
         out["gamma"] = np.array(self.gamma, np.float64)
         out["volume0"] = np.array(self.volume0, np.float64)
@@ -906,14 +970,15 @@ class FluidSolver:
 
     def load_state(self, state: dict[str, np.ndarray]) -> None:
         """Restore a :meth:`state` of a solver built with the same shape, parameters and effects."""
+        shared = self.force_shares_velocity
         for k in self._STATE_ARRAYS:
             mine = getattr(self, k)
-            if mine is None:
-                continue
+            if mine is None or (shared and k == "force"):
+                continue  # a shared force is the velocity's buffer (its values: the next step writes them first)
             if k not in state and k in ("pbar", "phi"):
                 continue  # checkpoints from before they were saved: rebuilt as well as those could
-            if k not in state and k == "sand_velocity":
-                continue  # a lockstep run keeps none (fold_sand_pressure_terms): its next step writes it first
+            if k not in state and k in ("sand_velocity", "force"):
+                continue  # a lockstep run keeps neither (fold_sand_pressure_terms, share_force_buffer): written first
             if k not in state:
                 raise KeyError(f"state has no {k!r}: it was saved by a solver with other effects")
             arr = np.asarray(state[k])
@@ -933,8 +998,11 @@ class FluidSolver:
                 setattr(self, k, self.backend.asarray(arr.astype(dtype_of(self.storage))))
                 continue
             setattr(self, k, self.backend.asarray(arr.astype(np.float32)))
+        if shared:
+            self.force = self.velocity
         self.step_count = int(state["step_count"])
         self._fsum_step, self._fsum_sand = None, False
+        self._force_step = self._slip_step = None
         self.gamma = float(state["gamma"])
         self.volume0 = float(state["volume0"])
         self.held_volume = float(state.get("held_volume", 0.0))  # absent from checkpoints before it existed

@@ -92,6 +92,9 @@ class StirringForce:
         fluid.ops = _StirredOps(fluid.ops, fluid, self)
 
 
+_FORCE_ARG = 5  # the force's place among collide_stream's arguments (fluid ops, FluidSolver.step)
+
+
 class _StirredOps:
     """The fluid's ops with ``collide_stream`` receiving ``force + ρ_w φ ε a`` while the stirring is active;
     every other stage is the wrapped ops' own (attribute access is forwarded)."""
@@ -130,6 +133,9 @@ class _StirredOps:
             weight = eps if weight is None else weight * eps
         inner = total[(slice(None), *box)]
         inner += self._rho_a if weight is None else self._rho_a * weight[None]
-        args = tuple(total if a is force else a for a in args)
-        kwargs = {k: (total if v is force else v) for k, v in kwargs.items()}
+        # the force argument only, by its place (collide_stream(f, flags, velocity, phi, eps, force, ...)): in
+        # lockstep the force is the velocity's buffer (FluidSolver.share_force_buffer), which the collide writes
+        args = tuple(total if (i == _FORCE_ARG and a is force) else a for i, a in enumerate(args))
+        if kwargs.get("force") is force:
+            kwargs = {**kwargs, "force": total}
         return self._inner.collide_stream(*args, **kwargs)

@@ -272,44 +272,67 @@ def _sand_terms_state(rng, shape, periodic, two_phase):
     ids=["small-xz-periodic", "long-rows-xy-periodic", "yz-periodic"],
 )
 def test_pressure_sand_terms_match_reference_and_the_stored_path(cpu, two_phase, shape, periodic):
-    """The sand terms of Eq. 39 folded into the kept population sum (kernels/coupling_pressure.cu): against the
-    reference (a 26-neighbour gradient of each velocity component, divided by ε ≥ 0.35: atol 1e-6 × the largest
-    term + 1e-9), exactly unchanged outside the interior fluid cells and in the sand-free rows, and the pressure
-    update from the folded sum bitwise the update from the stored sand velocity (lbm_pressure.cu, use_fsum 2
-    against 1; rows long enough for the host's bulk and tail vectors)."""
+    """Eq. 39's sand terms folded into the kept population sum in two parts (kernels/coupling_pressure.cu): the
+    fluid velocity's part of the slip term φ u·∇ε / ε (``pressure_slip_fluid``, written into every interior fluid
+    cell, 0 in the sand-free rows) and the rest from the MPM grid velocity (``pressure_sand_terms``, subtracted;
+    the sand-free rows unchanged), each against the reference (a 26-neighbour gradient divided by ε ≥ 0.35: atol
+    1e-6 × the largest term + 1e-9), exactly unchanged outside the interior fluid cells; the two reference parts
+    (each stored as float32) sum to the whole terms of a stored sand velocity (1e-6 × the largest); and the
+    pressure update from the folded sum equals the update from the stored sand velocity (lbm_pressure.cu,
+    use_fsum 2 against 1) to float32 round-off of the sum (rows long enough for the host's bulk and tail
+    vectors)."""
     from couplekit.fluid.kernel_ops import KernelOps as FluidKernelOps
+    from couplekit.fluid.reference import sand_pressure_terms
 
     rng = np.random.default_rng(21)
     st = _sand_terms_state(rng, shape, periodic, two_phase)
     kops, rops = _pair(cpu, False, two_phase)
-    out = []
-    for ops in (kops, rops):
-        fsum = st["fsum"].copy()
-        ops.pressure_sand_terms(
-            st["grid_v"], st["flags"], st["vel"], st["phi"], st["eps"], st["slip"], fsum, UNITS, periodic
-        )
-        out.append(fsum)
-    terms_k = out[0].astype(np.float64) - st["fsum"]
-    terms_r = out[1].astype(np.float64) - st["fsum"]
-    assert np.abs(terms_r).max() > 1e-4  # the sand's terms are not negligible here
-    np.testing.assert_allclose(terms_k, terms_r, rtol=0, atol=1e-6 * np.abs(terms_r).max() + 1e-9)
     fluid = np.zeros(st["flags"].shape, bool)
     fluid[1:-1, 1:-1, 1:-1] = st["flags"][1:-1, 1:-1, 1:-1] == 0
-    assert out[0][~fluid].tobytes() == st["fsum"][~fluid].tobytes()
-    assert out[0][1:2].tobytes() == st["fsum"][1:2].tobytes()  # z layer 0: no sand within a row of it
-    # the pressure update: folded sum (sand_in_fsum) against the stored sand velocity, bitwise
-    fops = FluidKernelOps(cpu, two_phase=two_phase, mixture=True, external_force=True)
+    slip_parts, rest = [], []
+    for ops in (kops, rops):
+        held = st["fsum"].copy()
+        ops.pressure_slip_fluid(st["flags"], st["vel"], st["phi"], st["eps"], st["slip"], held)
+        slip_parts.append(held)
+        fsum = st["fsum"].copy()
+        ops.pressure_sand_terms(st["grid_v"], st["flags"], st["phi"], st["eps"], st["slip"], fsum, UNITS, periodic)
+        rest.append(fsum)
+    # the fluid velocity's part: written over every interior fluid cell, nothing else
+    part_k, part_r = (np.where(fluid, h.astype(np.float64), 0.0) for h in slip_parts)
+    assert np.abs(part_r).max() > 1e-4
+    np.testing.assert_allclose(part_k, part_r, rtol=0, atol=1e-6 * np.abs(part_r).max() + 1e-9)
+    assert slip_parts[0][~fluid].tobytes() == st["fsum"][~fluid].tobytes()
+    assert not slip_parts[0][1:2][fluid[1:2]].any()  # z layer 0: ε = 1 around it, 0 written
+    # the rest, from the MPM grid velocity
+    terms_k = rest[0].astype(np.float64) - st["fsum"]
+    terms_r = rest[1].astype(np.float64) - st["fsum"]
+    assert np.abs(terms_r).max() > 1e-4  # the sand's terms are not negligible here
+    np.testing.assert_allclose(terms_k, terms_r, rtol=0, atol=1e-6 * np.abs(terms_r).max() + 1e-9)
+    assert rest[0][~fluid].tobytes() == st["fsum"][~fluid].tobytes()
+    assert rest[0][1:2].tobytes() == st["fsum"][1:2].tobytes()  # z layer 0: no sand within a row of it
+    # the two parts are the whole terms (reference, float64)
     sand_v = np.zeros((3, *padded(shape)), np.float32)
     kops.sand_velocity(st["grid_v"], sand_v, UNITS, periodic)
+    whole = sand_pressure_terms(st["vel"], st["phi"], st["eps"], sand_v, st["slip"], st["flags"], two_phase)
+    inner = fluid[1:-1, 1:-1, 1:-1]
+    np.testing.assert_allclose(
+        (part_r - terms_r)[1:-1, 1:-1, 1:-1][inner], whole[inner], rtol=0, atol=1e-6 * np.abs(whole).max()
+    )
+    # the pressure update: the folded sum (s0 - slip part - rest, as lbm_momentum and the second kernel form it)
+    # against the stored sand velocity
+    fops = FluidKernelOps(cpu, two_phase=two_phase, mixture=True, external_force=True)
+    folded = ((st["fsum"] - slip_parts[0]).astype(np.float32) + (rest[0] - st["fsum"])).astype(np.float32)
+    folded = np.where(fluid, folded, st["fsum"]).astype(np.float32)
     f = np.zeros((27, *padded(shape)), np.float32)
     p0 = rng.uniform(-1e-3, 1e-3, padded(shape)).astype(np.float32)
     ps = []
-    for sv, fsum, folded in ((sand_v, st["fsum"].copy(), False), (None, out[0].copy(), True)):
+    for sv, fsum, fold in ((sand_v, st["fsum"].copy(), False), (None, folded, True)):
         p = p0.copy()
         fops.macro_pressure(
             f, st["flags"], st["vel"], st["phi"], st["eps"], sv, st["slip"], p, 0, 1.0, 0.00125, fsum=fsum,
-            sand_in_fsum=folded,
+            sand_in_fsum=fold,
         )  # fmt: skip
         ps.append(p)
     assert not np.array_equal(ps[0], p0)
-    assert ps[0].tobytes() == ps[1].tobytes()
+    change = np.abs(ps[0].astype(np.float64) - p0).max()
+    np.testing.assert_allclose(ps[1], ps[0], rtol=0, atol=1e-5 * change)

@@ -294,6 +294,63 @@ def test_kept_population_sum_matches_reference_and_rereading(cpu, effects, shape
     assert np.abs(p_kept - sk["p"]).max() > 1e-5
 
 
+@pytest.mark.parametrize("parity", [0, 1])
+@pytest.mark.parametrize("shape", ["default", "wide"])
+def test_kept_population_sum_subtracts_the_held_slip_part_into_the_velocity_buffer(cpu, shape, parity):
+    """momentum(fsum=..., held=True) keeps Σ_j (f_j − w_j) minus what ``fsum`` held in each fluid cell (the slip
+    term's fluid part, coupling_pressure_slip_fluid), bitwise the plain sum minus it in float32, with ``out`` the
+    velocity buffer itself (the lockstep's shared buffer): the same Σ f c in the fluid cells as into a separate
+    array, the walls' velocities (the odd step's prefill reads them) left as they are; the reference likewise."""
+    b = {"default": BOUNDARY_SETS["mixed"], "wide": WIDE_X_WALLS}[shape]
+    kw = {"shape": (6, 7, 40)} if shape == "wide" else {}
+    ko, ro = KernelOps(cpu, **EFFECTS["all"]), ReferenceOps(**EFFECTS["all"])
+    s = random_state(91 + parity, b, **kw)
+    rng = np.random.default_rng(5)
+    held = rng.uniform(-1e-3, 1e-3, s["p"].shape).astype(np.float32)
+    fluid = np.zeros(s["flags"].shape, bool)  # the interior fluid cells (periodic ghosts are flagged fluid too)
+    fluid[1:-1, 1:-1, 1:-1] = s["flags"][1:-1, 1:-1, 1:-1] == 0
+    # plain sum into a separate output
+    fsum = np.full_like(s["p"], 7.0)
+    out = np.zeros_like(s["velocity"])
+    ko.momentum(s["f"].copy(), s["flags"], s["velocity"].copy(), out, parity, fsum=fsum)
+    # held, into the velocity buffer
+    vel = s["velocity"].copy()
+    kept = held.copy()
+    ko.momentum(s["f"].copy(), s["flags"], vel, vel, parity, fsum=kept, held=True)
+    assert kept[fluid].tobytes() == (fsum[fluid] - held[fluid]).tobytes()
+    assert kept[~fluid].tobytes() == held[~fluid].tobytes()
+    assert vel[:, fluid].tobytes() == out[:, fluid].tobytes()
+    assert vel[:, ~fluid].tobytes() == s["velocity"][:, ~fluid].tobytes()
+    vr, kr = s["velocity"].copy(), held.copy()
+    ro.momentum(s["f"].copy(), s["flags"], vr, vr, parity, fsum=kr, held=True)
+    np.testing.assert_allclose(kr[fluid], kept[fluid], rtol=0, atol=2e-6)
+    np.testing.assert_allclose(vr, vel, rtol=0, atol=2e-6)
+
+
+def test_collide_with_the_force_in_the_velocity_buffer_is_the_separate_one(cpu):
+    """The flow collide with ``force`` and ``velocity`` one array (lockstep's shared buffer: each cell reads its
+    force before it writes its u): bitwise the collide with the force in an array of its own holding the same
+    values, on both parities and the host's bulk, masked and tail rows."""
+    ko = KernelOps(cpu, **EFFECTS["all"])
+    for parity in (0, 1):
+        s = random_state(101 + parity, WIDE_X_WALLS, shape=(6, 7, 40))
+        rng = np.random.default_rng(parity)
+        force = s["velocity"].copy()  # the walls' velocities in the wall cells, forces in the fluid cells
+        fluid = s["flags"] == 0
+        force[:, fluid] = rng.uniform(-1e-4, 1e-4, (3, int(fluid.sum())))
+        runs = []
+        for shared in (True, False):
+            f, vel = s["f"].copy(), force.copy()
+            frc = vel if shared else force.copy()
+            ko.collide_stream(
+                f, s["flags"], vel, s["phi"], s["eps"], frc, s["pbar"], parity, *PARAMS, *GRAVITY,
+                chemical_potential=chem_of(ko, s),
+            )  # fmt: skip
+            runs.append((f, vel))
+        assert runs[0][0].tobytes() == runs[1][0].tobytes()
+        assert runs[0][1].tobytes() == runs[1][1].tobytes()
+
+
 def test_kept_population_sum_with_fp16_storage_is_the_re_read_one(cpu):
     """fp16 storage: the kept Σ (f − w) decodes the populations as the pressure update does (bitwise p)."""
     ko = KernelOps(cpu, storage="fp16", **EFFECTS["all"])
