@@ -272,11 +272,14 @@ def _cmd_run(args: argparse.Namespace) -> int:
             # --scheduler and --set together, validated once: each alone may be refused where the pair is valid
             # (multirate:2 with a softer sand.youngs_modulus), so neither is checked against the file's other half
             scene = _load_with_sets(args, scheduler=args.scheduler)
-            # the output folder before anything is allocated: a used one is refused unless overwritten
+            # the output folder before anything is allocated: a used one is refused unless overwritten, and an
+            # earlier run's files are deleted only by sim.run (below), once the run is built: a run refused for
+            # memory or an unsupported effect (exit 3), or failing to build, keeps them
             out = prepare_output(
                 args.out or scene.outputs.directory or default_output(scene.name),
                 resume=False,
                 overwrite=args.overwrite,
+                clear=False,
             )
             sim = Simulation(scene, backend=args.backend, threads=args.threads)
     except SceneError as exc:
@@ -299,7 +302,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         print("interrupted before the run started; nothing to save", file=sys.stderr)
         return 130
     try:
-        result = sim.run(frames=args.frames, out=out, progress=not args.no_progress)
+        result = sim.run(frames=args.frames, out=out, progress=not args.no_progress, overwrite=args.overwrite)
     except OutputFolderError as exc:  # e.g. --resume into another run's folder (Simulation.run checks the scene)
         print(f"error: {exc}", file=sys.stderr)
         return 2

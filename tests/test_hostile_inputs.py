@@ -91,6 +91,26 @@ def test_overwrite_deletes_only_numbered_frame_files(tmp_path):
     assert (out / "surface_scan.obj").read_text() == "v 0 0 0\n" and (out / "preview_final.png").exists()
 
 
+def test_a_refused_run_with_overwrite_keeps_the_earlier_run(tmp_path, capsys):
+    """Probe finding (session 24): a run refused for memory (exit 3) with --overwrite had already deleted the
+    earlier run's files, checkpoint included. The folder is checked first and cleared only once the run is built."""
+    out = tmp_path / "out"
+    common = ["--backend", "numpy", "--no-progress", "--frames", "1", "--out", str(out)]
+    assert main(["run", str(_toml(tmp_path)), *common]) == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert "checkpoint.h5" in before
+    huge = _toml(
+        tmp_path, TINY_SAND_TOML.replace("size = [0.06, 0.06, 0.06]", "size = [600.0, 600.0, 600.0]"), "huge.toml"
+    )
+    capsys.readouterr()
+    assert main(["run", str(huge), *common, "--overwrite"]) == 3
+    assert capsys.readouterr().err.startswith("refused: ")
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    # and a run that starts still replaces them
+    assert main(["run", str(_toml(tmp_path)), *common, "--overwrite"]) == 0
+    assert (out / "checkpoint.h5").exists()
+
+
 def test_a_tilde_in_the_output_folder_is_the_home_folder(tmp_path, monkeypatch):
     """Fuzz finding: --out '~/x' made a folder named '~' while PyVista wrote into $HOME/x (a traceback)."""
     monkeypatch.setenv("HOME", str(tmp_path / "home"))

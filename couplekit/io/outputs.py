@@ -140,7 +140,12 @@ def _describe(files: list[Path]) -> str:
 
 
 def prepare_output(
-    out: str | Path, *, resume: bool = False, overwrite: bool = False, scene: Mapping[str, Any] | None = None
+    out: str | Path,
+    *,
+    resume: bool = False,
+    overwrite: bool = False,
+    scene: Mapping[str, Any] | None = None,
+    clear: bool = True,
 ) -> Path:
     """Create and check the output folder ``out`` before a run (module docstring); returns it. A leading ``~``
     is the home folder, as in a shell.
@@ -148,7 +153,9 @@ def prepare_output(
     ``resume``: the run continues from a checkpoint, so an earlier run's files in the folder are its own (new
     frames are appended); with the run's ``scene`` (``Scene.to_dict()``) given, a folder whose files belong to
     another scene is refused (resuming there would mix two runs' frames). ``overwrite``: delete an earlier
-    run's files first. Raises :class:`OutputFolderError` when a path component is a file, the folder cannot be
+    run's files first; with ``clear=False`` only allowed, not done yet (a caller that may still refuse the run
+    checks the folder first and lets :meth:`couplekit.simulation.Simulation.run` delete them once the run is
+    built: a refused run keeps them). Raises :class:`OutputFolderError` when a path component is a file, the folder cannot be
     created or written, or it holds an earlier run's outputs without ``resume`` or ``overwrite``, or another
     scene's outputs with ``resume``."""
     out = Path(out).expanduser()
@@ -189,6 +196,7 @@ def prepare_output(
                 f"output folder {out} holds the outputs of an earlier run ({_describe(earlier)}): {resume_hint}"
                 "write elsewhere with --out DIR, or replace them with --overwrite"
             )
-        for p in earlier:
-            p.unlink()
+        if clear:
+            for p in earlier:
+                p.unlink()
     return out

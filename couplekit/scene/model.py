@@ -1267,8 +1267,9 @@ def _geometry(raw: Any, path: str, base_dir: Path, source: dict | None, problems
             f = Path(params[fk])
             f = f if f.is_absolute() else (base_dir / f)
             if not f.is_file():
+                what = "is a folder, not a file" if f.is_dir() else "does not exist"
                 problems.append(
-                    Problem(f"{path}.{fk}", f"file {str(f)!r} does not exist", "give a path relative to the scene file")
+                    Problem(f"{path}.{fk}", f"file {str(f)!r} {what}", "give a file's path relative to the scene file")
                 )
             else:
                 params[fk] = str(f.resolve())

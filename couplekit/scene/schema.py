@@ -1045,19 +1045,36 @@ def _check_range(key: Key, value: int | float, path: str) -> Problem | None:
     return None
 
 
+def _type_fix(key: Key, name: str, what: str) -> str:
+    """The fix of a type error of ``key``: the key's default as an example where the key's range admits it, else
+    the kind of value and its range (a fixed placeholder broke the key's own rules: "poisson_ratio = 1.5")."""
+    k = key.kind
+    integer = k in ("int", "ivec3")
+
+    def fmt(v: Any) -> str:
+        if integer:
+            return str(int(v))
+        text = f"{float(v):g}"
+        return text if any(c in text for c in ".en") else text + ".0"
+
+    def admitted(v: Any) -> bool:
+        ok = _is_number(v) and math.isfinite(float(v)) and _check_range(key, v, "") is None
+        return ok and (not integer or isinstance(v, int))
+
+    d = key.default
+    if k in ("float", "int") and d is not REQUIRED and admitted(d):
+        return f"write e.g. {name} = {fmt(d)}"
+    if k in ("vec3", "ivec3", "floats") and isinstance(d, (list, tuple)) and d and all(admitted(v) for v in d):
+        return f"write e.g. {name} = [" + ", ".join(fmt(v) for v in d) + "]"
+    bounds = key.range_text()
+    return f"write {name} = {what}" + (f", each {bounds}" if bounds and k not in ("float", "int") else f" {bounds}")
+
+
 def _check_value(key: Key, value: Any, path: str) -> tuple[Any, list[Problem]]:
     """(checked value, problems): the value is None whenever a problem was found (so no check or computation
     after this one sees a value that was refused)."""
     k = key.kind
     name = path.rsplit(".", 1)[-1]
-    example = {
-        "float": "1.5",
-        "int": "8",
-        "bool": "true",
-        "str": '"text"',
-        "vec3": "[0.0, 0.0, 1.0]",
-        "ivec3": "[64, 64, 64]",
-    }
     if k == "int_or_auto":
         if value == "auto":
             return value, []
@@ -1079,7 +1096,7 @@ def _check_value(key: Key, value: Any, path: str) -> tuple[Any, list[Problem]]:
                 Problem(
                     path,
                     f"must be {what}, got {_type_name(value)} ({show(value)})",
-                    f"write e.g. {name} = {example[k]}",
+                    _type_fix(key, name, what).rstrip(),
                 )
             ]
         p = _check_range(key, value, path)
@@ -1127,11 +1144,7 @@ def _check_value(key: Key, value: Any, path: str) -> tuple[Any, list[Problem]]:
             or not all((isinstance(v, int) and not isinstance(v, bool)) if integer else _is_number(v) for v in value)
         ):
             what = f"a list of {n} {'integers' if integer else 'numbers'}" if n else "a list of numbers"
-            return None, [
-                Problem(
-                    path, f"must be {what}, got {show(value)}", f"write e.g. {name} = {example.get(k, '[1.0, 2.0]')}"
-                )
-            ]
+            return None, [Problem(path, f"must be {what}, got {show(value)}", _type_fix(key, name, what).rstrip())]
         problems = [p for i, v in enumerate(value) if (p := _check_range(key, v, f"{path}[{i}]"))]
         if problems:
             return None, problems

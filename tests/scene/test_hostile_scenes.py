@@ -409,3 +409,38 @@ def test_a_closed_stdout_ends_quietly(tmp_path):
     err = proc.stderr.read().decode()
     assert proc.wait(timeout=120) == 141
     assert "Traceback" not in err and "BrokenPipeError" not in err, err
+
+
+@pytest.mark.parametrize(
+    "path, bad",
+    [
+        (("sand", "poisson_ratio"), "x"),
+        (("sand", "youngs_modulus"), "x"),
+        (("fluid", "phases"), 2.0),
+        (("fluid", "interface_width"), "a"),
+        (("sand", "hardening"), [35, 9, 0.2]),
+        (("domain", "gravity"), [1, 2]),
+        (("time", "frames"), "x"),
+        (("domain", "size"), [0.03, 0.02]),
+        (("time", "dt"), "x"),
+    ],
+)
+def test_a_type_errors_fix_gives_a_value_the_key_admits(path, bad):
+    """Probe finding (session 24): the fix of a type error was a fixed placeholder per kind, which often broke the
+    key's own rules ("write e.g. poisson_ratio = 1.5", allowed up to 0.5; "phases = 8"). Now the key's default
+    where its range admits it, else the kind and the range; following an example gives a valid scene."""
+    d = tiny_coupled()
+    d["sand"]["hardening"] = [35.0, 9.0, 0.2, 10.0]
+    Scene.from_dict(copy.deepcopy(d))  # valid as it is
+    d[path[0]][path[1]] = bad
+    with pytest.raises(SceneError) as err:
+        Scene.from_dict(copy.deepcopy(d))
+    (problem,) = [p for p in err.value.problems if p.key == ".".join(path)]
+    prefix = f"write e.g. {path[1]} = "
+    if not problem.fix.startswith(prefix):
+        assert problem.fix.startswith(f"write {path[1]} = a ") and (">" in problem.fix or "<" in problem.fix)
+        return
+    import tomllib
+
+    d[path[0]][path[1]] = tomllib.loads(f"v = {problem.fix[len(prefix) :]}")["v"]
+    Scene.from_dict(d)
