@@ -571,6 +571,9 @@ def main(argv: list[str] | None = None) -> int:
         if not _closed_output():
             raise
         return 141
+    except KeyboardInterrupt:  # Ctrl-C before a command's own handler is in place (while modules load)
+        print("interrupted before the command started; nothing to save", file=sys.stderr)
+        return 130
 
 
 def _closed_output() -> bool:

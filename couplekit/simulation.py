@@ -36,6 +36,7 @@ frame is replayed step by step from the last good state to name the first bad st
 from __future__ import annotations
 
 import math
+import os
 import signal
 from collections.abc import Callable, Mapping
 from pathlib import Path
@@ -626,6 +627,8 @@ class Simulation:
         statistics (:meth:`couplekit.schedulers.base.Scheduler.state`). Stage timings are not kept."""
         from .io.checkpoint import save_checkpoint
 
+        if not isinstance(path, (str, os.PathLike)):
+            raise TypeError(f"path must be a file path (a str or a pathlib.Path), got {type(path).__name__}")
         meta = {"step": self.step_count, "time": self.time, "backend": self.backend.name, "couplekit": __version__}
         if self.fluid is not None:
             # also in the stored scene (fluid.storage) and in the dtype of fluid/f and fluid/h

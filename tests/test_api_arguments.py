@@ -87,6 +87,21 @@ def test_save_refuses_what_it_would_replace_that_is_not_a_file(sim, tmp_path):
     with pytest.raises(CheckpointError, match="does not exist; create it first"):
         sim.save(tmp_path / "missing" / "c.h5")
     sim.save(target)  # a regular file is replaced, as before
+    with pytest.raises(TypeError, match="path must be a file path .* got int"):  # a probe (session 24): pathlib's
+        sim.save(5)  # own message named no argument
+
+
+def test_ctrl_c_while_a_command_loads_is_a_message(monkeypatch, capsys):
+    """A probe (session 24): Ctrl-C in the first second of ``couplekit run`` (while its modules load, before the
+    command's own handler) printed a KeyboardInterrupt traceback; now a message and exit 130."""
+    from couplekit import cli
+
+    def interrupted(args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli, "_cmd_run", interrupted)
+    assert cli.main(["run", str(SCENE)]) == 130
+    assert capsys.readouterr().err.startswith("interrupted before the command started")
 
 
 def test_a_validated_scene_cannot_be_changed_in_place(sim):
