@@ -190,7 +190,10 @@ def prepare_output(
             )
     if earlier and not resume:
         if not overwrite:
-            ckpt = next((p for p in earlier if p.name in ("interrupted.h5", "checkpoint.h5")), None)
+            # the newer of the two: a run resumed from interrupted.h5 and finished leaves it beside a later
+            # checkpoint.h5 (a probe: the hint named the stale one)
+            saved = [p for p in earlier if p.name in ("interrupted.h5", "checkpoint.h5")]
+            ckpt = max(saved, key=lambda p: p.stat().st_mtime_ns) if saved else None
             resume_hint = f"resume it with --resume {ckpt}, " if ckpt is not None else ""
             raise OutputFolderError(
                 f"output folder {out} holds the outputs of an earlier run ({_describe(earlier)}): {resume_hint}"

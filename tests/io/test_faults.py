@@ -209,6 +209,23 @@ def test_a_used_folder_is_refused_resumed_or_overwritten(tmp_path):
     assert run_files(out) == [] and (out / "notes.txt").read_text() == "mine" and "checkpoint.h5" in before
 
 
+def test_the_used_folders_hint_names_the_newer_checkpoint(tmp_path):
+    """A probe (session 24): a run resumed from interrupted.h5 and finished leaves it beside a later
+    checkpoint.h5; the refusal of a second run into the folder named the stale interrupted.h5 to resume from."""
+    import os
+
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "checkpoint.h5").write_bytes(b"new")
+    (out / "interrupted.h5").write_bytes(b"old")
+    os.utime(out / "interrupted.h5", ns=(1_000_000_000, 1_000_000_000))
+    with pytest.raises(OutputFolderError, match=r"--resume \S*checkpoint.h5"):
+        prepare_output(out)
+    os.utime(out / "checkpoint.h5", ns=(500_000_000, 500_000_000))
+    with pytest.raises(OutputFolderError, match=r"--resume \S*interrupted.h5"):
+        prepare_output(out)
+
+
 def test_a_run_resumed_from_a_checkpoint_of_step_0_appends(tmp_path):
     """Ctrl-C before the first step leaves interrupted.h5 of step 0 beside the run's diagnostics: resuming it is
     a resume (found when a slow machine interrupted the CLI test before its first step)."""
