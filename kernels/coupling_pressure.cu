@@ -175,11 +175,7 @@ KERNEL void coupling_pressure_slip_fluid(const long long n,
             const bool bulk = lbm_rows_all_fluid(flags, row, 0, nx + 1, px, pxy);
             if (!bulk) lbm_row_fluid_span(flags, row, nx, lo, hi);
             if (lo > hi) continue;
-            unsigned int any = 0;  // eps = 1 on the 9 rows: the gradient is exactly 0
-            for (int r = 0; r < 9; ++r)
-                any |= ck_any_differs(eps + row + (long long)(r % 3 - 1) * px + (long long)(r / 3 - 1) * pxy, nx + 2,
-                                      1.f);
-            if (any == 0) {
+            if (ck_rows_equal(eps, row, 0, nx + 1, px, pxy, 1.f)) {  // eps = 1 on the 9 rows: gradient exactly 0
                 CK_SIMD_SHORT
                 for (int x = lo; x <= hi; ++x) fsum[row + x] = flags[row + x] == FLAG_FLUID ? 0.f : fsum[row + x];
                 continue;

@@ -160,7 +160,6 @@ class SandFluidCoupler:
             self.retain = self.retentive = None
         self._started = False
         self._fractions_step = None  # the fluid step at which fractions() last ran (fluid_velocity's order check)
-        self._velocity_step = None  # the fluid step whose u a folding fluid_velocity() replaced by Σ f c
         self._scheduler = None  # built by step()
 
     @property
@@ -252,12 +251,6 @@ class SandFluidCoupler:
                     "fluid_velocity() of a folding coupler (lockstep) needs this step's porosity: call fractions() "
                     "first in the same step (the lockstep scheduler's order)"
                 )
-            if self._velocity_step == f.step_count:
-                raise RuntimeError(
-                    "fluid_velocity() ran already at this step: its velocity buffer now holds Σ f c (or the force), "
-                    "not the last collision's u that Eq. 39's slip term reads; call it once per step"
-                )
-            self._velocity_step = f.step_count
             f.take_slip_fluid_part(
                 lambda fsum: self.ops.pressure_slip_fluid(
                     f.flags, f.velocity, f.phi, f.fluid_fraction, f.slip_cells, fsum

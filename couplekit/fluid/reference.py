@@ -291,10 +291,7 @@ def sand_pressure_terms(velocity, phi, eps, sand_v, slip, flags, two_phase: bool
     u = np.zeros_like(v) if velocity is None else interior(velocity).astype(np.float64)
     grad_e = isotropic_gradient(eps, flags)
     div_v = sum(isotropic_gradient(sand_v[d], flags)[d] for d in range(3))
-    u_grad_e = sum((u[d] - v[d]) * grad_e[d] for d in range(3))
-    u_grad_e = np.where(interior(slip) != 0, u_grad_e, 0.0)  # macro_pressure: not near walls
-    if two_phase:
-        u_grad_e = np.clip(interior(phi).astype(np.float64), 0.0, 1.0) * u_grad_e  # macro_pressure: light phase
+    u_grad_e = _slip_weighted(sum((u[d] - v[d]) * grad_e[d] for d in range(3)), phi, slip, two_phase)
     return ((1.0 - e) * div_v + u_grad_e) / e
 
 
@@ -305,10 +302,16 @@ def slip_fluid_term(velocity, phi, eps, slip, flags, two_phase: bool) -> np.ndar
     e = interior(eps).astype(np.float64)
     u = interior(velocity).astype(np.float64)
     grad_e = isotropic_gradient(eps, flags)
-    u_grad_e = np.where(interior(slip) != 0, sum(u[d] * grad_e[d] for d in range(3)), 0.0)
+    return _slip_weighted(sum(u[d] * grad_e[d] for d in range(3)), phi, slip, two_phase) / e
+
+
+def _slip_weighted(slip_term, phi, slip, two_phase: bool) -> np.ndarray:
+    """A slip term of Eq. 39 kept only in the cells of ``slip`` (not near walls) and, two-phase, weighted by the
+    clamped water fraction φ (the light phase's slip pumped air: why both, :meth:`ReferenceOps.macro_pressure`)."""
+    slip_term = np.where(interior(slip) != 0, slip_term, 0.0)
     if two_phase:
-        u_grad_e = np.clip(interior(phi).astype(np.float64), 0.0, 1.0) * u_grad_e
-    return u_grad_e / e
+        slip_term = np.clip(interior(phi).astype(np.float64), 0.0, 1.0) * slip_term
+    return slip_term
 
 
 def _pull_links(f, ghost):

@@ -754,7 +754,14 @@ class FluidSolver:
         (``keep_fsum=True``) of the same step to subtract from the population sum it keeps: the coupling takes it
         while u is still stored, when the velocity's buffer is about to hold Σ f c and the force
         (:meth:`share_force_buffer`; kernels/coupling_pressure.cu).  :meth:`fold_sand_pressure_terms` then
-        subtracts the rest of the sand's terms."""
+        subtracts the rest of the sand's terms.  Refused once the sum was kept at this step: the velocity's buffer
+        may hold Σ f c by then, not u (a second exchange-velocity pass read it as u, silently)."""
+        if self._fsum_step == self.step_count:
+            raise RuntimeError(
+                "the exchange velocity was already computed at this step: its buffer now holds Σ f c (or the "
+                "force), not the last collision's u that Eq. 39's slip term reads; fluid_velocity() ran already at "
+                "this step, call it once per step"
+            )
         take(self.pbar)
         self._slip_step = self.step_count
 
