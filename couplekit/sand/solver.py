@@ -478,7 +478,8 @@ class SandSolver:
         out = {k: self.backend.to_host(getattr(self, k)) for k in self._fields()}
         for k in _PARTICLE_FIELDS:  # a field of an effect that is off: zeros, made here on the host
             out.setdefault(k, np.zeros(self.n_particles, np.float32))
-        out["friction_angle"] = np.degrees(self.model.friction_angle(out["q"]))
+        # float32 like every other particle array (the model computes in float64)
+        out["friction_angle"] = np.degrees(self.model.friction_angle(out["q"])).astype(np.float32)
         return out
 
     def fields(self) -> dict[str, np.ndarray]:

@@ -42,6 +42,16 @@ def test_sand_only_scene_without_hardening_and_cohesion_allocates_neither_field(
     assert np.all(off.sand.particles()["q"] == 0)
 
 
+def test_every_particle_array_is_float32_with_effects_on_and_off():
+    """The outputs write particles as they come; the friction angle (computed in float64 by the model) was the one
+    float64 array among them."""
+    for d in (tiny_sand(), _off(tiny_sand())):
+        sim = _sim(d)
+        sim.step(2)
+        kinds = {k: v.dtype for k, v in sim.particles().items()}
+        assert all(t == np.float32 for t in kinds.values()), kinds
+
+
 def test_coupled_scene_keeps_the_saturation_as_the_couplings_moisture():
     sim = _sim(_off(tiny_coupled()))
     assert sim.sand.q is None and sim.sand.saturation is not None
