@@ -899,6 +899,7 @@ class Simulation:
                     info = {k: d[k] for k in ("fluid_volume_drift", "mach", "sand_max_speed") if k in d}
                     bar.update(self.frame, steps_done, info)
             result["checkpoint"] = str(self.save(out / "checkpoint.h5"))
+            self._drop_passed_interrupt(out)
             return result
         finally:
             result.update(frames=self.frame, steps=steps_done)
@@ -914,6 +915,23 @@ class Simulation:
                     self._log(f"nothing left to run: the state is at frame {self.frame} of {total}; no summary.png")
             for sig, handler in (previous or {}).items():
                 signal.signal(sig, handler)
+
+    def _drop_passed_interrupt(self, out: Path) -> None:
+        """Remove the folder's ``interrupted.h5`` once a finished run's ``checkpoint.h5`` is at or past its step: a
+        resumed run that finished left it behind, offered as a state to resume from (a probe, session 24). One at a
+        later step (a resume from an older checkpoint that stopped short of it) or one that cannot be read is kept."""
+        from .io.checkpoint import CheckpointError, checkpoint_meta
+
+        stale = out / "interrupted.h5"
+        if not stale.is_file():
+            return
+        try:
+            step = int(checkpoint_meta(stale)["step"])
+        except (CheckpointError, KeyError, TypeError, ValueError):
+            return
+        if step <= self.step_count:
+            stale.unlink()
+            self._log(f"removed {stale}: step {step}, passed by this run's checkpoint.h5 (step {self.step_count})")
 
     def _keep_last_good(self, out: Path, good: dict, good_step: int) -> Path:
         """Back to the last checked state (fresh solvers, its arrays) and save it as ``last_good.h5``."""

@@ -163,6 +163,13 @@ def checkpoint_scene(path: str | Path) -> dict:
         return _header(f, path)[0]
 
 
+def checkpoint_meta(path: str | Path) -> dict:
+    """The metadata (step, time, backend, ...) stored in a checkpoint, verified as :func:`load_checkpoint`
+    verifies it, without reading the solver arrays; :class:`CheckpointError` naming the file and the defect."""
+    with _open(path) as f:
+        return _header(f, path)[1]
+
+
 def load_checkpoint(path: str | Path) -> tuple[dict, dict[str, dict[str, np.ndarray]], dict]:
     """(scene dict, states, meta) of a checkpoint written by :func:`save_checkpoint`, verified (module
     docstring); raises :class:`CheckpointError` naming the file and the defect."""

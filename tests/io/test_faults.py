@@ -242,6 +242,25 @@ def test_a_run_resumed_from_a_checkpoint_of_step_0_appends(tmp_path):
         fresh.run(out=out, progress=False)
 
 
+def test_a_finished_run_keeps_an_interrupt_it_did_not_pass(tmp_path):
+    """A finished run removes the folder's interrupted.h5 only when its own checkpoint is at or past that step
+    (tests/scene/test_simulation.py checks the removal): a state further on, or a file it cannot read, is kept."""
+    d = tiny_sand(frames=3)
+    out = tmp_path / "run"
+    sim = Simulation(Scene.from_dict(d), backend="cpu", threads=1, log=None)
+    assert sim.run(frames=1, out=out, progress=False).status == "done"
+    early = Simulation.load(out / "checkpoint.h5", backend="cpu", threads=1, log=None)  # frame 1
+    ahead = Simulation.load(out / "checkpoint.h5", backend="cpu", threads=1, log=None)
+    ahead.step(3 * ahead.steps_per_frame)
+    ahead.save(out / "interrupted.h5")  # as if stopped at frame 4 of a longer run
+    assert early.run(frames=2, out=out, progress=False).status == "done"
+    assert (out / "interrupted.h5").exists()  # step 20 > the finished run's 10: kept
+    (out / "interrupted.h5").write_bytes(b"not a checkpoint")
+    again = Simulation.load(out / "checkpoint.h5", backend="cpu", threads=1, log=None)
+    assert again.run(frames=3, out=out, progress=False).status == "done"
+    assert (out / "interrupted.h5").read_bytes() == b"not a checkpoint"
+
+
 @pytest.mark.parametrize("name", ["../../x", "a/b", "..", ""])
 def test_scene_names_cannot_escape_runs(name):
     with pytest.raises(OutputFolderError, match="not a plain folder name"):

@@ -243,6 +243,8 @@ def test_run_writes_outputs_and_interrupt_resume_is_exact(tmp_path):
     assert resumed.step_count == 5
     r = resumed.run(out=tmp_path, progress=False)
     assert r.status == "done" and r["frames"] == 3
+    # the finished run's checkpoint.h5 (step 15) passed interrupted.h5 (step 5): removed, not offered to resume
+    assert not (tmp_path / "interrupted.h5").exists() and (tmp_path / "checkpoint.h5").exists()
     straight = _sim(tiny_sand(frames=3))
     straight.step(15)
     _same_state(straight, resumed)
