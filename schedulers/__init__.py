@@ -80,7 +80,11 @@ def spec_table(spec: str) -> dict:
                 raise ValueError(f"scheduler {spec!r}: interpolation must be hold or linear, got {rest[1]!r}")
             table["interpolation"] = rest[1]
     if kind == "multirate":
-        if len(rest) != 1:
+        if len(rest) > 1:  # e.g. multirate:2:linear: the fluid a sand step sees is not interpolated here
+            raise ValueError(
+                f"scheduler {spec!r}: too many parts: multirate takes one, the LBM steps per MPM step; {usage}"
+            )
+        if not rest:
             raise ValueError(f"scheduler {spec!r}: multirate needs the LBM steps per MPM step; {usage}")
         table["sand_every"] = count(rest[0], "sand_every")
     return table

@@ -17,8 +17,9 @@ steps (``[scheduler] sand_every = m``), exchanging over its whole step. A block:
 
 Conservation: the drag force −J/m applied over the block's m fluid steps gives the fluid exactly the −J the
 sand took, so fluid + sand momentum changes by round-off only; the porosity changes once per block and the
-source term carries Σ ε̃ φ + bound water across that change as in lockstep. m = 1 is the lockstep step bit
-for bit. The sand's Δt m Δt must meet its elastic and particle CFL limits (validated by the scene, key
+source term carries Σ ε̃ φ + bound water across that change as in lockstep. m = 1 is the lockstep step, bit for
+bit with lockstep's split fold off (``SandFluidCoupler.fold_sand_velocity(False)``; to round-off with it on, the
+default: docs/schedulers.md). The sand's Δt m Δt must meet its elastic and particle CFL limits (validated by the scene, key
 ``scheduler.sand_every``).
 """
 

@@ -38,8 +38,9 @@ Why this is conservative:
   the one it saw in the last step, so the phase field carries Σ ε̃ φ + bound water from step to step as in
   lockstep (the source term's own conservation, Eq. 45), whatever k is.
 
-k = 1 is the lockstep step bit for bit on the cpu backend (the first substep exchanges with u0 itself and its
-sums are w x with w = 1). ``substeps = "auto"`` chooses each step the smallest k with δt within the MPM's
+k = 1 is the lockstep step on the cpu backend (the first substep exchanges with u0 itself and its sums are w x
+with w = 1): bit for bit with lockstep's split fold off (``SandFluidCoupler.fold_sand_velocity(False)``), to
+round-off with it on, the default (docs/schedulers.md). ``substeps = "auto"`` chooses each step the smallest k with δt within the MPM's
 elastic and particle CFL limits (:meth:`couplekit.sand.solver.SandSolver.max_stable_dt`); more than
 ``max_substeps`` raises :class:`~couplekit.schedulers.base.SubstepLimitError` naming the key.
 

@@ -113,7 +113,7 @@ table):
   time (`interpolation`), plus what the fluid gains from the drag already exchanged; the substeps' drag
   impulse is handed to the fluid as one force (fluid + sand momentum conserved to round-off), and the fluid
   sees the substeps' mean sand fraction and velocity, with the source term computed from that fraction
-  (volume-conserving). `substeps = 1` is lockstep bit for bit. A fixed `substeps` above a given
+  (volume-conserving). `substeps = 1` is lockstep (to round-off: docs/schedulers.md). A fixed `substeps` above a given
   `max_substeps` is refused (the cap applies to `"auto"`), as is `interpolation = "linear"` in a scene without
   a fluid. During a run, sand that would need more substeps than `max_substeps` (or, in lockstep, a smaller
   step than its particle CFL allows) stops the run before it goes non-finite, keeping the last good state as a

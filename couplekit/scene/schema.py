@@ -634,7 +634,7 @@ SECTIONS: dict[str, list[Key]] = {
             "int_or_auto",
             "auto",
             "kind = 'subcycle': MPM substeps per LBM step, an integer k >= 1 (the sand steps time.dt / k; k = 1 is "
-            "lockstep bit for bit) or 'auto': each step the smallest k whose substep meets the MPM elastic and "
+            "lockstep to round-off) or 'auto': each step the smallest k whose substep meets the MPM elastic and "
             "particle CFL limits at the particles' current speed",
             lo=1,
             hi=4096,

@@ -105,6 +105,13 @@ def test_bad_scheduler_specs_say_what_works(spec):
         spec_table(spec)
 
 
+@pytest.mark.parametrize("spec", ["multirate:2:linear", "multirate:2:3", "subcycle:2:linear:x"])
+def test_a_spec_with_parts_too_many_says_so(spec):
+    """A probe (session 25): multirate:2:linear was told that multirate needs the LBM steps per MPM step."""
+    with pytest.raises(ValueError, match="too many parts"):
+        spec_table(spec)
+
+
 def test_a_fixed_count_above_its_cap_and_linear_data_without_fluid_are_refused():
     """max_substeps below a fixed substeps count was silently ignored (the cap applies to 'auto'), and 'linear'
     fluid data was accepted on a scene without a fluid: both now name the key and the fix."""
