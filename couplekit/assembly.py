@@ -464,7 +464,8 @@ def _input_cautions(scene: Scene) -> list[str]:
     a water outlet in an outflow face (the zero-gradient
     outflow cells around it copy the jet's inward velocity and let water in too: a 4 × 4-cell outlet delivered
     1.4-1.9× its flux, exactly its flux in a wall face); a single-phase fluid let in through an inflow with no
-    outflow face (the liquid has nowhere to go: its pressure rises for as long as the inflow runs)."""
+    outflow face (the liquid has nowhere to go: its pressure rises for as long as the inflow runs); sand kept only
+    one cell off the walls (:func:`_wall_layer_caution`)."""
     fl, out = scene.fluid, []
     if fl.storage == "fp16":
         out += _fp16_gravity_caution(scene)
@@ -485,6 +486,7 @@ def _input_cautions(scene: Scene) -> list[str]:
     if fl.phases == 2:
         out += _small_drop_cautions(scene)
     out += _multirate_frame_caution(scene)
+    out += _wall_layer_caution(scene)
     if fl.phases == 1 and scene.inflows and "outflow" not in scene.domain.boundary.values():
         out.append(
             "a single-phase fluid enters through inflows[0] but no face is an outflow: the liquid has nowhere to "
@@ -492,6 +494,23 @@ def _input_cautions(scene: Scene) -> list[str]:
             'a face an outflow (domain.boundary.<face> = "outflow") unless the run is short'
         )
     return out
+
+
+def _wall_layer_caution(scene: Scene) -> list[str]:
+    """``sand.wall_layers = 1`` in a scene coupling sand to a fluid: a bed whose grains reach the first cell off a
+    wall leaves a thin fringe of sand (fraction ~0.01-0.02) in the wall's first cell, and where that fringe meets a
+    floor-wall edge the water grows a current after ~3000 steps, driven by Eq. 39's porosity-slip term (measured,
+    docs/fluid-stability.md: a 20 x 12 x 12 bed at ν_h = 1e-3, lattice speed 8e-5 to 8e-3 from step 3000 to 6000,
+    growing; the same bed at the default 2 stays at 5e-5 for 7000 steps)."""
+    if scene.sand is None or scene.sand.wall_layers != 1 or not scene.has_sand:
+        return []
+    steps = scene.time.frames * scene.time.steps_per_frame
+    return [
+        f"sand.wall_layers = 1 lets sand rest in the first cell off a wall: where that thin fringe meets a "
+        "floor-wall edge the water grows a spurious current after ~3000 steps (docs/fluid-stability.md; this "
+        f"scene runs {steps:,} steps); keep 2 (the default) unless water must not pass between the sand and the "
+        "walls"
+    ]
 
 
 def fluid_boundaries(scene: Scene, units: Units):

@@ -492,7 +492,8 @@ SECTIONS: dict[str, list[Key]] = {
             2,
             "node layers the MPM domain walls take at every face; sand bodies and sand-carrying outlets must keep "
             "this many cells from each face (1 lets a bed reach the first cell, so that water cannot bypass it "
-            "along the walls)",
+            "along the walls; with a fluid it draws a caution: a bed's fringe there grows a current at floor-wall "
+            "edges after ~3000 steps)",
             "",
             lo=1,
             hi=4,

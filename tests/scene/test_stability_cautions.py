@@ -5,6 +5,7 @@ refusal, and nothing for the shipped examples."""
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import pytest
@@ -13,6 +14,9 @@ from couplekit.assembly import stability_cautions
 from couplekit.cli import main
 from couplekit.scene import Scene
 from couplekit.simulation import Simulation
+
+sys.path.insert(0, str(Path(__file__).parent))
+from sim_scenes import tiny_coupled, tiny_sand  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 FACES = ("x_min", "x_max", "y_min", "y_max", "z_min", "z_max")
@@ -224,3 +228,16 @@ def test_a_drop_two_interface_widths_across_gets_no_caution():
         "bodies": [{"kind": "water", "geometry": {"type": "sphere", "center": [0.06, 0.06, 0.06], "radius": 0.02}}],
     }
     assert not [c for c in stability_cautions(Scene.from_dict(d)) if "(water) is only" in c]
+
+
+def test_sand_one_cell_off_the_walls_is_named():
+    """``sand.wall_layers = 1`` with a fluid: the floor-wall edge current of docs/fluid-stability.md (session 25:
+    Eq. 39's slip term drives it); the default 2, and sand without a fluid, get no such caution."""
+    d = tiny_coupled()
+    d["sand"]["wall_layers"] = 1
+    named = [c for c in _cautions(d) if "wall_layers" in c]
+    assert len(named) == 1 and "keep 2" in named[0], _cautions(d)
+    assert not [c for c in _cautions(tiny_coupled()) if "wall_layers" in c]
+    dry = tiny_sand()
+    dry.setdefault("sand", {})["wall_layers"] = 1
+    assert not [c for c in stability_cautions(Scene.from_dict(dry)) if "wall_layers" in c]
