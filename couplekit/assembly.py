@@ -35,6 +35,7 @@ import math
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
+from dataclasses import replace as dataclass_replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -189,26 +190,20 @@ def _water_shape(scene: Scene, periodic: tuple[bool, bool, bool] = (False, False
     drop) along that wall. On a ``periodic`` (x, y, z) axis only a shape that reaches both ends is pushed out (it
     continues across the wrap); one that reaches one end has its interface there, across the wrap from the
     cells at the other end (:func:`_periodic_images`)."""
-    from .scene.geometry import Box
     from .scene.mesh import HeightField, load_heights
 
     dom = scene.domain
     size, pad = np.asarray(dom.size), 10 * dom.dx
     wraps = np.asarray(periodic, bool)
+    band = (5.0 * scene.fluid.interface_width + 2.0) * dom.dx  # φ < 1e-8 beyond (as _periodic_images)
     shapes = []
     for b in scene.bodies:
         if b.kind != "water":
             continue
         g = b.geometry
-        if g.type == "box" and g.scale == 1.0 and not any(g.rotate) and not g.invert:
-            lo = np.asarray(g.params["min"], float) + np.asarray(g.translate)
-            hi = np.asarray(g.params["max"], float) + np.asarray(g.translate)
-            tol = 1e-9 * size.max()
-            at_lo, at_hi = lo <= tol, hi >= size - tol
-            spans = at_lo & at_hi
-            lo = np.where(at_lo & (spans | ~wraps), lo - pad, lo)
-            hi = np.where(at_hi & (spans | ~wraps), hi + pad, hi)
-            shapes.append(Box(lo, hi))
+        if _plain_box(g):
+            box = _padded_box(g, size, pad, wraps)
+            shapes.append(_cut(box, g, dom, size, pad, wraps, band, host=(box.lo, box.hi)))
         elif g.type == "heightfield" and g.scale == 1.0 and not any(g.rotate) and not any(g.translate) and not g.invert:
             p = g.params
             h = np.asarray(p["heights"], float) if p.get("heights") is not None else load_heights(p["file"])
@@ -230,10 +225,59 @@ def _water_shape(scene: Scene, periodic: tuple[bool, bool, bool] = (False, False
                 h, y0 = np.concatenate([np.repeat(h[:1], ny_pad, axis=0), h], axis=0), y0 - ny_pad * sy
             if y1 >= size[1] - tol and push_y:
                 h, y1 = np.concatenate([h, np.repeat(h[-1:], ny_pad, axis=0)], axis=0), y1 + ny_pad * sy
-            shapes.append(HeightField(h, (x0, x1), (y0, y1), base, 0.25 * dom.dx))
+            shapes.append(_cut(HeightField(h, (x0, x1), (y0, y1), base, 0.25 * dom.dx), g, dom, size, pad, wraps, band))
+        elif g.subtract:  # the cuts with the interface's band (see _cut)
+            base = dataclass_replace(g, subtract=()).shape(dom, 0.25 * dom.dx)
+            shapes.append(_cut(base, g, dom, size, pad, wraps, band))
         else:
             shapes.append(g.shape(dom, 0.25 * dom.dx))
     return Union(shapes) if shapes else None
+
+
+def _plain_box(g) -> bool:
+    """Whether geometry ``g`` is an axis-aligned box (translated at most: no scale, rotation or inversion)."""
+    return g.type == "box" and g.scale == 1.0 and not any(g.rotate) and not g.invert
+
+
+def _padded_box(g, size: np.ndarray, pad: float, wraps: np.ndarray, host=None):
+    """The plain box ``g`` (without its own ``subtract``) with each face lying on the domain boundary pushed out
+    by ``pad``, except on a periodic axis it reaches one end of only (:func:`_water_shape`). ``host``: (lo, hi) of
+    the water box ``g`` is cut out of; a face of the cut level with or beyond the host's face on the same side is
+    pushed out too (the difference is the same set; level faces left a sheet of φ ≈ 0.5 in the difference's
+    distance, max(d_water, −d_cut))."""
+    from .scene.geometry import Box
+
+    lo = np.asarray(g.params["min"], float) + np.asarray(g.translate)
+    hi = np.asarray(g.params["max"], float) + np.asarray(g.translate)
+    tol = 1e-9 * size.max()
+    at_lo, at_hi = lo <= tol, hi >= size - tol
+    spans = at_lo & at_hi
+    push_lo, push_hi = at_lo & (spans | ~wraps), at_hi & (spans | ~wraps)
+    if host is not None:
+        push_lo |= lo <= np.asarray(host[0], float) + tol
+        push_hi |= hi >= np.asarray(host[1], float) - tol
+    return Box(np.where(push_lo, lo - pad, lo), np.where(push_hi, hi + pad, hi))
+
+
+def _cut(shape, g, dom, size: np.ndarray, pad: float, wraps: np.ndarray, band: float, host=None):
+    """``shape`` (a water body's box or height field, pushed out at the walls) less its geometry's ``subtract``
+    shapes, as :meth:`couplekit.scene.model.Geometry.shape` builds them; a plain box among them is pushed out at
+    the walls as the water is, so that cutting water away up to a wall leaves no interface along that wall (the
+    cut's face 0.5 cell beyond the last cell centre left a layer of φ ≈ 0.4 there). Both shortcuts of
+    :func:`_water_shape` dropped the cuts before: a water box with its half subtracted started full (a probe,
+    session 25). A cut of another shape that reaches a wall keeps that thin layer. ``host``: the water box's
+    (lo, hi), see :func:`_padded_box`. The cuts are evaluated within ``band`` (m) outside ``shape`` too
+    (:class:`~couplekit.scene.geometry.Difference`'s ``near``), so the base shape's surface over a cut-away part
+    leaves no tanh tail there."""
+    from .scene.geometry import Difference
+
+    if not g.subtract:
+        return shape
+    cuts = [
+        _padded_box(c, size, pad, wraps, host) if _plain_box(c) and not c.subtract else c.shape(dom, 0.25 * dom.dx)
+        for c in g.subtract
+    ]
+    return Difference(shape, cuts, near=band)
 
 
 def _periodic_images(d: np.ndarray, shape, scene: Scene, periodic: tuple[bool, bool, bool]) -> np.ndarray:
@@ -555,6 +599,19 @@ def check_odd_ramp_gaps(scene: Scene) -> None:
     check_gaps(flags, periodic, scene.fluid.odd_ramp)
 
 
+def initial_phi(scene: Scene, periodic: tuple[bool, bool, bool] = (False, False, False)) -> np.ndarray:
+    """The two-phase fluid's initial φ (nz, ny, nx) float32: the tanh profile (after Eq. 48) of the water bodies'
+    signed distance (:func:`_water_shape`), with their images across the ``periodic`` axes; zeros without water."""
+    dom, fl = scene.domain, scene.fluid
+    water = _water_shape(scene, periodic)
+    if water is None:
+        return np.zeros(dom.shape, np.float32)
+    d_cells = sdf_on_grid(water, dom.resolution, dom.dx).astype(np.float64) / dom.dx
+    if any(periodic):
+        d_cells = _periodic_images(d_cells, water, scene, periodic)
+    return (0.5 * (1.0 - np.tanh(2.0 * d_cells / fl.interface_width))).astype(np.float32)
+
+
 def build_fluid(scene: Scene, backend: Backend, units: Units, coupled: bool, log: Callable[[str], Any]):
     """The :class:`~couplekit.fluid.solver.FluidSolver` of ``scene`` and its FluidParams (lattice units):
     boundaries and outlets, obstacles as bounce-back cells, the initial φ of the water bodies and their
@@ -567,15 +624,7 @@ def build_fluid(scene: Scene, backend: Backend, units: Units, coupled: bool, log
     boundaries, solid = fluid_boundaries(scene, units)
     phi = velocity = None
     if two:
-        periodic = boundaries.periodic_axes
-        water = _water_shape(scene, periodic)
-        if water is None:
-            phi = np.zeros(dom.shape, np.float32)
-        else:
-            d_cells = sdf_on_grid(water, dom.resolution, dom.dx).astype(np.float64) / dom.dx
-            if any(periodic):
-                d_cells = _periodic_images(d_cells, water, scene, periodic)
-            phi = (0.5 * (1.0 - np.tanh(2.0 * d_cells / fl.interface_width))).astype(np.float32)  # after Eq. 48
+        phi = initial_phi(scene, boundaries.periodic_axes)
         for b in scene.bodies:
             if b.kind == "water" and any(b.velocity):
                 if velocity is None:

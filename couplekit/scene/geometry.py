@@ -253,16 +253,18 @@ class Union(Shape):
 
 class Difference(Shape):
     """``shape`` less the ``cutters`` (e.g. a sand body less the obstacles it overlaps): inside where ``shape`` is
-    and no cutter is. The sign is exact; the distance is ``shape``'s outside it and max(d_shape, −d_cutters)
-    inside (a bound), which is what seeding needs. The cutters are evaluated only at points inside ``shape``."""
+    and no cutter is. The sign is exact; the distance is max(d_shape, −d_cutters) (a bound) where d_shape <
+    ``near`` and ``shape``'s beyond. The cutters are evaluated only there: ``near`` = 0 (inside ``shape``) is what
+    seeding needs; a water body's diffuse initial φ takes a band of its interface's width outside too, or the
+    base shape's surface over a cut-away part would keep its tanh tail there (couplekit.assembly._cut)."""
 
-    def __init__(self, shape: Shape, cutters: Sequence[Shape]):
-        self.shape, self.cutters = shape, list(cutters)
+    def __init__(self, shape: Shape, cutters: Sequence[Shape], near: float = 0.0):
+        self.shape, self.cutters, self.near = shape, list(cutters), float(near)
 
     def sdf(self, points: np.ndarray) -> np.ndarray:
         p = _points(points)
         d = np.array(self.shape.sdf(p), dtype=np.float64)
-        inside = d < 0
+        inside = d < self.near
         if self.cutters and inside.any():
             q = p[inside]
             cut = np.min([c.sdf(q) for c in self.cutters], axis=0)

@@ -822,6 +822,7 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
             _check_sand_overlaps(list(zip(body_ids, bodies, strict=True)), domain, sand, problems)
         if fluid is not None and len(problems) == n_geometry:
             _check_fluid_room(list(zip(body_ids, bodies, strict=True)), domain, problems)
+            _check_water_cut_away(list(zip(body_ids, bodies, strict=True)), domain, problems)
         if len(problems) == n_geometry and not failed_inflows:
             _check_jets_clear(inflows, list(zip(body_ids, bodies, strict=True)), domain, wall_cells, problems)
         allowed = sand is not None and sand.periodic_walls
@@ -1875,7 +1876,7 @@ def _check_jets_clear(
         return
     size = np.asarray(domain.size, np.float64)
     for n, inf in enumerate(inflows):
-        if inf.sand_fraction <= 0 or _face_too_large(domain, inf.face):
+        if _face_too_large(domain, inf.face):
             continue
         if inf.shape != "face" and (
             inf.center is None
@@ -1883,6 +1884,9 @@ def _check_jets_clear(
             or (inf.shape == "disc" and inf.radius is None)
         ):
             continue  # an outlet without its keys: refused by the inflow checks
+        _check_inflow_open(n, inf, obstacles, domain, problems)
+        if inf.sand_fraction <= 0:
+            continue
         face, sites = inflow_sites(inf, domain.shape, domain.dx, 1, rim)  # one point per open cell
         if sites.shape[1] == 0:
             continue
@@ -1911,6 +1915,36 @@ def _check_jets_clear(
                     )
                 )
                 break
+
+
+def _check_inflow_open(n: int, inf: Inflow, obstacles, domain: Domain, problems: list[Problem]) -> None:
+    """Some cell in front of inflow ``n``'s open area (the interior cells next to its face) is outside every
+    obstacle: an outlet wholly behind obstacles delivers nothing (a probe, session 25: a 4 × 4 outlet behind a box
+    validated and ran with no water entering)."""
+    face, sites = inflow_sites(inf, domain.shape, domain.dx, 1, 0)  # one point per open cell
+    if sites.shape[1] == 0:
+        return  # an outlet covering no cell centre: refused by the inflow checks
+    axis = "xyz".index(face[0])
+    plane = [a for a in range(3) if a != axis]
+    pts = np.empty((sites.shape[1], 3))
+    pts[:, plane[0]], pts[:, plane[1]] = sites[0], sites[1]
+    pts[:, axis] = 0.5 * domain.dx if face[1] == "-" else domain.size[axis] - 0.5 * domain.dx
+    try:
+        blocked = np.zeros(pts.shape[0], bool)
+        for _, shape in obstacles:
+            blocked |= np.asarray(shape.sdf(pts)) < 0
+    except Exception:  # an SDF that fails here: the obstacle's own problem
+        return
+    if blocked.all():
+        names = ", ".join(f"bodies[{j}]" for j, _ in obstacles)
+        problems.append(
+            Problem(
+                f"inflows[{n}]",
+                f"every cell in front of the inflow on face {inf.face} is inside an obstacle ({names}): nothing "
+                "would enter the domain",
+                "move the obstacle at least one cell off the face in front of the outlet, or move the outlet",
+            )
+        )
 
 
 def _check_fluid_room(built: list[tuple[int, Body]], domain: Domain, problems: list[Problem]) -> None:
@@ -1965,6 +1999,31 @@ def _check_fluid_room(built: list[tuple[int, Body]], domain: Domain, problems: l
             continue
         if inside_only:
             problems.append(_inside_obstacles(i, b, obstacles, hits, "its water would be in solid cells"))
+
+
+def _check_water_cut_away(built: list[tuple[int, Body]], domain: Domain, problems: list[Problem]) -> None:
+    """No water body is wholly removed by its own ``geometry.subtract``: no cell centre would lie inside it, and
+    the initial φ would be the interface's tail alone (a probe, session 25: a sphere less a larger one started
+    with 272 cells of water). The sand bodies' counterpart is :func:`_check_seeding`'s."""
+    from .geometry import Difference
+
+    for i, b, shape, lo, hi in _shapes_of_kind(built, "water", domain):
+        if not b.geometry.subtract or not isinstance(shape, Difference):
+            continue
+        try:
+            gone = _seeds_any(shape.sdf, lo, hi, domain.dx, 1) is False
+            gone = gone and _seeds_any(shape.shape.sdf, lo, hi, domain.dx, 1) is not False
+        except Exception:  # an SDF that fails on the cell centres: the shape's own problem
+            continue
+        if gone:
+            problems.append(
+                Problem(
+                    f"bodies[{i}].geometry.subtract",
+                    f"the water body {b.name!r} is wholly removed by its own geometry.subtract: no cell centre lies "
+                    "in what is left, so it would start as a diffuse interface with no water inside",
+                    "make the subtracted shapes smaller than the body (or remove them)",
+                )
+            )
 
 
 def _check_sand_overlaps(built: list[tuple[int, Body]], domain: Domain, sand: Sand, problems: list[Problem]) -> None:

@@ -54,10 +54,26 @@ def test_a_sand_jet_emitted_into_an_obstacle_is_refused(plate_min_x):
 
 def test_a_sand_jet_clear_of_obstacles_is_valid():
     Scene.from_dict(_jet_scene(0.03))  # 6 cells from the face: clear
-    water_jet = _jet_scene(0.0)  # a plate over an outlet carrying no sand emits no particles into it
+    water_jet = _jet_scene(0.01)  # a plate 2 cells off the face, over an outlet carrying no sand: water flows past
     water_jet["inflows"][0]["sand_fraction"] = 0.0
     del water_jet["sand"]
     Scene.from_dict(water_jet)
+
+
+@pytest.mark.parametrize("sand_fraction", [0.0, 0.3])
+def test_an_outlet_wholly_behind_an_obstacle_is_refused(sand_fraction):
+    """A probe (session 25): a water outlet whose every cell in front lay inside an obstacle validated and ran with
+    nothing entering. Refused whatever the jet carries; partly covered, it is valid (water enters beside the
+    plate)."""
+    d = _jet_scene(0.0)  # the plate on the face covers the whole outlet
+    d["inflows"][0]["sand_fraction"] = sand_fraction
+    if not sand_fraction:
+        del d["sand"]
+    with pytest.raises(SceneError, match=r"inflows\[0\].*every cell in front of the inflow.*nothing would enter"):
+        Scene.from_dict(d)
+    d["bodies"][1]["geometry"]["max"][1] = 0.06  # the plate now ends half-way across the outlet
+    if not sand_fraction:
+        Scene.from_dict(d)
 
 
 def _partition(thickness: float, dx: float = 0.005) -> dict:

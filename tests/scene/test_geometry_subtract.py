@@ -92,3 +92,50 @@ def test_json_schema_takes_subtract_lists():
     assert not list(v.iter_errors(data))
     data["bodies"][1]["geometry"]["subtract"][0]["radus"] = 1.0
     assert list(v.iter_errors(data))
+
+
+def _water_scene(geometry: dict) -> dict:
+    return {
+        "domain": {"size": [0.16, 0.16, 0.16], "dx": 0.01},
+        "time": {"dt": 2e-4, "frames": 1},
+        "fluid": {"water_lattice_viscosity": 1e-3, "air_lattice_viscosity": 1e-2},
+        "bodies": [{"kind": "water", "geometry": geometry}],
+    }
+
+
+HALF = {"type": "box", "min": [0.08, 0.0, 0.0], "max": [0.16, 0.16, 0.06]}
+
+
+@pytest.mark.parametrize(
+    "water",
+    [
+        {"type": "box", "min": [0.0, 0.0, 0.0], "max": [0.16, 0.16, 0.06], "subtract": [HALF]},
+        {"type": "box", "min": [0.0, 0.0, 0.0], "max": [0.16, 0.16, 0.06], "subtract": [{**HALF, "max": [0.16, 0.16, 0.16]}]},
+        {"type": "heightfield", "heights": [[0.06] * 17] * 17, "x_range": [0.0, 0.16], "y_range": [0.0, 0.16],
+         "subtract": [{**HALF, "max": [0.16, 0.16, 0.16]}]},
+    ],
+)  # fmt: skip
+def test_water_takes_its_subtract(water):
+    """A probe (session 25): a water box or height field with its right half subtracted started full (1536.6 cells
+    of φ, the uncut volume): the initial φ's shortcuts for those two shapes dropped the cuts. Now the water lies
+    in x < 0.08 m only. A cut level with the water's top, or reaching the walls, is pushed out as the water is, so
+    no sheet of φ ≈ 0.5 lies on the cut's flush faces: the flush cut and the one up to the lid give the same φ."""
+    from couplekit.assembly import initial_phi
+
+    phi = initial_phi(Scene.from_dict(_water_scene(water)))
+    cols = phi.sum(axis=(0, 1))  # by x
+    assert cols[:3].min() > 0.99 * 96 and cols[-4:].max() < 0.01 * 256  # the left half full, the right empty
+    flush = initial_phi(Scene.from_dict(_water_scene({**water, "subtract": [HALF]})))
+    if water["type"] == "box":
+        # the same to the interface's far tail: there the distance runs to whichever cut face is nearer (the flush
+        # cut's pushed-out top at 0.16 m or the other's at 0.26 m), φ < 5e-3 either way
+        np.testing.assert_allclose(phi, flush, atol=5e-3)
+
+
+def test_water_wholly_cut_away_is_refused():
+    """A probe (session 25): a water sphere less a larger concentric one was valid and started with 272 cells of
+    φ, all interface tail; sand bodies had this refusal already."""
+    ball = {"type": "sphere", "center": [0.08, 0.08, 0.08], "radius": 0.04}
+    with pytest.raises(SceneError, match=r"bodies\[0\].geometry.subtract.*wholly removed"):
+        Scene.from_dict(_water_scene({**ball, "subtract": [{**ball, "radius": 0.05}]}))
+    Scene.from_dict(_water_scene({**ball, "subtract": [{**ball, "radius": 0.02}]}))  # a hollow ball is water
