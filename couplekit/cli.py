@@ -219,6 +219,15 @@ def _run_folder_of(checkpoint: str) -> str | None:
     return str(folder) if (folder / RUN_MARKER).is_file() else None
 
 
+def _drop_made_folder(folder: Path | None) -> None:
+    """Remove ``folder`` if it is an empty folder (one this command made before the run was refused)."""
+    try:
+        if folder is not None and folder.is_dir() and not any(folder.iterdir()):
+            folder.rmdir()
+    except OSError:
+        pass
+
+
 def _note_scene_file(path: str, stored, checkpoint: str) -> None:
     """A note when the scene file given with --resume is not the checkpoint's scene (changed, invalid or gone):
     the stored scene is the one resumed either way."""
@@ -274,14 +283,16 @@ def _cmd_run(args: argparse.Namespace) -> int:
             scene = _load_with_sets(args, scheduler=args.scheduler)
             # the output folder before anything is allocated: a used one is refused unless overwritten, and an
             # earlier run's files are deleted only by sim.run (below), once the run is built: a run refused for
-            # memory or an unsupported effect (exit 3), or failing to build, keeps them
-            out = prepare_output(
-                args.out or scene.outputs.directory or default_output(scene.name),
-                resume=False,
-                overwrite=args.overwrite,
-                clear=False,
-            )
-            sim = Simulation(scene, backend=args.backend, threads=args.threads)
+            # memory or an unsupported effect (exit 3), or failing to build, keeps them, and a folder this
+            # command made is removed again (_drop_made_folder)
+            target = Path(args.out or scene.outputs.directory or default_output(scene.name))
+            fresh = None if target.exists() else target
+            out = prepare_output(target, resume=False, overwrite=args.overwrite, clear=False)
+            try:
+                sim = Simulation(scene, backend=args.backend, threads=args.threads)
+            except BaseException:
+                _drop_made_folder(fresh)
+                raise
     except SceneError as exc:
         print(exc, file=sys.stderr)
         return 2

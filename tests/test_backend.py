@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -73,6 +75,31 @@ def test_threads_from_argument_and_environment(monkeypatch, cpu_backend):
     assert be.module("selfcheck.cu").num_threads() == 2
     with pytest.raises(ValueError, match="threads must be a whole number >= 1"):
         get_backend("cpu", threads=0)
+
+
+def test_more_threads_than_the_machine_can_start_are_refused(monkeypatch, tmp_path):
+    """A probe (session 25): ``--threads 99999`` ended in a segmentation fault, leaving a half-made run folder.
+    Refused above 8 per core (at least 64), by argument and by OMP_NUM_THREADS, before any folder is made."""
+    import subprocess
+    import sys
+
+    from couplekit.backend import max_threads
+
+    limit = max_threads()
+    with pytest.raises(ValueError, match=f"more than the {limit} couplekit starts"):
+        get_backend("cpu", threads=limit + 1)
+    monkeypatch.setenv("OMP_NUM_THREADS", str(limit + 1))
+    with pytest.raises(ValueError, match=f"OMP_NUM_THREADS={limit + 1} is more than"):
+        get_backend("cpu")
+    monkeypatch.delenv("OMP_NUM_THREADS")
+    scene = Path(__file__).resolve().parents[1] / "examples" / "sand_drop_small.toml"
+    out = tmp_path / "run"
+    r = subprocess.run(
+        [sys.executable, "-m", "couplekit", "run", str(scene), "--threads", "99999", "--out", str(out)],
+        capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert r.returncode == 2 and "couplekit starts on this machine" in r.stderr, r.stderr
+    assert not out.exists()
 
 
 def test_data_pointer_is_remembered_only_while_the_array_lives():

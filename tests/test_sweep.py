@@ -219,6 +219,8 @@ BAD_SWEEPS = {
         'sweep.cases[0].grid."time.frames"',
     ),
     "time.frames in the reference": ({"reference": {"time.frames": 4}}, None, 'sweep.reference."time.frames"'),
+    # a probe (session 25): --threads 99999 ended in a segmentation fault; each point's backend would refuse it
+    "threads beyond the machine": ({"threads": 99999, "grid": {"time.dt": [1e-4]}}, None, "sweep.threads"),
 }
 
 

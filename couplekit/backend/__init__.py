@@ -152,19 +152,37 @@ class Backend:
         return f"backend: {self.name} ({self.reason})"
 
 
+def max_threads() -> int:
+    """The most OpenMP threads a cpu backend accepts: 8 per core of this machine, at least 64. Far more only
+    exhausts memory starting them (a probe: --threads 99999 ended in a segmentation fault)."""
+    return max(64, 8 * (os.cpu_count() or 1))
+
+
 def _threads_from(threads: int | None) -> int | None:
+    limit = max_threads()
     if threads is not None:
         if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1:
             raise ValueError(
                 f"threads must be a whole number >= 1 (OpenMP threads of the cpu backends), got {threads!r}"
             )
+        if threads > limit:
+            raise ValueError(
+                f"threads = {threads} is more than the {limit} couplekit starts on this machine ({os.cpu_count()} "
+                f"cores; the limit is 8 per core, at least 64): use at most {os.cpu_count()}, one per core, for speed"
+            )
         return int(threads)
     env = os.environ.get("OMP_NUM_THREADS")
     if env:
         try:
-            return max(1, int(env.split(",")[0]))
+            n = max(1, int(env.split(",")[0]))
         except ValueError:
             raise ValueError(f"OMP_NUM_THREADS={env!r} is not a whole number") from None
+        if n > limit:
+            raise ValueError(
+                f"OMP_NUM_THREADS={env} is more than the {limit} threads couplekit starts on this machine "
+                f"({os.cpu_count()} cores; the limit is 8 per core, at least 64): set it to at most {os.cpu_count()}"
+            )
+        return n
     return None
 
 

@@ -26,11 +26,13 @@ import hashlib
 import itertools
 import json
 import math
+import os
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from ..backend import max_threads
 from ..scene import Scene, SceneError
 from ..scene.schema import Problem, ProblemError, read_toml
 from .keys import KeyPathError, check_key, flatten_keys, parse_key, set_key
@@ -156,6 +158,15 @@ def parse_sweep(
     name = _optional(sweep, "name", str, default_name, problems)
     frames = _optional(sweep, "frames", int, None, problems, lo=1)
     threads = _optional(sweep, "threads", int, 1, problems, lo=1)
+    if threads > max_threads():  # each point's backend would refuse it (a probe: far more ended in a segfault)
+        problems.append(
+            Problem(
+                "sweep.threads",
+                f"{threads} is more than the {max_threads()} OpenMP threads couplekit starts on this machine",
+                f"set sweep.threads to at most {os.cpu_count()} (the cores) divided among the workers",
+            )
+        )
+        threads = 1
     backend = _optional(sweep, "backend", str, "auto", problems)
     if backend not in BACKENDS and not any(p.key == "sweep.backend" for p in problems):
         problems.append(Problem("sweep.backend", f"unknown backend {backend!r}", f"use one of {', '.join(BACKENDS)}"))
