@@ -248,3 +248,28 @@ def test_summary_false_writes_no_png(tmp_path):
     """Sweep points run with summary=False: their folders hold no PNG unless the sweep turns outputs on."""
     assert _sim(tiny_sand(frames=1)).run(out=tmp_path / "r", progress=False, summary=False).status == "done"
     assert (tmp_path / "r" / "diagnostics.jsonl").is_file() and not list((tmp_path / "r").glob("*.png"))
+
+
+def test_a_one_frame_runs_stage_costs_are_drawn(tmp_path):
+    """A probe (session 25): a 1-frame run logs stage costs in one record (frame 0 has none), and a stack plot of
+    one point draws nothing: the summary's stage panel was empty. It is one stacked bar now, as tall as the
+    frame's cost per step."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from couplekit.io.plots import _stage_panel_single
+
+    d = tiny_coupled()
+    d["time"]["frames"] = 1
+    assert _sim(d).run(out=tmp_path / "one", progress=False).status == "done"
+    run = load_run(tmp_path / "one")
+    timed = [r for r in run.records if any(k.startswith("stage_") for k in r)]
+    assert len(timed) == 1
+    fig, ax = plt.subplots()
+    _stage_panel_single(ax, run)
+    heights = [p.get_height() for p in ax.patches]
+    total = sum(v for k, v in timed[0].items() if k.startswith("stage_") and k.endswith("_ms"))
+    assert heights and sum(heights) == pytest.approx(total, rel=1e-6)
+    plt.close(fig)

@@ -116,7 +116,7 @@ def load_run(run_dir: str | Path) -> RunLog:
         except ValueError as exc:
             if idx == len(lines) - 1:
                 notes.append(
-                    f"{log}: line {n} is cut short (the run stopped while writing it); plotted the {idx} frames before it"
+                    f"{log}: line {n} is cut short (the run stopped while writing it); plotted the {idx} records before it"
                 )
                 break
             raise RunLogError(
@@ -248,7 +248,14 @@ def _stage_panel_single(ax, run: RunLog) -> None:
         if len(names) > top:
             shown.append(f"{len(names) - top} other stages")
             data.append(np.sum([ys[i] for i in order[top:]], axis=0))
-        ax.stackplot(t, data, labels=shown, alpha=0.85)
+        if len(t) > 1:
+            ax.stackplot(t, data, labels=shown, alpha=0.85)
+        else:  # one timed frame (a 1-frame run): a stack of one point draws nothing, so one stacked bar
+            width = 0.5 * abs(float(t[0])) if len(t) and float(t[0]) else 1.0
+            bottom = 0.0
+            for y, label in zip(data, shown, strict=True):
+                ax.bar(t, y, width=width, bottom=bottom, label=label, alpha=0.85)
+                bottom = bottom + np.asarray(y)
     elif "step_seconds" in run.keys():
         t, v = run.series("step_seconds")
         ax.plot(t, 1e3 * v, "k.-", label="last step of the frame")
@@ -289,7 +296,7 @@ def _plot_panel(ax, panel: Panel, runs: Sequence[RunLog], labels: Sequence[str] 
 def _title(run: RunLog) -> str:
     last = run.records[-1]
     frames = int(_number(last.get("frame", len(run.records) - 1)))
-    what = f"{run.name}: {frames} frames, t = {_number(last.get('time')):.4g} s"
+    what = f"{run.name}: {frames} frame{'' if frames == 1 else 's'} run, t = {_number(last.get('time')):.4g} s"
     if run.status in ("diverged", "interrupted"):
         what += f" ({run.status})"
     if any("cut short" in n for n in run.notes):
