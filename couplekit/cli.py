@@ -275,6 +275,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
                 or default_output(sim.scene.name),
                 resume=True,
                 overwrite=args.overwrite,
+                scene=sim.scene.to_dict(),
+                frame=sim.frame,
             )
             print(f"resumed from {args.resume} at step {sim.step_count} (frame {sim.frame})")
         else:

@@ -791,7 +791,8 @@ class Simulation:
 
         The folder is checked first (:func:`couplekit.io.outputs.prepare_output`): one holding an earlier run's
         outputs is refused unless this run resumes from a checkpoint (it appends), continues this simulation's
-        own last run() in the same folder, or ``overwrite`` deletes them. A simulation stepped with :meth:`step`
+        own last run() in the same folder, or ``overwrite`` deletes them. A resume from a frame before the folder's
+        last is refused too (it would replace the later frames), unless ``overwrite`` deletes those frames' files. A simulation stepped with :meth:`step`
         before its first run() is a new run: it does not append to (and so cut short) an earlier run's folder.
         """
         from .io import DiagnosticsLog, PvdIndex
@@ -804,7 +805,9 @@ class Simulation:
         # a checkpoint's run appends; so does this simulation's own earlier run() into the same folder
         resumed = self._resumed or (self.step_count > 0 and self._run_folder == _resolved(folder))
         scene_dict = sc.to_dict()
-        out = prepare_output(folder, resume=resumed, overwrite=overwrite, scene=scene_dict)
+        out = prepare_output(
+            folder, resume=resumed, overwrite=overwrite, scene=scene_dict, frame=self.frame if resumed else None
+        )
         self._run_folder = _resolved(out)
         write_run_marker(out, scene_dict)
         missing = [k for k in sc.outputs.fields if k not in self.fields()]

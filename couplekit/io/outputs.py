@@ -95,6 +95,31 @@ def run_files(out: str | Path) -> list[Path]:
     return found
 
 
+def later_frame_files(out: str | Path, frame: int) -> tuple[list[Path], int]:
+    """(the per-frame files of frames after ``frame`` in ``out``, the last frame the folder holds: the larger of
+    its per-frame files' numbers and the last ``frame`` in its diagnostics log; -1 when neither says)."""
+    out = Path(out)
+    later, last = [], -1
+    for pattern in RUN_PATTERNS:
+        head, _, tail = pattern.partition("*")
+        for p in out.glob(pattern):
+            number = p.name[len(head) : len(p.name) - len(tail)]
+            if p.is_file() and number.isdigit():
+                last = max(last, int(number))
+                if int(number) > frame:
+                    later.append(p)
+    log = out / "diagnostics.jsonl"
+    if log.is_file():
+        for line in reversed(log.read_text(encoding="utf-8", errors="replace").splitlines()):
+            try:
+                rec = json.loads(line)
+                last = max(last, int(rec["frame"]))
+                break
+            except (ValueError, KeyError, TypeError):  # a line cut short by a killed run, or not a record
+                continue
+    return sorted(later), last
+
+
 def scene_fingerprint(scene: Mapping[str, Any]) -> str:
     """A short hash of a scene dict (``Scene.to_dict()``): equal for the same scene, run or resumed."""
     text = json.dumps(scene, sort_keys=True, default=str)
@@ -146,6 +171,7 @@ def prepare_output(
     overwrite: bool = False,
     scene: Mapping[str, Any] | None = None,
     clear: bool = True,
+    frame: int | None = None,
 ) -> Path:
     """Create and check the output folder ``out`` before a run (module docstring); returns it. A leading ``~``
     is the home folder, as in a shell.
@@ -157,7 +183,9 @@ def prepare_output(
     checks the folder first and lets :meth:`couplekit.simulation.Simulation.run` delete them once the run is
     built: a refused run keeps them). Raises :class:`OutputFolderError` when a path component is a file, the folder cannot be
     created or written, or it holds an earlier run's outputs without ``resume`` or ``overwrite``, or another
-    scene's outputs with ``resume``."""
+    scene's outputs with ``resume``. ``frame``: with ``resume``, the frame the resumed state is at; a folder holding
+    later frames of the run (a resume from an earlier checkpoint) is refused unless ``overwrite``, which deletes
+    those frames' files (:func:`later_frame_files`; the log is cut back by the run itself)."""
     out = Path(out).expanduser()
     for parent in reversed(out.parents):
         if parent.exists() and not parent.is_dir():
@@ -188,6 +216,18 @@ def prepare_output(
                 f"(scene {this!r}): resuming there would mix the two runs' frames; resume into the run's own "
                 "folder, or write elsewhere with --out DIR"
             )
+    if earlier and resume and frame is not None:
+        later, last = later_frame_files(out, frame)
+        if last > frame and not overwrite:
+            raise OutputFolderError(
+                f"output folder {out} holds this run's frames up to {last}, beyond frame {frame} of the state "
+                f"resumed: resuming there would replace frames {frame + 1}-{last} (their diagnostics, files and the "
+                "checkpoints written after them); resume into another folder with --out DIR, or replace them with "
+                "--overwrite"
+            )
+        if last > frame and clear:
+            for p in later:
+                p.unlink()
     if earlier and not resume:
         if not overwrite:
             # the newer of the two: a run resumed from interrupted.h5 and finished leaves it beside a later

@@ -3,6 +3,7 @@ before anything is computed; a used output folder is never silently mixed with a
 
 from __future__ import annotations
 
+import json
 import os
 import sys
 from pathlib import Path
@@ -281,3 +282,29 @@ def test_cli_refuses_a_used_folder_before_building_and_overwrites_on_request(tmp
     assert "holds the outputs of an earlier run" in capsys.readouterr().err and not built  # refused before building
     monkeypatch.undo()
     assert main(["run", str(scene_file), "--out", str(out), "--no-progress", "--overwrite"]) == 0
+
+
+def test_a_resume_from_an_earlier_frame_does_not_silently_replace_later_ones(tmp_path):
+    """A probe (session 25): resuming a frame-1 checkpoint into a folder whose run had reached frame 3 cut its log
+    back to frame 2, overwrote the frame-3 checkpoint and left frame 3's files indexed by nothing, unasked. It is
+    refused now, naming the frames; ``overwrite`` replaces them (frame 3's files deleted, the log cut)."""
+    import shutil
+
+    d = tiny_sand(frames=3)
+    d["outputs"] = {"checkpoint_every": 1, "preview": False}
+    out = tmp_path / "run"
+    first = Simulation(Scene.from_dict(d), backend="cpu", threads=1, log=None)
+    assert first.run(frames=1, out=out, progress=False).status == "done"
+    shutil.copy(out / "checkpoint.h5", tmp_path / "frame1.h5")
+    later = Simulation.load(out / "checkpoint.h5", backend="cpu", threads=1, log=None)
+    assert later.run(out=out, progress=False).status == "done"  # frames 2 and 3
+    assert (out / "fields_0003.vti").exists() or (out / "particles_0003.vtp").exists()
+    before = (out / "diagnostics.jsonl").read_text()
+    again = Simulation.load(tmp_path / "frame1.h5", backend="cpu", threads=1, log=None)
+    with pytest.raises(OutputFolderError, match=r"frames up to 3, beyond frame 1.*--overwrite"):
+        again.run(frames=2, out=out, progress=False)
+    assert (out / "diagnostics.jsonl").read_text() == before  # nothing touched
+    assert again.run(frames=2, out=out, progress=False, overwrite=True).status == "done"
+    assert not list(out.glob("*_0003.*"))
+    frames = [json.loads(line)["frame"] for line in (out / "diagnostics.jsonl").read_text().splitlines()]
+    assert frames == [0, 1, 2]
