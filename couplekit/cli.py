@@ -261,7 +261,13 @@ def _cmd_run(args: argparse.Namespace) -> int:
                   file=sys.stderr)  # fmt: skip
             return 2
         if args.set and args.resume:
-            print("error: --set cannot change a resumed run (the checkpoint keeps its scene)", file=sys.stderr)
+            print(
+                "error: --set cannot change a resumed run (the checkpoint keeps its scene: its state belongs to that "
+                "scene's time step, grid and solvers); to go on with other settings (a smaller time.dt after a "
+                f"divergence, say), run the scene again with them: couplekit run {args.scene} --set KEY=VALUE "
+                "--out NEW_DIR",
+                file=sys.stderr,
+            )
             return 2
         if args.resume:
             # the checkpoint's own scene is resumed: the file need not exist or validate any more (it was edited

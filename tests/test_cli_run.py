@@ -115,7 +115,11 @@ def test_run_set_refuses_bad_settings_before_running(tmp_path, capsys, setting, 
 def test_run_set_cannot_change_a_resumed_run(tmp_path, capsys):
     rc = main(["run", str(_scene(tmp_path)), "--resume", str(tmp_path / "x.h5"), "--set", "time.frames=3"])
     assert rc == 2
-    assert "--set cannot change a resumed run" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "--set cannot change a resumed run" in err
+    # the way on (a probe, session 25: a diverged run's last_good.h5 could only be resumed with the settings
+    # that diverged, and the refusal said nothing more)
+    assert f"couplekit run {_scene(tmp_path)} --set KEY=VALUE --out NEW_DIR" in err
 
 
 def test_validate_set_checks_the_changed_scene(tmp_path, capsys):
