@@ -253,7 +253,7 @@ class Simulation:
         self.fluid = self.sand = self.coupler = self.scheduler = self.emitter = None
         self._timing = bool(timing)
         self._cost_mark: tuple[dict[str, float], int] = ({}, 0)  # stage totals at the last frame (frame_stage_costs)
-        self._rebuild()
+        self._rebuild(quiet=False)
         self._sand_origin = self._sand_centroid()
 
     # ------------------------------------------------------------------------------------ state
@@ -597,9 +597,12 @@ class Simulation:
         self.scheduler.load_state(states.get("scheduler", {}))
         self.step_count = int(step)
 
-    def _rebuild(self) -> None:
-        """Fresh solvers (scratch arrays outside the solver state, e.g. ghost layers, may hold NaN)."""
-        asm = assemble(self.scene, self.backend, log=self._log, timing=self._timing, warm_up_steps=1)
+    def _rebuild(self, quiet: bool = True) -> None:
+        """Fresh solvers (scratch arrays outside the solver state, e.g. ghost layers, may hold NaN). ``quiet``:
+        the scene's notes and cautions are not logged again (the constructor's first build logs them; a probe saw
+        each caution again per rebuild after a divergence)."""
+        log = (lambda _line: None) if quiet else self._log
+        asm = assemble(self.scene, self.backend, log=log, timing=self._timing, warm_up_steps=1)
         self.assembly = asm
         self.fluid, self.sand, self.coupler = asm.fluid, asm.sand, asm.coupler
         self.emitter, self.scheduler = asm.emitter, asm.scheduler
@@ -813,8 +816,8 @@ class Simulation:
         missing = [k for k in sc.outputs.fields if k not in self.fields()]
         if missing and sc.outputs.vtk:
             self._log(
-                f"note: outputs.fields lists {', '.join(missing)}, which this scene does not produce "
-                f"({', '.join(sorted(self.fields())) or 'no grid fields'}): not written"
+                f"note: outputs.fields lists {', '.join(missing)}, which this scene does not produce (it produces "
+                f"{', '.join(sorted(self.fields())) or 'no grid fields'}): not written"
             )
         indexes = {"fields": PvdIndex(out / "fields.pvd"), "particles": PvdIndex(out / "particles.pvd")}
         log_file = (

@@ -142,6 +142,13 @@ def test_missing_folder_and_missing_log_are_named(tmp_path, capsys):
     with pytest.raises(RunLogError, match="is empty"):
         load_run(tmp_path / "empty")
     assert main(["compare", str(tmp_path / "empty"), str(missing)]) == 2
+    # a sweep point's folder (points/<id>) holds its run in run/: named (a probe, session 25, after the docs'
+    # example left the run/ out)
+    point = tmp_path / "points" / "a"
+    (point / "run").mkdir(parents=True)
+    (point / "run" / "diagnostics.jsonl").write_text('{"frame": 0, "time": 0.0}\n')
+    with pytest.raises(RunLogError, match=r"sweep point's folder: its run is in .*run; give that folder"):
+        load_run(point)
 
 
 def test_a_truncated_last_line_is_plotted_up_to_it(runs, tmp_path, capsys):

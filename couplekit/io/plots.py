@@ -96,6 +96,10 @@ def load_run(run_dir: str | Path) -> RunLog:
             f"run folder {folder} {what}: give the folder a run wrote into (couplekit run SCENE --out {folder})"
         )
     log = folder / "diagnostics.jsonl"
+    if not log.is_file() and (folder / "run" / "diagnostics.jsonl").is_file():  # a sweep point's folder
+        raise RunLogError(
+            f"{folder} is a sweep point's folder: its run is in {folder / 'run'}; give that folder instead"
+        )
     if not log.is_file():
         raise RunLogError(
             f"run folder {folder} has no diagnostics.jsonl, so there is nothing to plot: is it a run folder? A run "

@@ -356,3 +356,18 @@ def test_a_finished_checkpoint_run_again_says_there_is_nothing_left(tmp_path):
     text = "\n".join(messages)
     assert "nothing left to run: the state is at frame 1 of 1" in text
     assert "empty" not in text and "warning" not in text
+
+
+def test_a_divergence_logs_the_scenes_cautions_once(tmp_path):
+    """A probe (session 25): after a divergence each caution of the scene was logged again by every rebuild of
+    the solvers (replaying to the first bad step, keeping the last good state): three times in all."""
+    from sim_scenes import run_with_a_nan_after_step_7
+
+    d = tiny_fluid(frames=3)
+    d["fluid"].update({"water_lattice_viscosity": 1e-4, "odd_lambda": 0.0})  # the paper's collision: a caution
+    lines: list[str] = []
+    sim = Simulation(Scene.from_dict(d), backend="cpu", log=lines.append)
+    result, _ = run_with_a_nan_after_step_7(sim, tmp_path)
+    assert result.status == "diverged"
+    cautions = [line for line in lines if line.startswith("caution:")]
+    assert cautions and len(cautions) == len(set(cautions)), cautions
