@@ -221,6 +221,12 @@ BAD_SWEEPS = {
     "time.frames in the reference": ({"reference": {"time.frames": 4}}, None, 'sweep.reference."time.frames"'),
     # a probe (session 25): --threads 99999 ended in a segmentation fault; each point's backend would refuse it
     "threads beyond the machine": ({"threads": 99999, "grid": {"time.dt": [1e-4]}}, None, "sweep.threads"),
+    # a probe (session 25): each point writes into points/<id>/run whatever outputs.directory says
+    "outputs.directory in the set": (
+        {"set": {"outputs.directory": "elsewhere"}, "grid": {"time.dt": [1e-4]}},
+        None,
+        'sweep.set."outputs.directory"',
+    ),
 }
 
 

@@ -185,6 +185,7 @@ def parse_sweep(
     _check_key_names(base_scene, global_set, global_grid, cases, reference, problems)
     _check_overlaps(global_set, global_grid, cases, problems)
     _check_frames(frames, global_set, global_grid, cases, reference, problems)
+    _check_output_folder(global_set, global_grid, cases, reference, problems)
     if problems:
         raise SweepError(problems, source)
 
@@ -527,6 +528,29 @@ def _check_frames(frames, global_set, global_grid, cases, reference, problems: l
                     f"remove sweep.frames (every point then runs its own time.frames), or {drop}",
                 )
             )
+
+
+def _check_output_folder(global_set, global_grid, cases, reference, problems: list[Problem]) -> None:
+    """A sweep writes each point's run into ``<out>/points/<id>/run``: a table setting ``outputs.directory`` is
+    refused, since the value would be silently ignored (a probe, session 25)."""
+    for where, table in _tables(global_set, global_grid, cases, reference):
+        for key, value in table.items():
+            try:
+                parts = parse_key(key)
+            except KeyPathError:
+                continue
+            values = value if where.endswith(".grid") and isinstance(value, list) else [value]
+            if parts == ("outputs", "directory") or (
+                parts == ("outputs",) and any(isinstance(v, dict) and "directory" in v for v in values)
+            ):
+                problems.append(
+                    Problem(
+                        f'{where}."{key}"',
+                        "sets outputs.directory, but a sweep writes each point's run into <out>/points/<id>/run, so "
+                        "it would be ignored",
+                        f"drop it from {where}; choose where the sweep writes with couplekit sweep --out DIR",
+                    )
+                )
 
 
 # ------------------------------------------------------------------------------------------------ points
