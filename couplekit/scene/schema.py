@@ -1024,8 +1024,9 @@ def _check_range(key: Key, value: int | float, path: str) -> Problem | None:
     if isinstance(value, float) and not math.isfinite(value):
         return Problem(path, f"must be a finite number, got {value}", f"set {path} to a finite number{allowed}")
     if key.kind in ("int", "ivec3", "int_or_auto") and abs(value) > MAX_INT:
-        limit = f"{key.range_text()}" if key.range_text() else f"at most {MAX_INT}"
-        return Problem(path, f"{show(value)} is too large (must be {limit})", f"set {path} to an integer{allowed}")
+        limit = key.range_text() if key.hi is not None else ""
+        limit = limit or (f"{key.range_text()} and at most {MAX_INT}" if key.range_text() else f"at most {MAX_INT}")
+        return Problem(path, f"{show(value)} is too large (must be {limit})", f"set {path} to an integer {limit}")
     if value != 0 and not MIN_MAGNITUDE <= abs(value) <= MAX_MAGNITUDE:  # exact for integers of any size
         shown = f"{value:g}" if isinstance(value, float) else show(value)
         unit = f" {key.unit}" if key.unit else ""

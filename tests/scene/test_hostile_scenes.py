@@ -444,3 +444,23 @@ def test_a_type_errors_fix_gives_a_value_the_key_admits(path, bad):
 
     d[path[0]][path[1]] = tomllib.loads(f"v = {problem.fix[len(prefix) :]}")["v"]
     Scene.from_dict(d)
+
+
+@pytest.mark.parametrize(
+    ("key", "limit"),
+    [("checkpoint_every", ">= 0 and at most 9223372036854775807"), ("particles_per_cell", None)],
+)
+def test_an_integer_beyond_int64_names_the_real_limit(key, limit):
+    """A probe (session 25): 1e20 for outputs.checkpoint_every said "too large (must be >= 0)", a range the value
+    meets; the message names the int64 limit where the key has no upper bound of its own, else the key's range."""
+    d = tiny_sand()
+    table = "outputs" if key == "checkpoint_every" else "sand"
+    d.setdefault(table, {})[key] = 10**20
+    with pytest.raises(SceneError) as err:
+        Scene.from_dict(d)
+    text = str(err.value)
+    assert f"{table}.{key}: {10**20} is too large" in text
+    if limit:
+        assert f"must be {limit}" in text
+    else:  # the key's own range, which 1e20 breaks
+        assert "<=" in text and "9223372036854775807" not in text
