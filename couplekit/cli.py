@@ -385,7 +385,11 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         print(exc, file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(f"interrupted: finished points are kept in {out}/points; run the same command to resume", file=sys.stderr)
+        print(
+            f"interrupted: finished points are kept in {out}/points and tabled in {out}/results.*; run the same "
+            "command to resume",
+            file=sys.stderr,
+        )
         return 130
     except OSError as exc:  # an unusable output folder, or the timeout of connecting to --address
         if exc.filename is not None:  # a file operation failed: the folder, not the cluster

@@ -152,6 +152,30 @@ def test_reference_errors_and_resuming_runs_nothing(tmp_path, cluster_address):
         assert a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a), a["name"]
 
 
+def test_an_interrupted_sweep_tables_the_points_it_finished(tmp_path, cluster_address, monkeypatch):
+    """A probe (session 25): Ctrl-C during a sweep kept each finished point's JSON but wrote no results table.
+    The table is written with the points finished before the interrupt, which is raised on."""
+    from couplekit.sweep import runner
+
+    real = runner._finished_line
+
+    def stop_after_first(i, n, rec):
+        real(i, n, rec)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(runner, "_finished_line", stop_after_first)
+    path = _write_sweep(tmp_path, {"grid": {"time.dt": [1e-4, 2e-4]}})
+    out = tmp_path / "out"
+    log = io.StringIO()
+    with pytest.raises(KeyboardInterrupt):
+        run_sweep(path, out, address=cluster_address, stream=log)
+    assert "interrupted; 1 of 2 points in" in log.getvalue()
+    tables = list(out.glob("results.*"))
+    assert tables, list(out.iterdir())
+    rows = json.loads((out / "results.json").read_text())
+    assert len(rows) == 1 and rows[0]["status"] == "done"
+
+
 def test_invalid_and_failing_points_are_recorded_and_the_others_run(tmp_path, cluster_address):
     sweep = {
         "grid": {"time.dt": [2e-4, 5e-3]},  # 5e-3 breaks the MPM elastic limit: refused up front

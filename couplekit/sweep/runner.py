@@ -413,7 +413,12 @@ def run_sweep(
     records, tasks = _plan_runs(spec, out, say)
     if tasks:
         require_dask()
-        _run_tasks(tasks, out, records, say, address, workers, spec.threads, client)
+        try:
+            _run_tasks(tasks, out, records, say, address, workers, spec.threads, client)
+        except KeyboardInterrupt:  # the points finished so far go into the table too (a probe, session 25)
+            table = write_results(out, build_rows(spec, records))
+            say(f"{spec.name}: interrupted; {len(records)} of {len(spec.all_points())} points in {table}")
+            raise
     reference = records.get(REFERENCE_ID)
     if spec.reference is not None and reference is not None and reference.get("status") != "done":
         say(f"warning: the reference run ended {reference.get('status')!r}; errors are measured on the frames it has")
