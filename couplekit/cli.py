@@ -293,7 +293,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
             # earlier run's files are deleted only by sim.run (below), once the run is built: a run refused for
             # memory or an unsupported effect (exit 3), or failing to build, keeps them, and a folder this
             # command made is removed again (_drop_made_folder)
-            target = Path(args.out or scene.outputs.directory or default_output(scene.name))
+            target = Path(args.out or scene.outputs.directory or default_output(scene.name)).expanduser()
             fresh = None if target.exists() else target
             out = prepare_output(target, resume=False, overwrite=args.overwrite, clear=False)
             try:

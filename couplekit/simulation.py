@@ -795,8 +795,9 @@ class Simulation:
         The folder is checked first (:func:`couplekit.io.outputs.prepare_output`): one holding an earlier run's
         outputs is refused unless this run resumes from a checkpoint (it appends), continues this simulation's
         own last run() in the same folder, or ``overwrite`` deletes them. A resume from a frame before the folder's
-        last is refused too (it would replace the later frames), unless ``overwrite`` deletes those frames' files. A simulation stepped with :meth:`step`
-        before its first run() is a new run: it does not append to (and so cut short) an earlier run's folder.
+        last is refused too (it would replace the later frames), unless ``overwrite`` deletes those frames' files.
+        A simulation stepped with :meth:`step` before its first run() is a new run: it does not append to (and so
+        cut short) an earlier run's folder.
         """
         from .io import DiagnosticsLog, PvdIndex
         from .io.outputs import default_output, prepare_output, write_run_marker
