@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["is_real", "whole_count"]
+__all__ = ["is_real", "whole_count", "flag", "callable_or_none"]
 
 
 def is_real(value: Any) -> bool:
@@ -27,3 +27,18 @@ def whole_count(name: str, value: Any, least: int = 0, what: str = "steps") -> i
     if value < least:
         raise ValueError(f"{name} must be {least} or more, got {value!r}")
     return int(value)
+
+
+def flag(name: str, value: Any) -> bool:
+    """``value`` as a bool, else a TypeError naming ``name``: only ``True``/``False`` (NumPy's too). A string such
+    as ``"no"`` is truthy, so ``overwrite="no"`` once deleted an earlier run."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be True or False, got {value!r} ({type(value).__name__})")
+    return bool(value)
+
+
+def callable_or_none(name: str, value: Any, what: str) -> Any:
+    """``value`` if it is callable or None, else a TypeError naming ``name`` and ``what`` it is called with."""
+    if value is not None and not callable(value):
+        raise TypeError(f"{name} must be a function {what} (or None), got {value!r} ({type(value).__name__})")
+    return value

@@ -45,7 +45,7 @@ from typing import Any
 import numpy as np
 
 from . import __version__
-from .arguments import whole_count
+from .arguments import callable_or_none, flag, whole_count
 from .assembly import CouplingUnavailableError, assemble, check_run, memory_estimate, refuse_unsupported
 from .backend import Backend, get_backend
 from .fluid.hydrostatic import hydrostatic_pressure
@@ -224,7 +224,8 @@ class Simulation:
         if scheduler is not None:
             self.scene = with_scheduler(self.scene, scheduler)
         sc = self.scene
-        self._log = log or (lambda s: None)
+        self._log = callable_or_none("log", log, "taking one line of text (e.g. print)") or (lambda s: None)
+        check_memory, timing = flag("check_memory", check_memory), flag("timing", timing)
         self._preview_failed = False
         self._preview_scale: tuple[float, float] | None = None  # the run's fixed sand-speed colours (preview_scale)
         self._preview_colour: tuple[str, float | None] | None = None  # (colour_by, r_max), preview_colouring
@@ -325,6 +326,8 @@ class Simulation:
         """One line: mean ms per step and share of each stage (most expensive first), over the timed steps,
         and the sand steps per step (sub-cycled and multi-rate schedulers)."""
         rep = self.cost_report()
+        if top is not None:
+            top = whole_count("top", top, least=1, what="stages")
         if not rep:
             return "stage costs: not timed"
         total = sum(r["mean"] for r in rep.values())
@@ -805,6 +808,17 @@ class Simulation:
 
         sc = self.scene
         total = _count("frames", frames, least=1) if frames is not None else int(sc.time.frames)
+        # every argument checked before the folder is touched (a probe: overwrite="no" deleted an earlier run)
+        progress, overwrite, summary = (
+            flag("progress", progress),
+            flag("overwrite", overwrite),
+            flag("summary", summary),
+        )
+        callable_or_none("stop", stop, "of no arguments returning True to stop")
+        if stream is not None and not callable(getattr(stream, "write", None)):
+            raise TypeError(f"stream must be a text stream with a write method (or None), got {type(stream).__name__}")
+        if out is not None and not isinstance(out, (str, os.PathLike)):
+            raise TypeError(f"out must be a folder path (a str or a pathlib.Path) or None, got {type(out).__name__}")
         folder = Path(out or sc.outputs.directory or default_output(sc.name))
         # a checkpoint's run appends; so does this simulation's own earlier run() into the same folder
         resumed = self._resumed or (self.step_count > 0 and self._run_folder == _resolved(folder))

@@ -118,6 +118,13 @@ def test_a_validated_scene_cannot_be_changed_in_place(sim):
     if scene.sand is not None:
         with pytest.raises(TypeError):
             scene.sand.walls["z_min"] = "slip"
+    # scene.source, the record to_dict() and checkpoints give, is read-only to its leaves (a probe, session 25:
+    # changing its time.dt in place made a checkpoint restore another scene than the one that ran)
+    with pytest.raises(TypeError, match="cannot be changed in place"):
+        scene.source["time"]["dt"] = 5e-4
+    with pytest.raises(TypeError, match="cannot be changed in place"):
+        scene.source["bodies"].append({})
+    assert type(scene.to_dict()["bodies"]) is list and type(scene.to_dict()["time"]) is dict  # plain copies
     assert pickle.loads(pickle.dumps(scene)) == scene == copy.deepcopy(scene)
     assert ck.Scene.from_dict(scene.to_dict()) == scene
     changed = with_settings(scene, {"sand.walls.z_min.kind": "slip"})  # the way to change one
@@ -147,3 +154,38 @@ def test_an_empty_backend_name_is_refused():
 
     with pytest.raises(ValueError, match="empty name"):
         get_backend("")
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (
+            lambda sim, tmp: sim.run(frames=1, out=tmp, overwrite="no", progress=False),
+            "overwrite must be True or False",
+        ),
+        (lambda sim, tmp: sim.run(frames=1, out=tmp, progress="no"), "progress must be True or False"),
+        (lambda sim, tmp: sim.run(frames=1, out=tmp, progress=False, summary=1), "summary must be True or False"),
+        (lambda sim, tmp: sim.run(frames=1, out=tmp, progress=False, stop=True), "stop must be a function"),
+        (lambda sim, tmp: sim.run(frames=1, out=tmp, progress=False, stream=123), "stream must be a text stream"),
+        (lambda sim, tmp: sim.run(frames=1, out=123, progress=False), "out must be a folder path"),
+        (lambda sim, tmp: sim.cost_summary(top=1.5), "top must be a whole number"),
+        (lambda sim, tmp: sim.cost_summary(top=0), "top must be 1 or more"),
+    ],
+)
+def test_run_and_report_arguments_are_checked_before_anything_is_written(sim, tmp_path, call, match):
+    """A probe (session 25): overwrite="no" (a true string) deleted an earlier run's frames; stop=True, stream=123
+    and out=123 failed deep inside (stop after the run marker was written); cost_summary(top=1.5) failed on a
+    slice. Each is refused naming the argument, and the folder is left as it was."""
+    with pytest.raises((TypeError, ValueError), match=match):
+        call(sim, tmp_path / "run")
+    assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize(
+    ("kw", "match"),
+    [({"log": 123}, "log must be a function"), ({"timing": "no"}, "timing must be True or False"),
+     ({"check_memory": "no"}, "check_memory must be True or False")],
+)  # fmt: skip
+def test_simulation_arguments_are_checked(kw, match):
+    with pytest.raises(TypeError, match=match):
+        ck.Simulation(ck.Scene.load(SCENE), "cpu", **{"log": None, **kw})

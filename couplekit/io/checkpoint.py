@@ -92,6 +92,13 @@ def save_checkpoint(
                               "regular file's path")  # fmt: skip
     if not path.parent.is_dir():
         raise CheckpointError(f"cannot write {path}: its folder {path.parent} does not exist; create it first")
+    if path.is_file() and not _is_checkpoint_file(path):
+        # a checkpoint replaces an earlier checkpoint at its path, never another file (a probe: save("scene.toml")
+        # replaced the user's scene file)
+        raise CheckpointError(
+            f"{path} holds a file that is not a couplekit checkpoint: saving would replace it; give a new path "
+            "(e.g. one ending in .h5), or delete the file first"
+        )
     tmp = path.with_name(path.name + ".tmp")
     scene_text, meta_text = json.dumps(scene), json.dumps(dict(meta))
     try:
@@ -114,6 +121,18 @@ def save_checkpoint(
     return path
 
 
+def _is_checkpoint_file(path: Path) -> bool:
+    """Whether ``path`` is an HDF5 file a couplekit checkpoint was written into (its format attribute; a damaged
+    one counts, its contents are not verified)."""
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as f:
+            return f.attrs.get("format") == FORMAT
+    except (OSError, ValueError):
+        return False
+
+
 def _attr_text(f, path, name: str) -> str:
     if name not in f.attrs:
         raise CheckpointError(f"{path}: the checkpoint has no {name!r} attribute (a damaged or foreign file)")
@@ -134,6 +153,15 @@ def _json(text: str, path, name: str) -> dict:
 def _open(path):
     import h5py
 
+    if not isinstance(path, (str, os.PathLike)):
+        raise TypeError(f"path must be a checkpoint file's path (a str or a pathlib.Path), got {type(path).__name__}")
+    if not Path(path).expanduser().exists():
+        raise CheckpointError(f"{path}: no such file (give the path of a checkpoint a run saved, e.g. checkpoint.h5)")
+    if Path(path).expanduser().is_dir():
+        raise CheckpointError(
+            f"{path} is a folder: give the checkpoint file in it (e.g. {Path(path) / 'checkpoint.h5'})"
+        )
+    path = Path(path).expanduser()
     try:
         return h5py.File(path, "r")
     except OSError as exc:

@@ -116,6 +116,28 @@ class FrozenDict(dict):
         return (type(self), (dict(self),))
 
 
+class FrozenList(list):
+    """A read-only list: the lists inside a validated scene's :attr:`Scene.source` (see :class:`FrozenDict`)."""
+
+    def _refuse(self, *args, **kwargs):
+        FrozenDict._refuse(self)
+
+    __setitem__ = __delitem__ = append = extend = insert = pop = remove = clear = sort = reverse = _refuse
+    __iadd__ = __imul__ = _refuse
+
+    def __reduce__(self):
+        return (type(self), (list(self),))
+
+
+def _frozen(x: Any) -> Any:
+    """``x`` with every dict and list inside it read-only (:class:`FrozenDict`, :class:`FrozenList`)."""
+    if isinstance(x, dict):
+        return FrozenDict({k: _frozen(v) for k, v in x.items()})
+    if isinstance(x, list):
+        return FrozenList(_frozen(v) for v in x)
+    return x
+
+
 @dataclass(frozen=True)
 class Domain:
     size: tuple[float, float, float]
@@ -942,7 +964,9 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
         effects=effects,
         stirring=stirring,
         scheduler=scheduler,
-        source=source,
+        # read-only: the scene's own record of itself (to_dict(), checkpoints); a probe changed scene.source's dt
+        # in place and the checkpoint then restored another scene than the one that ran
+        source=_frozen(source),
     )
 
 

@@ -308,3 +308,29 @@ def test_a_resume_from_an_earlier_frame_does_not_silently_replace_later_ones(tmp
     assert not list(out.glob("*_0003.*"))
     frames = [json.loads(line)["frame"] for line in (out / "diagnostics.jsonl").read_text().splitlines()]
     assert frames == [0, 1, 2]
+
+
+def test_save_never_replaces_a_file_that_is_not_a_checkpoint(tmp_path):
+    """A probe (session 25): sim.save("scene.toml") replaced the user's scene file with a checkpoint. A checkpoint
+    replaces an earlier checkpoint (a run's checkpoint.h5 every few frames), never another file."""
+    sim = Simulation(Scene.from_dict(tiny_sand()), backend="cpu", threads=1, log=None)
+    scene_file = tmp_path / "scene.toml"
+    scene_file.write_text(TINY_SAND_TOML)
+    with pytest.raises(CheckpointError, match="not a couplekit checkpoint: saving would replace it"):
+        sim.save(scene_file)
+    assert scene_file.read_text() == TINY_SAND_TOML
+    sim.save(tmp_path / "a.h5")
+    sim.step(1)
+    sim.save(tmp_path / "a.h5")  # an earlier checkpoint is replaced
+    assert Simulation.load(tmp_path / "a.h5", backend="cpu", threads=1, log=None).step_count == 1
+
+
+def test_load_names_a_missing_file_a_folder_and_a_non_path(tmp_path):
+    """A probe (session 25): a missing file was "not a readable HDF5 file (... errno = 2 ...)", and load(None)
+    raised from inside h5py."""
+    with pytest.raises(CheckpointError, match="no such file"):
+        Simulation.load(tmp_path / "missing.h5", backend="cpu", log=None)
+    with pytest.raises(CheckpointError, match="is a folder"):
+        Simulation.load(tmp_path, backend="cpu", log=None)
+    with pytest.raises(TypeError, match="path must be a checkpoint file's path"):
+        Simulation.load(None, backend="cpu", log=None)
