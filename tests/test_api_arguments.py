@@ -189,3 +189,23 @@ def test_run_and_report_arguments_are_checked_before_anything_is_written(sim, tm
 def test_simulation_arguments_are_checked(kw, match):
     with pytest.raises(TypeError, match=match):
         ck.Simulation(ck.Scene.load(SCENE), "cpu", **{"log": None, **kw})
+
+
+def test_from_dict_takes_tuples_and_numpy_values():
+    """A probe (session 25): a tuple or NumPy-array ``size`` and an ``np.int64`` frame count were refused by
+    Scene.from_dict while step() and run() take NumPy numbers; they are TOML's lists and numbers now. A float for an
+    integer key is still refused (TOML would not make one)."""
+    plain = ck.Scene.load(SCENE)
+    d = plain.to_dict()
+    d["domain"]["size"] = np.array(d["domain"]["size"])
+    d["time"]["frames"] = np.int64(d["time"]["frames"])
+    d["bodies"][0]["geometry"] = {
+        k: tuple(v) if isinstance(v, list) else v for k, v in d["bodies"][0]["geometry"].items()
+    }
+    scene = ck.Scene.from_dict(d)
+    assert scene == plain and scene.to_dict() == plain.to_dict()
+    d["time"]["frames"] = 2.0
+    with pytest.raises(ck.SceneError, match="time.frames"):
+        ck.Scene.from_dict(d)
+    with pytest.raises(TypeError, match="base_dir must be a folder path"):
+        ck.Scene.from_dict(plain.to_dict(), base_dir=None)

@@ -189,9 +189,13 @@ def prepare_output(
     out = Path(out).expanduser()
     for parent in reversed(out.parents):
         if parent.exists() and not parent.is_dir():
-            raise OutputFolderError(f"output folder {out}: {parent} is a file, not a folder; choose another --out")
+            raise OutputFolderError(
+                f"output folder {out}: {parent} is a file, not a folder; choose another --out (run(out=...) in Python)"
+            )
     if out.exists() and not out.is_dir():
-        raise OutputFolderError(f"output folder {out} is a file; choose another --out (or remove the file)")
+        raise OutputFolderError(
+            f"output folder {out} is a file; choose another --out (run(out=...) in Python; or remove the file)"
+        )
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -214,7 +218,7 @@ def prepare_output(
             raise OutputFolderError(
                 f"output folder {out} holds the outputs of another run (scene {name!r}) than the one resumed "
                 f"(scene {this!r}): resuming there would mix the two runs' frames; resume into the run's own "
-                "folder, or write elsewhere with --out DIR"
+                "folder, or write elsewhere with --out DIR (run(out=...) in Python)"
             )
     if earlier and resume and frame is not None:
         later, last = later_frame_files(out, frame)
@@ -223,7 +227,7 @@ def prepare_output(
                 f"output folder {out} holds this run's frames up to {last}, beyond frame {frame} of the state "
                 f"resumed: resuming there would replace frames {frame + 1}-{last} (their diagnostics, files and the "
                 "checkpoints written after them); resume into another folder with --out DIR, or replace them with "
-                "--overwrite"
+                "--overwrite (in Python: run(out=...), run(overwrite=True))"
             )
         if last > frame and clear:
             for p in later:
@@ -234,10 +238,15 @@ def prepare_output(
             # checkpoint.h5 (a probe: the hint named the stale one)
             saved = [p for p in earlier if p.name in ("interrupted.h5", "checkpoint.h5")]
             ckpt = max(saved, key=lambda p: p.stat().st_mtime_ns) if saved else None
-            resume_hint = f"resume it with --resume {ckpt}, " if ckpt is not None else ""
+            resume_hint = (
+                f"resume it with --resume {ckpt} (Simulation.load({str(ckpt)!r}).run(...) in Python), "
+                if ckpt is not None
+                else ""
+            )
             raise OutputFolderError(
                 f"output folder {out} holds the outputs of an earlier run ({_describe(earlier)}): {resume_hint}"
-                "write elsewhere with --out DIR, or replace them with --overwrite"
+                "write elsewhere with --out DIR, or replace them with --overwrite (in Python: run(out=...), "
+                "run(overwrite=True))"
             )
         if clear:
             for p in earlier:

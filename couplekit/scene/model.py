@@ -30,6 +30,7 @@ before anything is allocated:
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -494,12 +495,16 @@ class Scene:
 
     @classmethod
     def from_dict(cls, data: dict, base_dir: str | Path = ".", source_name: str = "scene") -> Scene:
-        """Validate a scene given as a dict (the TOML structure); relative files resolve against ``base_dir``."""
+        """Validate a scene given as a dict (the TOML structure); relative files resolve against ``base_dir``.
+        Python and NumPy values a script has at hand are taken as TOML's: a tuple or a NumPy array as a list, a
+        NumPy number as the number (``size = np.array([...])``, ``frames = np.int64(2)``)."""
+        if not isinstance(base_dir, (str, os.PathLike)):
+            raise TypeError(f"base_dir must be a folder path (a str or a pathlib.Path), got {type(base_dir).__name__}")
         deep = too_deep(data)  # before anything walks the dict recursively (copying it, printing a value)
         if deep is not None:
             raise SceneError([deep], source_name)
         problems: list[Problem] = []
-        scene = _build(data, Path(base_dir), problems)
+        scene = _build(_toml_values(data), Path(base_dir), problems)
         if problems or scene is None:
             raise SceneError(problems, source_name)
         return scene
@@ -551,6 +556,21 @@ class Scene:
 
 
 # ---------------------------------------------------------------------------------------------- building
+def _toml_values(x: Any) -> Any:
+    """``x`` with tuples and NumPy arrays as lists and NumPy scalars as Python numbers (a probe, session 25: a tuple
+    ``size`` or an ``np.int64`` frame count was refused where the rest of the API takes them); anything else as is,
+    for the schema to judge."""
+    if isinstance(x, dict):
+        return {k: _toml_values(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_toml_values(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _toml_values(x.tolist())
+    if isinstance(x, np.generic):
+        return x.item()
+    return x
+
+
 def _deep_copy(x: Any) -> Any:
     if isinstance(x, dict):
         return {k: _deep_copy(v) for k, v in x.items()}
