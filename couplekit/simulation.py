@@ -40,7 +40,7 @@ import os
 import signal
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, TextIO
 
 import numpy as np
 
@@ -53,6 +53,9 @@ from .lattice import CS2
 from .sand.solver import TimeStepError
 from .scene import Scene
 from .schedulers import SubstepLimitError
+
+if TYPE_CHECKING:
+    from .io import DiagnosticsLog
 
 __all__ = [
     "Simulation",
@@ -643,7 +646,11 @@ class Simulation:
 
     @classmethod
     def load(
-        cls, path: str | Path, backend: str | Backend | None = "auto", threads: int | None = None, log=print
+        cls,
+        path: str | Path,
+        backend: str | Backend | None = "auto",
+        threads: int | None = None,
+        log: Callable[[str], Any] | None = print,
     ) -> Simulation:
         """Rebuild the scene of a checkpoint and restore its state (bitwise on the backend that wrote it).
 
@@ -711,7 +718,7 @@ class Simulation:
                     self._log(f"previews: sand coloured by wetness ({how}), dry sand light, wet sand dark")
         return self._preview_colour
 
-    def write_frame(self, out: Path, indexes: dict, log_file) -> None:
+    def write_frame(self, out: Path, indexes: dict, log_file: DiagnosticsLog | None) -> None:
         """Write the outputs of the current frame (per the scene's [outputs])."""
         from .io import render_preview, write_fields_vti, write_particles_ply, write_particles_vtp
 
@@ -778,7 +785,7 @@ class Simulation:
         frames: int | None = None,
         out: str | Path | None = None,
         progress: bool = True,
-        stream=None,
+        stream: TextIO | None = None,
         stop: Callable[[], bool] | None = None,
         overwrite: bool = False,
         summary: bool = True,

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass
 from dataclasses import fields as dataclass_fields
 from typing import Any
@@ -722,7 +723,7 @@ class FluidSolver:
                 "the same step (the lockstep scheduler's order), or share_force_buffer(False)"
             )
 
-    def current_velocity(self, out=None, keep_fsum: bool = False):
+    def current_velocity(self, out: Any = None, keep_fsum: bool = False) -> Any:
         """Σ_j f_j c_j of the current populations (before the next collision, no force shift) as a padded
         backend array (3, Pz, Py, Px), interior fluid cells set: the velocity the sand–fluid exchange must
         see. ``out`` may be a preallocated array of that shape. Prepares the ghosts the way the next step
@@ -748,7 +749,7 @@ class FluidSolver:
         self._slip_step = None
         return out
 
-    def take_slip_fluid_part(self, take) -> None:
+    def take_slip_fluid_part(self, take: Callable[[Any], None]) -> None:
         """Have ``take(pbar)`` write the fluid velocity's part of Eq. 39's slip term (φ u·∇ε / ε from this
         :attr:`velocity`, the last collision's) into p̄'s fluid cells, for the :meth:`current_velocity`
         (``keep_fsum=True``) of the same step to subtract from the population sum it keeps: the coupling takes it
@@ -793,7 +794,7 @@ class FluidSolver:
         return self._force_step == self.step_count
 
     @property
-    def slip_cells(self):
+    def slip_cells(self) -> Any:
         """The padded uint8 mask of the cells where Eq. 39 keeps its slip term (None without ``mixture``;
         :func:`couplekit.fluid.grid.slip_cells`)."""
         return self._slip_cells
@@ -808,7 +809,7 @@ class FluidSolver:
         (:meth:`fold_sand_pressure_terms`)."""
         self.sand_velocity = None
 
-    def fold_sand_pressure_terms(self, fold) -> None:
+    def fold_sand_pressure_terms(self, fold: Callable[[Any], None]) -> None:
         """Have ``fold(fsum)`` subtract Eq. 39's sand terms from the Σ (f − w) that :meth:`current_velocity`
         (``keep_fsum=True``) kept at this step, in place (the coupling computes them from the MPM grid velocity:
         kernels/coupling_pressure.cu), so that this step's pressure update adds none of its own and reads no

@@ -516,6 +516,7 @@ class Scene:
     # ------------------------------------------------------------------------------------ derived
     @property
     def has_fluid(self) -> bool:
+        """A fluid is simulated (a ``[fluid]`` table: water and air, or one phase filling the domain)."""
         return self.fluid is not None
 
     @property
