@@ -509,7 +509,8 @@ def _input_cautions(scene: Scene) -> list[str]:
     outflow cells around it copy the jet's inward velocity and let water in too: a 4 × 4-cell outlet delivered
     1.4-1.9× its flux, exactly its flux in a wall face); a single-phase fluid let in through an inflow with no
     outflow face (the liquid has nowhere to go: its pressure rises for as long as the inflow runs); sand kept only
-    one cell off the walls (:func:`_wall_layer_caution`)."""
+    one cell off the walls (:func:`_wall_layer_caution`); an absorption rate beyond the measured one
+    (:func:`_absorption_caution`)."""
     fl, out = scene.fluid, []
     if fl.storage == "fp16":
         out += _fp16_gravity_caution(scene)
@@ -531,6 +532,7 @@ def _input_cautions(scene: Scene) -> list[str]:
         out += _small_drop_cautions(scene)
     out += _multirate_frame_caution(scene)
     out += _wall_layer_caution(scene)
+    out += _absorption_caution(scene)
     if fl.phases == 1 and scene.inflows and "outflow" not in scene.domain.boundary.values():
         out.append(
             "a single-phase fluid enters through inflows[0] but no face is an outflow: the liquid has nowhere to "
@@ -554,6 +556,28 @@ def _wall_layer_caution(scene: Scene) -> list[str]:
         "floor-wall edge the water grows a spurious current after ~3000 steps (docs/fluid-stability.md; this "
         f"scene runs {steps:,} steps); keep 2 (the default) unless water must not pass between the sand and the "
         "walls"
+    ]
+
+
+MEASURED_ABSORPTION_RATE = 0.03
+"""The largest ``sand.absorption_rate`` measured to run (a probe, session 25: a dry bed under a pool, dx = 1 cm,
+finite for 2000 steps at 0.03; at 0.05 non-finite at step 327, 0.1 at step 171; the paper's scenes 0.001-0.003)."""
+
+
+def _absorption_caution(scene: Scene) -> list[str]:
+    """Water retention at an absorption rate above :data:`MEASURED_ABSORPTION_RATE`: the uptake drains the
+    water that seeps into a dry bed's pores about as fast as it arrives, φ there falls below 0, and the air in
+    those pores, still under the water's pressure gradient, accelerates until the run diverges (measured at
+    0.05: lattice speed 0.034 at step 300, 1.5 at 325, NaN at 327, in cells of φ ≈ −0.01)."""
+    if scene.sand is None or True not in sand_retention_flags(scene):
+        return []
+    rate = scene.sand.absorption_rate
+    if rate <= MEASURED_ABSORPTION_RATE:
+        return []
+    return [
+        f"sand.absorption_rate = {rate:g} is above the {MEASURED_ABSORPTION_RATE:g} measured to run: a dry bed under "
+        "water went non-finite at 0.05 (step 327) and 0.1 (step 171), its drained pores' air accelerating; the "
+        "paper's scenes use 0.001-0.003 (docs/examples.md, Fig. 10)"
     ]
 
 

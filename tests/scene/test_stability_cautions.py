@@ -241,3 +241,17 @@ def test_sand_one_cell_off_the_walls_is_named():
     dry = tiny_sand()
     dry.setdefault("sand", {})["wall_layers"] = 1
     assert not [c for c in stability_cautions(Scene.from_dict(dry)) if "wall_layers" in c]
+
+
+def test_an_absorption_rate_beyond_the_measured_one_is_named():
+    """A probe (session 25): sand.absorption_rate 0.05, 0.1 and 1 (the schema admits up to 1) made a dry bed under
+    water go non-finite; 0.03 ran 2000 steps. A caution above 0.03 where sand retains water, none at or below it or
+    without retention."""
+    d = tiny_coupled(retention=True)
+    d["sand"]["absorption_rate"] = 0.05
+    assert [c for c in _cautions(d) if "absorption_rate = 0.05" in c]
+    d["sand"]["absorption_rate"] = 0.03
+    assert not [c for c in _cautions(d) if "absorption_rate" in c]
+    d = tiny_coupled(retention=False)
+    d["sand"]["absorption_rate"] = 0.5
+    assert not [c for c in _cautions(d) if "absorption_rate" in c]
