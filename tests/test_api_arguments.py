@@ -125,6 +125,9 @@ def test_a_validated_scene_cannot_be_changed_in_place(sim):
     with pytest.raises(TypeError, match="cannot be changed in place"):
         scene.source["bodies"].append({})
     assert type(scene.to_dict()["bodies"]) is list and type(scene.to_dict()["time"]) is dict  # plain copies
+    with pytest.raises(TypeError, match="cannot be changed in place"):  # a body's geometry too
+        scene.bodies[0].geometry.params["center"][0] = 1.0
+    assert hash(scene) == hash(ck.Scene.from_dict(scene.to_dict()))  # a frozen scene hashes (it raised)
     assert pickle.loads(pickle.dumps(scene)) == scene == copy.deepcopy(scene)
     assert ck.Scene.from_dict(scene.to_dict()) == scene
     changed = with_settings(scene, {"sand.walls.z_min.kind": "slip"})  # the way to change one

@@ -33,6 +33,7 @@ import numpy as np
 
 from ..arguments import is_real, whole_count
 from ..backend import Backend, get_backend
+from ..lattice import CS2
 from ..slabs import host_slabs
 from .grid import (
     FLUID,
@@ -339,6 +340,14 @@ def _max_phi_jump(phi: np.ndarray, fluid: np.ndarray, periodic: tuple[bool, bool
     return jump
 
 
+def _check_initial(name: str, a: np.ndarray) -> None:
+    """A ValueError naming ``name`` and the first cell where the initial field ``a`` is NaN or infinite."""
+    bad = ~np.isfinite(a)
+    if bad.any():
+        where = tuple(int(i) for i in np.argwhere(bad)[0])
+        raise ValueError(f"{name} is not finite at index {where} ({a[where]}): give finite initial values")
+
+
 class FluidSolver:
     """Velocity-based D3Q27 NOCM-MRT flow, optionally with the D3Q7 conservative phase field.
 
@@ -396,9 +405,10 @@ class FluidSolver:
     ):
         self.backend = backend = backend if isinstance(backend, Backend) else get_backend(backend)
         self.storage = check_storage(storage, "FluidSolver storage")
-        self.shape = tuple(int(s) for s in shape)
-        if len(self.shape) != 3 or min(self.shape) < 2:
+        if isinstance(shape, (str, bytes)) or not hasattr(shape, "__len__") or len(shape) != 3:
             raise ValueError(f"shape must be (nz, ny, nx) with every extent >= 2, got {shape!r}")
+        # whole numbers of cells: (6.0, 7, 8) or a NaN once became int() silently (a probe, session 25)
+        self.shape = tuple(whole_count(f"shape[{i}]", s, least=2, what="cells") for i, s in enumerate(shape))
         if not isinstance(params, FluidParams):
             raise TypeError(
                 f"params must be a FluidParams, got {type(params).__name__}: build one, e.g. FluidParams(nu_h=0.1) "
@@ -467,6 +477,14 @@ class FluidSolver:
         u0 = np.zeros((3,) + self.shape) if velocity is None else np.asarray(velocity, np.float64)
         if u0.shape != (3,) + self.shape:
             raise ValueError(f"velocity must have shape {(3,) + self.shape}, got {u0.shape}")
+        _check_initial("velocity", u0)
+        speed = float(np.sqrt((u0**2).sum(axis=0)).max()) if u0.size else 0.0
+        if speed >= math.sqrt(CS2):  # a probe: 1000 lattice units was taken and went NaN in one step
+            raise ValueError(
+                f"velocity reaches {speed:.3g} lattice units (Δx/Δt), at or above the lattice speed of sound "
+                f"{math.sqrt(CS2):.3f}: the LBM cannot carry it (keep it below ~0.1); give the velocity in lattice "
+                "units, or use a finer Δt"
+            )
         u0 = np.where(fluid_host[None], u0, 0.0)
         vel = wall_u.astype(np.float32)
         vel[(slice(None), *INTERIOR)] = np.where(fluid_host[None], u0, vel[(slice(None), *INTERIOR)])
@@ -484,6 +502,7 @@ class FluidSolver:
             p_host = np.asarray(pressure, np.float32)
             if p_host.shape != self.shape:
                 raise ValueError(f"pressure must have the interior shape {self.shape}, got {p_host.shape}")
+            _check_initial("pressure", p_host)
             p0[INTERIOR] = p_host
         self.p = backend.asarray(p0)
         self.pbar = xp.zeros(pshape, dtype=np.float32)
@@ -526,6 +545,7 @@ class FluidSolver:
             phi0 = np.asarray(phi, np.float32)
             if phi0.shape != self.shape:
                 raise ValueError(f"phi must have the interior shape {self.shape}, got {phi0.shape}")
+            _check_initial("phi", phi0)
             self._check_interface(phi0, fluid_host)
             phi_p = wall_phi.astype(np.float32)  # inflow cells carry their phase value
             phi_p[INTERIOR] = phi0

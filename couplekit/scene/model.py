@@ -116,6 +116,9 @@ class FrozenDict(dict):
     def __reduce__(self):  # pickle and deepcopy without __setitem__
         return (type(self), (dict(self),))
 
+    def __hash__(self) -> int:  # read-only, so a frozen Scene holding one hashes (a probe: hash(scene) failed)
+        return hash(tuple(sorted(self.items())))
+
 
 class FrozenList(list):
     """A read-only list: the lists inside a validated scene's :attr:`Scene.source` (see :class:`FrozenDict`)."""
@@ -128,6 +131,9 @@ class FrozenList(list):
 
     def __reduce__(self):
         return (type(self), (list(self),))
+
+    def __hash__(self) -> int:
+        return hash(tuple(self))
 
 
 def _frozen(x: Any) -> Any:
@@ -1350,7 +1356,7 @@ def _geometry(raw: Any, path: str, base_dir: Path, source: dict | None, problems
         return None
     if cuts is None:
         return None
-    return Geometry(gtype, params, v["scale"], tuple(v["rotate"]), tuple(v["translate"]), v["invert"], cuts)
+    return Geometry(gtype, _frozen(params), v["scale"], tuple(v["rotate"]), tuple(v["translate"]), v["invert"], cuts)
 
 
 def _subtract(

@@ -230,3 +230,24 @@ def test_building_a_solver_needs_little_more_host_memory_than_it_keeps(monkeypat
         tracemalloc.stop()
     assert peak <= 1.5 * kept, (peak / 2**20, kept / 2**20)
     assert np.asarray(sliced.f).tobytes() == np.asarray(whole.f).tobytes()
+
+
+@pytest.mark.parametrize(
+    ("kw", "match"),
+    [
+        ({"velocity": np.full((3, 4, 5, 6), np.nan)}, "velocity is not finite at index"),
+        ({"velocity": np.full((3, 4, 5, 6), 2.0)}, "at or above the lattice speed of sound"),
+        ({"phi": np.full((4, 5, 6), np.inf)}, "phi is not finite"),
+        ({"pressure": np.full((4, 5, 6), np.nan)}, "pressure is not finite"),
+        ({"shape": (4.5, 5, 6)}, "shape\\[0\\] must be a whole number"),
+        ({"shape": (4, 5)}, "shape must be \\(nz, ny, nx\\)"),
+    ],
+)
+def test_a_bad_initial_state_is_refused(kw, match):
+    """A probe (session 25): NaN velocity or φ, a velocity of 1000 lattice units and a shape of (6.0, 7, 8) were all
+    taken (the NaN came out of the first step). Each is refused naming the field."""
+    args = {"shape": (4, 5, 6), "phi": np.zeros((4, 5, 6))}
+    args.update(kw)
+    shape = args.pop("shape")
+    with pytest.raises((ValueError, TypeError), match=match):
+        FluidSolver("numpy", shape, FluidParams(), **args)
