@@ -443,7 +443,8 @@ class Simulation:
 
         Sand: sand_mass (kg), ``sand_momentum_x/y/z`` (Σ m v, kg m/s), sand_kinetic_energy (J), sand_max_speed
         (m/s); ``sand_dt`` (the sand's Δt, s) and ``sand_steps_per_step`` (sand steps per time step over the
-        current frame: k sub-cycled, 1/m multi-rate, 1 lockstep) with ``substeps_min`` and ``substeps_max``.
+        current frame: k sub-cycled, 1/m multi-rate, 1 lockstep; 0 before the first step, as at a run's frame 0)
+        with ``substeps_min`` and ``substeps_max``.
 
         Both: ``total_momentum_x/y/z`` (fluid + sand momentum, kg m/s: what gravity, walls, inflows and
         stirring change and the drag exchange between fluid and sand does not) and
