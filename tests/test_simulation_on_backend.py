@@ -12,6 +12,13 @@ sand x 1.8e-8 m): its bounds are :data:`LONG_RUN` times wider. The particle velo
 bound is the loosest: the sand block sits in the air, where its grid nodes hold little mass and the drag's
 implicit update divides by it, so float32 round-off there is amplified (tests/test_standin_device.py saw the
 same with the atomics' order alone).
+
+These bounds are for these scenes, not for any scene: a probe (session 25) ran Fig. 11 small, whose sand pile
+rests packed (sand fraction ~0.6) on the floor, and found the backends 2.3e-4 apart in fluid velocity at step 10
+and 2.0e-3 at step 20. One MPM step from the same state differs by round-off (4.7e-9 m/s, 2e-6 of g Δt), but in
+the pile's first steps the difference grows ×30 per step (9.3e-10, 3.0e-8, 9.7e-7 m/s at steps 1-3, sand alone):
+the packed grains' plastic return and the floor's separating rule switch branch on round-off, and the fluid in
+the pores follows the sand.
 """
 
 from __future__ import annotations
