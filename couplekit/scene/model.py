@@ -325,7 +325,10 @@ class Geometry:
                 base = -(domain.dx if domain else 1e-3)
             s = HeightField(h, p["x_range"], p["y_range"], base, sample_spacing)
         elif self.type == "mesh":
-            s = load_mesh(p["file"], sample_spacing)
+            # the surface is sampled in the file's own units, which `scale` turns into metres: dx/4 in the world
+            # is dx/(4 scale) there (a probe: a cube in mm with scale 0.001 was sampled every dx/4 mm, 1000x
+            # too finely, and refused at run time after validating; at scale 0.1 one SDF pass took 57 s)
+            s = load_mesh(p["file"], None if sample_spacing is None else sample_spacing / self.scale)
         else:
             raise ValueError(f"unknown geometry type {self.type!r}")
         if self.scale != 1.0 or any(self.rotate) or any(self.translate):

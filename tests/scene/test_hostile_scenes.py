@@ -464,3 +464,28 @@ def test_an_integer_beyond_int64_names_the_real_limit(key, limit):
         assert f"must be {limit}" in text
     else:  # the key's own range, which 1e20 breaks
         assert "<=" in text and "9223372036854775807" not in text
+
+
+@pytest.mark.parametrize("unit", [1.0, 0.001, 0.1])
+def test_a_scaled_mesh_is_sampled_in_world_units(tmp_path, unit):
+    """A probe (session 25): the surface was sampled every dx/4 in the file's own units, so a cube written in mm
+    with scale = 0.001 validated and was then refused at run time (7.7e10 samples), and at scale 0.1 one SDF pass
+    took 57 s. The same cube in any unit, scaled to metres, gives the box's cells."""
+    from couplekit.scene.geometry import sdf_on_grid
+
+    verts = "".join(
+        f"v {x / unit} {y / unit} {z / unit}\n" for x in (0.03, 0.07) for y in (0.03, 0.07) for z in (0.03, 0.07)
+    )
+    (tmp_path / "cube.obj").write_text(_obj(_CUBE_F, verts))
+    d = {
+        "domain": {"size": [0.1, 0.1, 0.1], "dx": 0.005},
+        "time": {"dt": 1e-4, "frames": 1},
+        "bodies": [
+            {"kind": "obstacle", "geometry": {"type": "mesh", "file": str(tmp_path / "cube.obj"), "scale": unit}}
+        ],
+        "fluid": {"phases": 1},
+    }
+    scene = Scene.from_dict(d)
+    dom = scene.domain
+    cells = int((sdf_on_grid(scene.bodies[0].geometry.shape(dom, 0.25 * dom.dx), dom.resolution, dom.dx) < 0).sum())
+    assert cells == 8**3
