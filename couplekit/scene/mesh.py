@@ -504,7 +504,10 @@ def load_mesh(path: str | Path, sample_spacing: float | None = None) -> Triangle
             mesh = meshio.read(str(path))
     except (Exception, SystemExit) as exc:  # ReadError, a format reader's error, or meshio's own sys.exit(1)
         why = " ".join(said.getvalue().split()) or f"{type(exc).__name__}: {exc}"
-        raise ValueError(f"{path}: not a mesh meshio can read ({why[-300:]})") from None
+        obj = _read_obj(path) if Path(path).suffix.lower() == ".obj" else None
+        if obj is None:
+            raise ValueError(f"{path}: not a mesh meshio can read ({why[-300:]})") from None
+        mesh = obj
     faces = []
     for block in mesh.cells:
         if block.type == "triangle":
@@ -522,6 +525,13 @@ def load_mesh(path: str | Path, sample_spacing: float | None = None) -> Triangle
         raise ValueError(f"{path}: mesh faces index vertices that do not exist")
     if not np.all(np.isfinite(points)):
         raise ValueError(f"{path}: {int(np.sum(~np.isfinite(points).all(axis=1)))} mesh vertices are not finite")
+    twice = repeated_triangles(points, faces)  # first: a repeated face also leaves edges of odd count
+    if twice:
+        raise ValueError(
+            f"{path}: {twice} triangles are given more than once (the same three vertices): the inside test counts "
+            "each crossing of a repeated face twice, so the solid would vanish; remove the duplicate faces (e.g. "
+            "Blender's 'Merge by Distance' and 'Delete Loose', MeshLab's 'Remove Duplicate Faces')"
+        )
     holes = open_edges(points, faces)
     if holes:
         raise ValueError(
@@ -529,16 +539,42 @@ def load_mesh(path: str | Path, sample_spacing: float | None = None) -> Triangle
             "number), so its inside is undefined; close the holes (e.g. Blender's 'Fill Holes' or MeshLab's "
             "'Close Holes')"
         )
-    twice = repeated_triangles(points, faces)
-    if twice:
-        raise ValueError(
-            f"{path}: {twice} triangles are given more than once (the same three vertices): the inside test counts "
-            "each crossing of a repeated face twice, so the solid would vanish; remove the duplicate faces (e.g. "
-            "Blender's 'Merge by Distance' and 'Delete Loose', MeshLab's 'Remove Duplicate Faces')"
-        )
     mesh = TriangleMesh(points, faces, sample_spacing)
     mesh.source = str(path)
     return mesh
+
+
+def _read_obj(path: str | Path):
+    """A Wavefront OBJ's vertices and faces (as meshio's cell blocks) when meshio refuses the file: meshio 5
+    refuses an OBJ with fewer texture coordinates (``vt``) than vertices, which is how Blender exports one (a
+    probe, session 25). Reads ``v`` and ``f`` lines only; face entries ``i``, ``i/t``, ``i//n``, ``i/t/n``, with
+    negative (relative) indices; polygons as fans. None when it finds no faces (the caller names meshio's error)."""
+    from types import SimpleNamespace
+
+    points: list[list[float]] = []
+    tris: list[tuple[int, int, int]] = []
+    try:
+        with open(path, encoding="utf-8", errors="replace") as fh:
+            for line in fh:
+                parts = line.split()
+                if not parts:
+                    continue
+                if parts[0] == "v" and len(parts) >= 4:
+                    points.append([float(v) for v in parts[1:4]])
+                elif parts[0] == "f" and len(parts) >= 4:
+                    idx = []
+                    for entry in parts[1:]:
+                        i = int(entry.split("/")[0])
+                        idx.append(i - 1 if i > 0 else len(points) + i)
+                    tris += [(idx[0], idx[k], idx[k + 1]) for k in range(1, len(idx) - 1)]
+    except (OSError, ValueError):
+        return None
+    if not tris:
+        return None
+    return SimpleNamespace(
+        points=np.asarray(points, np.float64).reshape(-1, 3),
+        cells=[SimpleNamespace(type="triangle", data=np.asarray(tris, np.int64))],
+    )
 
 
 def load_heights(path: str | Path) -> np.ndarray:

@@ -489,3 +489,30 @@ def test_a_scaled_mesh_is_sampled_in_world_units(tmp_path, unit):
     dom = scene.domain
     cells = int((sdf_on_grid(scene.bodies[0].geometry.shape(dom, 0.25 * dom.dx), dom.resolution, dom.dx) < 0).sum())
     assert cells == 8**3
+
+
+def test_an_obj_with_texture_coordinates_and_partly_repeated_faces(tmp_path):
+    """A probe (session 25): an OBJ with fewer texture coordinates than vertices (Blender's export: `vt`, `vn`,
+    `f v/t/n`, negative indices) was refused as "not a mesh meshio can read"; it builds the cube now. A closed cube
+    with two faces repeated was called open ("6 edges belong to one triangle only"); it is named as repeated."""
+    from couplekit.scene.geometry import sdf_on_grid
+
+    corners = "".join(f"v {x} {y} {z}\n" for x in (0.03, 0.07) for y in (0.03, 0.07) for z in (0.03, 0.07))
+    uv = "vt 0 0\nvt 1 0\nvt 0 1\nvn 0 0 1\n"
+    faces = "".join(f"f {a - 9}/{1 + i % 3 - 4}/-1 {b - 9}/1/1 {c}//1\n" for i, (a, b, c) in enumerate(_CUBE_F))
+    (tmp_path / "uv.obj").write_text("o cube\n" + corners + uv + faces)
+    d = {
+        "domain": {"size": [0.1, 0.1, 0.1], "dx": 0.005},
+        "time": {"dt": 1e-4, "frames": 1},
+        "bodies": [{"kind": "obstacle", "geometry": {"type": "mesh", "file": str(tmp_path / "uv.obj")}}],
+        "fluid": {"phases": 1},
+    }
+    scene = Scene.from_dict(d)
+    dom = scene.domain
+    assert (
+        int((sdf_on_grid(scene.bodies[0].geometry.shape(dom, 0.25 * dom.dx), dom.resolution, dom.dx) < 0).sum()) == 512
+    )
+    (tmp_path / "dup.obj").write_text(_obj(_CUBE_F + _CUBE_F[:2]))
+    d["bodies"][0]["geometry"]["file"] = str(tmp_path / "dup.obj")
+    with pytest.raises(SceneError, match="2 triangles are given more than once"):
+        Scene.from_dict(d)
