@@ -25,6 +25,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -581,12 +582,16 @@ def load_heights(path: str | Path) -> np.ndarray:
     """A 2-D height grid from a .npy file or a whitespace/comma separated text file."""
     path = Path(path)
     try:
-        if path.suffix == ".npy":
+        if path.suffix.lower() == ".npy":
             h = np.load(path)  # allow_pickle is off: a pickled object is refused, not run
             if np.iscomplexobj(h):  # the cast below would drop the imaginary parts silently
                 raise ValueError(f"complex numbers ({h.dtype}); heights are real")
+            if h.dtype == bool:  # True/False read as 1 m and 0 m (a probe: taken, then a build that hung)
+                raise ValueError("booleans (a mask?); heights are numbers in metres")
         else:
-            h = np.loadtxt(path, delimiter="," if path.suffix == ".csv" else None)
+            with warnings.catch_warnings():  # an empty file: numpy's warning before our refusal below
+                warnings.simplefilter("ignore", UserWarning)
+                h = np.loadtxt(path, delimiter="," if path.suffix.lower() == ".csv" else None)
         h = np.asarray(h, dtype=np.float64)
     except OSError:
         raise

@@ -516,3 +516,19 @@ def test_an_obj_with_texture_coordinates_and_partly_repeated_faces(tmp_path):
     d["bodies"][0]["geometry"]["file"] = str(tmp_path / "dup.obj")
     with pytest.raises(SceneError, match="2 triangles are given more than once"):
         Scene.from_dict(d)
+
+
+def test_height_files_booleans_an_upper_case_csv_and_an_empty_file(tmp_path, recwarn):
+    """A probe (session 25): a boolean .npy was read as heights of 0 and 1 m (then a build that hung), a .CSV
+    (upper case) was read as whitespace-separated, and an empty file printed numpy's warning before the refusal."""
+    from couplekit.scene.mesh import load_heights
+
+    np.save(tmp_path / "mask.npy", np.ones((3, 4), bool))
+    with pytest.raises(ValueError, match="booleans"):
+        load_heights(tmp_path / "mask.npy")
+    (tmp_path / "slope.CSV").write_text("0.1,0.2,0.3\n0.1,0.2,0.3\n")
+    assert load_heights(tmp_path / "slope.CSV").shape == (2, 3)
+    (tmp_path / "empty.csv").write_text("")
+    with pytest.raises(ValueError, match="at least 2 rows"):
+        load_heights(tmp_path / "empty.csv")
+    assert not [w for w in recwarn if issubclass(w.category, UserWarning)]
