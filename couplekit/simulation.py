@@ -386,8 +386,7 @@ class Simulation:
         (:meth:`couplekit.scene.Scene.units`); the conversion is :meth:`couplekit.units.Units.to_si`.
         :meth:`write_frame` writes these SI fields into the ``.vti`` files (docs/units-and-conventions.md).
         """
-        if not isinstance(lattice, (bool, np.bool_)):  # "no" would be true: the units must be asked for exactly
-            raise TypeError(f"lattice must be True or False, got {lattice!r} ({type(lattice).__name__})")
+        lattice = flag("lattice", lattice)  # "no" would be true: the units must be asked for exactly
         u = self.units
         speed = 1.0 if lattice else u.scale("velocity")
         out: dict[str, np.ndarray] = {}

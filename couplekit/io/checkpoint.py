@@ -155,15 +155,13 @@ def _open(path):
 
     if not isinstance(path, (str, os.PathLike)):
         raise TypeError(f"path must be a checkpoint file's path (a str or a pathlib.Path), got {type(path).__name__}")
-    if not Path(path).expanduser().exists():
+    file = Path(path).expanduser()
+    if not file.exists():
         raise CheckpointError(f"{path}: no such file (give the path of a checkpoint a run saved, e.g. checkpoint.h5)")
-    if Path(path).expanduser().is_dir():
-        raise CheckpointError(
-            f"{path} is a folder: give the checkpoint file in it (e.g. {Path(path) / 'checkpoint.h5'})"
-        )
-    path = Path(path).expanduser()
+    if file.is_dir():
+        raise CheckpointError(f"{path} is a folder: give the checkpoint file in it (e.g. {file / 'checkpoint.h5'})")
     try:
-        return h5py.File(path, "r")
+        return h5py.File(file, "r")
     except OSError as exc:
         raise CheckpointError(f"{path}: not a readable HDF5 file ({exc})") from None
 
