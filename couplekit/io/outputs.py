@@ -87,27 +87,27 @@ def run_files(out: str | Path) -> list[Path]:
     if not out.is_dir():
         return []
     found = [out / n for n in RUN_FILES + (RUN_MARKER,) if (out / n).is_file()]
+    return found + [p for p, _ in _frame_files(out)]
+
+
+def _frame_files(out: Path):
+    """(path, frame number) of each per-frame file in ``out`` (:data:`RUN_PATTERNS`, the number digits only),
+    pattern by pattern, sorted within each."""
     for pattern in RUN_PATTERNS:
         head, _, tail = pattern.partition("*")
-        found += sorted(
-            p for p in out.glob(pattern) if p.is_file() and p.name[len(head) : len(p.name) - len(tail)].isdigit()
-        )
-    return found
+        for p in sorted(out.glob(pattern)):
+            number = p.name[len(head) : len(p.name) - len(tail)]
+            if p.is_file() and number.isdigit():
+                yield p, int(number)
 
 
 def later_frame_files(out: str | Path, frame: int) -> tuple[list[Path], int]:
     """(the per-frame files of frames after ``frame`` in ``out``, the last frame the folder holds: the larger of
     its per-frame files' numbers and the last ``frame`` in its diagnostics log; -1 when neither says)."""
     out = Path(out)
-    later, last = [], -1
-    for pattern in RUN_PATTERNS:
-        head, _, tail = pattern.partition("*")
-        for p in out.glob(pattern):
-            number = p.name[len(head) : len(p.name) - len(tail)]
-            if p.is_file() and number.isdigit():
-                last = max(last, int(number))
-                if int(number) > frame:
-                    later.append(p)
+    numbered = list(_frame_files(out))
+    later = [p for p, number in numbered if number > frame]
+    last = max((number for _, number in numbered), default=-1)
     log = out / "diagnostics.jsonl"
     if log.is_file():
         for line in reversed(log.read_text(encoding="utf-8", errors="replace").splitlines()):
