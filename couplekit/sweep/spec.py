@@ -497,16 +497,17 @@ def _check_overlaps(global_set, global_grid, cases, problems: list[Problem]) -> 
             problems.append(Problem(f'sweep.grid."{key}"', "is also fixed in sweep.set", "keep it in one of the two"))
 
 
-def _sets_frames(key: str, value: Any, grid: bool) -> bool:
-    """Whether the override ``key = value`` (a grid's list of values when ``grid``) sets ``time.frames``."""
+def _sets_key(key: str, value: Any, grid: bool, table: str, name: str) -> bool:
+    """Whether the override ``key = value`` (a grid's list of values when ``grid``) sets ``table.name`` (as the
+    dotted key, or inside a value for ``table``)."""
     try:
         parts = parse_key(key)
     except KeyPathError:
         return False
-    if parts == ("time", "frames"):
+    if parts == (table, name):
         return True
     values = value if grid and isinstance(value, list) else [value]
-    return parts == ("time",) and any(isinstance(v, dict) and "frames" in v for v in values)
+    return parts == (table,) and any(isinstance(v, dict) and name in v for v in values)
 
 
 def _check_frames(frames, global_set, global_grid, cases, reference, problems: list[Problem]) -> None:
@@ -517,7 +518,7 @@ def _check_frames(frames, global_set, global_grid, cases, reference, problems: l
     for where, table in _tables(global_set, global_grid, cases, reference):
         grid = where.endswith(".grid")
         for key, value in table.items():
-            if not _sets_frames(key, value, grid):
+            if not _sets_key(key, value, grid, "time", "frames"):
                 continue
             drop = "drop time.frames from the grid" if grid else f"drop time.frames from {where}"
             problems.append(
@@ -535,14 +536,7 @@ def _check_output_folder(global_set, global_grid, cases, reference, problems: li
     refused, since the value would be silently ignored (a probe, session 25)."""
     for where, table in _tables(global_set, global_grid, cases, reference):
         for key, value in table.items():
-            try:
-                parts = parse_key(key)
-            except KeyPathError:
-                continue
-            values = value if where.endswith(".grid") and isinstance(value, list) else [value]
-            if parts == ("outputs", "directory") or (
-                parts == ("outputs",) and any(isinstance(v, dict) and "directory" in v for v in values)
-            ):
+            if _sets_key(key, value, where.endswith(".grid"), "outputs", "directory"):
                 problems.append(
                     Problem(
                         f'{where}."{key}"',
