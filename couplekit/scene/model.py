@@ -1928,7 +1928,6 @@ def _check_jets_clear(
     obstacles = [(i, b.geometry.solver_shape(domain)) for i, b in built if b.kind == "obstacle"]
     if not obstacles:
         return
-    size = np.asarray(domain.size, np.float64)
     for n, inf in enumerate(inflows):
         if _face_too_large(domain, inf.face):
             continue
@@ -1941,18 +1940,10 @@ def _check_jets_clear(
         _check_inflow_open(n, inf, obstacles, domain, problems)
         if inf.sand_fraction <= 0:
             continue
-        face, sites = inflow_sites(inf, domain.shape, domain.dx, 1, rim)  # one point per open cell
-        if sites.shape[1] == 0:
+        # the cell centres from the face to beyond the emission plane, in front of the open area
+        pts = _cells_in_front(inf, domain, rim + 2, rim)
+        if pts.shape[0] == 0:
             continue
-        axis = "xyz".index(face[0])
-        plane = [a for a in range(3) if a != axis]
-        depth = (np.arange(rim + 2) + 0.5) * domain.dx  # cell centres from the face to beyond the emission plane
-        if face[1] == "+":
-            depth = size[axis] - depth
-        pts = np.empty((sites.shape[1] * depth.size, 3))
-        pts[:, plane[0]] = np.tile(sites[0], depth.size)
-        pts[:, plane[1]] = np.tile(sites[1], depth.size)
-        pts[:, axis] = np.repeat(depth, sites.shape[1])
         for j, shape in obstacles:
             inside = np.asarray(shape.sdf(pts)) < 0
             if inside.any():
@@ -1971,18 +1962,29 @@ def _check_jets_clear(
                 break
 
 
+def _cells_in_front(inf: Inflow, domain: Domain, depth: int, rim: int) -> np.ndarray:
+    """The centres (N, 3) of the cells in the first ``depth`` layers inside inflow ``inf``'s face, in front of its
+    open cells (those ``rim`` cells or more from the face's edges: :func:`couplekit.sand.emission.inflow_sites`)."""
+    face, sites = inflow_sites(inf, domain.shape, domain.dx, 1, rim)  # one point per open cell
+    axis = "xyz".index(face[0])
+    plane = [a for a in range(3) if a != axis]
+    along = (np.arange(depth) + 0.5) * domain.dx
+    if face[1] == "+":
+        along = domain.size[axis] - along
+    pts = np.empty((sites.shape[1] * along.size, 3))
+    pts[:, plane[0]] = np.tile(sites[0], along.size)
+    pts[:, plane[1]] = np.tile(sites[1], along.size)
+    pts[:, axis] = np.repeat(along, sites.shape[1])
+    return pts
+
+
 def _check_inflow_open(n: int, inf: Inflow, obstacles, domain: Domain, problems: list[Problem]) -> None:
     """Some cell in front of inflow ``n``'s open area (the interior cells next to its face) is outside every
     obstacle: an outlet wholly behind obstacles delivers nothing (a probe, session 25: a 4 × 4 outlet behind a box
     validated and ran with no water entering)."""
-    face, sites = inflow_sites(inf, domain.shape, domain.dx, 1, 0)  # one point per open cell
-    if sites.shape[1] == 0:
+    pts = _cells_in_front(inf, domain, 1, 0)
+    if pts.shape[0] == 0:
         return  # an outlet covering no cell centre: refused by the inflow checks
-    axis = "xyz".index(face[0])
-    plane = [a for a in range(3) if a != axis]
-    pts = np.empty((sites.shape[1], 3))
-    pts[:, plane[0]], pts[:, plane[1]] = sites[0], sites[1]
-    pts[:, axis] = 0.5 * domain.dx if face[1] == "-" else domain.size[axis] - 0.5 * domain.dx
     try:
         blocked = np.zeros(pts.shape[0], bool)
         for _, shape in obstacles:
