@@ -486,7 +486,10 @@ class ReferenceOps:
         it): the fluid in a 1500 kg/m³ ball falling at 0.31 m/s rose at 1.2 m/s after 208 steps, and sand
         balls bounced off the water (tests/test_fig08_sand_densities.py).  Weighted by φ it rises at
         0.03 m/s.  The term keeps its full weight in water, where the mixture continuity matters for the
-        sand (air's drag on it is ~800× weaker).
+        sand (air's drag on it is ~800× weaker).  The same loop returns in water at a small Δt, where the drag
+        per step (∝ Δt/Δx) no longer outruns it: Fig. 2's floating ring rises out of the pool at Δt = 6e-5 s
+        (docs/fluid-stability.md, 'The slip term at a small time step'; a strict xfail in
+        tests/test_paper_scenes.py).  Not fixed.
         """
         if fsum is None:
             s0 = self.load(f, flags, velocity, parity).sum(axis=0)
