@@ -41,14 +41,14 @@ import time
 from pathlib import Path
 
 from . import __version__
-from .backend import BackendUnavailableError, KernelBuildError, cuda_status, get_backend, host_tools
+from .backend import BackendUnavailableError, KernelBuildError, KernelCacheError, cuda_status, get_backend, host_tools
 
 
 def _cmd_info(args: argparse.Namespace) -> int:
     print(f"couplekit {__version__}")
     try:
         backend = get_backend(args.backend, threads=args.threads)
-    except (BackendUnavailableError, ValueError) as exc:
+    except (BackendUnavailableError, KernelCacheError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     print(backend.describe())
@@ -66,9 +66,15 @@ def _cmd_info(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     try:
         results = run_selfcheck(backend)
+    except KernelCacheError as exc:  # a setting to fix, not a kernel failure
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     except KernelBuildError as exc:
         print(f"selfcheck: kernel build failed\n{exc}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt:
+        print("interrupted: the self-check did not finish (kernels it built stay in the cache)", file=sys.stderr)
+        return 130
     for r in results:
         print(
             f"selfcheck {'ok  ' if r.ok else 'FAIL'} {r.name}: rel. error {r.error:.2e} (tolerance {r.tolerance:.0e})"
@@ -197,8 +203,8 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         print(f"error: cannot write the results to {args.out or 'benchmarks/results'}: {exc}; choose another --out",
               file=sys.stderr)  # fmt: skip
         return 2
-    except KeyboardInterrupt:
-        print("interrupted: no results written", file=sys.stderr)
+    except KeyboardInterrupt:  # run_bench writes all six files or none (bench.runner.write_all)
+        print("interrupted: no results written (any results already in the folder are as they were)", file=sys.stderr)
         return 130
     print(res["table1_md"])
     print()
@@ -310,7 +316,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     except (CouplingUnavailableError, InsufficientMemoryError) as exc:
         print(f"refused: {exc}", file=sys.stderr)
         return 3
-    except (BackendUnavailableError, CheckpointError, OutputFolderError, ValueError) as exc:
+    except (BackendUnavailableError, KernelCacheError, CheckpointError, OutputFolderError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     except OSError as exc:  # the output folder cannot be made: a name too long, a read-only or full disk
@@ -429,15 +435,18 @@ def _cmd_schema(args: argparse.Namespace) -> int:
 
 def _cmd_plot(args: argparse.Namespace) -> int:
     """``couplekit plot``: exit 0 when summary.png is written, 2 for an unusable run folder or log."""
-    from .io.plots import RunLogError, load_run, plot_run
+    from .io.plots import PlotOptionError, RunLogError, load_run, plot_run
 
     try:
         for note in load_run(args.run_dir).notes:
             print(f"note: {note}", file=sys.stderr)
         paths = plot_run(args.run_dir, out=args.out)
-    except RunLogError as exc:
+    except (RunLogError, PlotOptionError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:  # plot_run writes its PNG whole or not at all
+        print("interrupted: nothing written", file=sys.stderr)
+        return 130
     except OSError as exc:
         print(f"error: cannot write the plot to {args.out or args.run_dir}: {exc}; choose another --out",
               file=sys.stderr)  # fmt: skip
@@ -449,20 +458,35 @@ def _cmd_plot(args: argparse.Namespace) -> int:
 
 def _cmd_compare(args: argparse.Namespace) -> int:
     """``couplekit compare``: exit 0 when the PNGs are written, 2 for an unusable run folder, log or option."""
-    from .io.plots import RunLogError, compare_runs, load_run
+    from .io.plots import PlotOptionError, RunLogError, compare_runs, load_run
 
     if args.labels is not None and len(args.labels) != len(args.run_dirs):
         print(f"error: {len(args.labels)} --labels for {len(args.run_dirs)} run folders: give one label per run",
               file=sys.stderr)  # fmt: skip
         return 2
+    seen: dict[Path, int] = {}
+    for i, run_dir in enumerate(args.run_dirs):
+        first = seen.setdefault(Path(run_dir).resolve(), i)
+        if first != i:
+            print(
+                f"note: {run_dir} is given twice (runs {first + 1} and {i + 1}): their lines coincide", file=sys.stderr
+            )
+    if args.labels is not None:
+        for i, lab in enumerate(args.labels):
+            if lab.strip() and args.labels.index(lab) < i:
+                print(f"note: label {lab!r} is given to runs {args.labels.index(lab) + 1} and {i + 1}: the legend "
+                      "cannot tell them apart", file=sys.stderr)  # fmt: skip
     try:
         for run_dir in args.run_dirs:
             for note in load_run(run_dir).notes:
                 print(f"note: {note}", file=sys.stderr)
         paths = compare_runs(args.run_dirs, args.out, labels=args.labels)
-    except RunLogError as exc:
+    except (RunLogError, PlotOptionError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:  # compare_runs writes its PNGs all or none
+        print("interrupted: nothing written", file=sys.stderr)
+        return 130
     except OSError as exc:
         print(f"error: cannot write the plots to {args.out}: {exc}; choose another --out", file=sys.stderr)
         return 2
@@ -502,7 +526,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--tiny", action="store_true", help="the test suite's size: runs and writes, timings meaningless"
     )
     bench.add_argument("--out", default=None, metavar="DIR", help="results folder (default benchmarks/results)")
-    bench.add_argument("--backend", default=None, help="cpu (default; numpy with --tiny), cuda, numpy")
+    bench.add_argument(
+        "--backend",
+        default=None,
+        help="cpu (default; numpy with --tiny), cuda, numpy, or cpu-device (the kernels' GPU code paths on the host)",
+    )
     bench.add_argument("--no-progress", action="store_true", help="no progress bar")
     bench.set_defaults(func=_cmd_bench)
 

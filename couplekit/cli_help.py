@@ -24,7 +24,8 @@ EXIT_CODES: dict[str, dict[int, str]] = {
     "info": {
         0: "done; with --selfcheck, every kernel agrees with the NumPy reference",
         1: "--selfcheck: a kernel failed to build or disagrees with NumPy",
-        2: "the backend asked for is unavailable, or a bad option",
+        2: "the backend asked for is unavailable, the kernel cache folder is unusable, or a bad option",
+        130: "interrupted by Ctrl-C (kernels already built stay in the cache)",
         141: _CLOSED,
     },
     "validate": {
@@ -52,17 +53,20 @@ EXIT_CODES: dict[str, dict[int, str]] = {
     "plot": {
         0: "summary.png written (a cut-short last line of the log is skipped, with a note)",
         2: "no such run folder, no or unreadable diagnostics.jsonl, or the PNG cannot be written",
+        130: "interrupted by Ctrl-C (nothing written)",
         141: _CLOSED,
     },
     "compare": {
-        0: "compare.png and compare_stages.png written",
-        2: "a run folder or its log is unusable, --labels does not match the runs, or the PNGs cannot be written",
+        0: "compare.png and compare_stages.png written (the second only when the runs logged stage costs)",
+        2: "a run folder or its log is unusable, --labels does not match the runs or one is empty, --out is not a "
+        "folder or .png, or the PNGs cannot be written",
+        130: "interrupted by Ctrl-C (nothing written: the PNGs are written all or none)",
         141: _CLOSED,
     },
     "bench": {
         0: "every measurement ran; results (JSON, PNG, markdown) written",
         2: "a bad option, or the results folder cannot be written",
-        130: "interrupted by Ctrl-C (no results are written)",
+        130: "interrupted by Ctrl-C (no results are written; results already in the folder stay as they were)",
         141: _CLOSED,
     },
     "schema": {

@@ -87,7 +87,8 @@ def _stirred_box_cells(scene) -> int:
 
 def effect_memory(scene) -> dict[str, dict[str, float]]:
     """Per effect that applies to ``scene``: whether it is on, and the bytes per cell / per particle it costs
-    and in total at the scene's size (``bytes_total``; 0 for an effect that is off)."""
+    and in total over the scene's cells (``bytes_total``, the per-particle bytes not included: they grow with
+    the particles a run holds; 0 for an effect that is off)."""
     nx, ny, nz = scene.domain.resolution
     padded, cells = (nx + 2) * (ny + 2) * (nz + 2), nx * ny * nz
     fl, eff = scene.fluid, scene.effects

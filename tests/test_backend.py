@@ -133,3 +133,27 @@ def test_kernel_sees_a_new_array_at_a_reused_id(cpu1):
         fn(a.size, a)
         assert not a.any()
         del a
+
+
+def test_an_unusable_kernel_cache_or_cxx_is_named_with_the_fix(monkeypatch, tmp_path, capsys):
+    """A ``COUPLEKIT_CACHE_DIR`` that is a file is refused when a host backend is built (exit 2 from info and
+    run, the run's folder not made), not as a raw FileExistsError at the first build; a ``CXX`` that is not an
+    executable is named as such (it read "no host C++ compiler found (set CXX ...)" with CXX set)."""
+    from couplekit.backend import KernelCacheError, cpu_status
+    from couplekit.cli import main
+
+    cache = tmp_path / "afile"
+    cache.write_text("")
+    monkeypatch.setenv("COUPLEKIT_CACHE_DIR", str(cache))
+    with pytest.raises(KernelCacheError, match="is a file, not a folder: set COUPLEKIT_CACHE_DIR"):
+        get_backend("cpu")
+    assert main(["info", "--backend", "cpu", "--selfcheck"]) == 2
+    assert "COUPLEKIT_CACHE_DIR" in capsys.readouterr().err
+    scene = Path(__file__).resolve().parents[1] / "examples" / "sand_drop_small.toml"
+    out = tmp_path / "run"
+    assert main(["run", str(scene), "--backend", "cpu", "--out", str(out), "--no-progress"]) == 2
+    assert "COUPLEKIT_CACHE_DIR" in capsys.readouterr().err and not out.exists()
+    monkeypatch.delenv("COUPLEKIT_CACHE_DIR")
+    monkeypatch.setenv("CXX", str(tmp_path / "no-such-g++"))
+    ok, why = cpu_status()
+    assert not ok and f"CXX={tmp_path / 'no-such-g++'} is not an executable C++ compiler" in why

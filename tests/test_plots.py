@@ -280,3 +280,74 @@ def test_a_one_frame_runs_stage_costs_are_drawn(tmp_path):
     total = sum(v for k, v in timed[0].items() if k.startswith("stage_") and k.endswith("_ms"))
     assert heights and sum(heights) == pytest.approx(total, rel=1e-6)
     plt.close(fig)
+
+
+# ------------------------------------------------------------------ hostile inputs (session 26 probe)
+def test_compare_writes_all_or_nothing_and_drops_a_stale_stage_chart(runs, tmp_path, monkeypatch, capsys):
+    """A compare into a folder an earlier compare used removes that compare's stage chart when these runs logged
+    no stage costs (it showed other runs); Ctrl-C while writing leaves neither new PNG and no folder it made."""
+    out = tmp_path / "cmp"
+    compare_runs([runs["fluid"], runs["coupled"]], out)
+    assert (out / "compare_stages.png").is_file()
+    bare = tmp_path / "bare"
+    bare.mkdir()
+    records = [json.loads(s) for s in (runs["fluid"] / "diagnostics.jsonl").read_text().splitlines()]
+    (bare / "diagnostics.jsonl").write_text(
+        "\n".join(json.dumps({k: v for k, v in r.items() if not k.startswith("stage_")}) for r in records) + "\n"
+    )
+    assert compare_runs([bare, bare], out) == [out / "compare.png"]
+    assert not (out / "compare_stages.png").exists()
+
+    import matplotlib.figure
+
+    calls = {"n": 0}
+    real = matplotlib.figure.Figure.savefig
+
+    def interrupted(self, *args, **kwargs):
+        calls["n"] += 1
+        if calls["n"] == 2:  # the second PNG: the first is already written (to its temporary name)
+            raise KeyboardInterrupt
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(matplotlib.figure.Figure, "savefig", interrupted)
+    fresh = tmp_path / "new" / "deeper"
+    assert main(["compare", str(runs["fluid"]), str(runs["coupled"]), "--out", str(fresh)]) == 130
+    assert "interrupted: nothing written" in capsys.readouterr().err
+    assert not (tmp_path / "new").exists()
+
+
+def test_compare_refuses_unusable_outputs_and_labels_and_notes_duplicates(runs, tmp_path, capsys):
+    assert main(["compare", str(runs["fluid"]), "--out", str(tmp_path / "x.jpg")]) == 2
+    assert "PNG images" in capsys.readouterr().err and not (tmp_path / "x.jpg").exists()
+    assert main(["compare", str(runs["fluid"]), str(runs["sand"]), "--labels", "", "", "--out", str(tmp_path)]) == 2
+    assert "label 1 is empty" in capsys.readouterr().err
+    assert main(["compare", str(runs["fluid"]), str(runs["fluid"]), "--out", str(tmp_path / "d")]) == 0
+    assert "given twice" in capsys.readouterr().err
+    assert main(["compare", str(runs["fluid"]), str(runs["sand"]), "--labels", "a", "a", "--out", str(tmp_path)]) == 0
+    assert "label 'a' is given to runs 1 and 2" in capsys.readouterr().err
+
+
+def test_damaged_logs_are_named_with_the_right_fix(runs, tmp_path, capsys):
+    # the log file given instead of its folder: the folder is suggested
+    assert main(["compare", str(runs["fluid"] / "diagnostics.jsonl"), "--out", str(tmp_path)]) == 2
+    assert f"give the run folder that holds it ({runs['fluid']})" in capsys.readouterr().err
+    # whole JSON that is not a record: damage, not a cut-short line
+    run = tmp_path / "list"
+    run.mkdir()
+    (run / "diagnostics.jsonl").write_text("[1, 2]\n")
+    with pytest.raises(RunLogError, match=r"line 1 is JSON but not an object \(a list\)"):
+        load_run(run)
+    # diagnostics.jsonl a folder
+    run = tmp_path / "folderlog"
+    (run / "diagnostics.jsonl").mkdir(parents=True)
+    with pytest.raises(RunLogError, match="is not a file"):
+        load_run(run)
+    # a time that is not a number is plotted as missing, not a traceback (plot and compare)
+    run = tmp_path / "badtime"
+    run.mkdir()
+    records = [json.loads(s) for s in (runs["fluid"] / "diagnostics.jsonl").read_text().splitlines()]
+    records[0]["time"] = None
+    records[-1]["time"] = "0.02s"
+    (run / "diagnostics.jsonl").write_text("\n".join(json.dumps(r) for r in records) + "\n")
+    assert main(["plot", str(run)]) == 0
+    assert main(["compare", str(run), str(runs["fluid"]), "--out", str(tmp_path / "c")]) == 0

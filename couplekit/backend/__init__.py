@@ -24,14 +24,15 @@ from typing import Any
 
 import numpy as np
 
-from .errors import BackendUnavailableError, KernelArgumentError, KernelBuildError
-from .host import cache_dir, compiler_version, find_compiler
+from .errors import BackendUnavailableError, KernelArgumentError, KernelBuildError, KernelCacheError
+from .host import cache_dir, compiler_version, ensure_cache_dir, find_compiler, no_compiler_message
 
 __all__ = [
     "Backend",
     "BackendUnavailableError",
     "KernelArgumentError",
     "KernelBuildError",
+    "KernelCacheError",
     "BACKENDS",
     "NAMED_BACKENDS",
     "cpu_device_status",
@@ -69,7 +70,7 @@ def cpu_status() -> tuple[bool, str]:
     """(usable, why): whether a host C++ compiler with OpenMP is present."""
     cxx = find_compiler()
     if cxx is None:
-        return False, "no host C++ compiler found (set CXX or install g++)"
+        return False, no_compiler_message()
     return True, f"host build with {compiler_version(cxx)}"
 
 
@@ -89,6 +90,10 @@ class Backend:
     reason: str
     threads: int | None = None
     _modules: dict = field(default_factory=dict, repr=False)
+
+    def __post_init__(self) -> None:
+        if self.name in ("cpu", "cpu-device"):  # a kernel cache that is a file: refused now, not at the first build
+            ensure_cache_dir()
 
     @property
     def xp(self) -> ModuleType:

@@ -9,5 +9,10 @@ class KernelBuildError(RuntimeError):
     """A kernel failed to compile; the message holds the command and the compiler's output."""
 
 
+class KernelCacheError(KernelBuildError):
+    """The kernel cache folder (``$COUPLEKIT_CACHE_DIR``, else ``$XDG_CACHE_HOME/couplekit/kernels``) cannot be
+    made or written: a setting to fix, not a compiler failure."""
+
+
 class KernelArgumentError(TypeError):
     """A kernel was called with arguments that do not match its C signature."""

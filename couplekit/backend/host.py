@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import KernelBuildError
+from .errors import KernelBuildError, KernelCacheError
 from .signature import Signature, check_args, parse_kernels
 from .sources import kernel_path, source_digest
 
@@ -52,6 +52,14 @@ def find_compiler() -> str | None:
     return None
 
 
+def no_compiler_message() -> str:
+    """Why :func:`find_compiler` found none, and the fix: a ``$CXX`` that is not an executable is named."""
+    cxx = os.environ.get("CXX")
+    if cxx:
+        return f"CXX={cxx} is not an executable C++ compiler (set CXX to one, e.g. g++, or unset it)"
+    return "no host C++ compiler found (set CXX or install g++)"
+
+
 @functools.cache
 def compiler_version(cxx: str) -> str:
     """First line of ``cxx --version``."""
@@ -78,6 +86,23 @@ def cache_dir() -> Path:
         return Path(env).expanduser()
     base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
     return Path(base) / "couplekit" / "kernels"
+
+
+def ensure_cache_dir() -> Path:
+    """:func:`cache_dir`, made if missing; :class:`KernelCacheError` naming the fix when it is a file or cannot
+    be made or written (the host backends check it when they are built, before a run allocates anything)."""
+    out_dir = cache_dir()
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        if not os.access(out_dir, os.W_OK | os.X_OK):
+            raise PermissionError(f"{out_dir} is not writable")
+    except OSError as exc:
+        what = "is a file, not a folder" if out_dir.exists() and not out_dir.is_dir() else f"cannot be used ({exc})"
+        raise KernelCacheError(
+            f"the kernel cache {out_dir} {what}: set COUPLEKIT_CACHE_DIR to a writable folder (or unset it for "
+            "$XDG_CACHE_HOME/couplekit/kernels)"
+        ) from None
+    return out_dir
 
 
 def define_flags(defines: dict[str, int | float | str | bool] | None) -> list[str]:
@@ -119,14 +144,13 @@ def build_library(
     """
     cxx = cxx or find_compiler()
     if cxx is None:
-        raise KernelBuildError("no C++ compiler found (set CXX, or install g++)")
+        raise KernelBuildError(no_compiler_message())
     if defines and DEVICE_PATH_DEFINE in defines:
         raise ValueError(f"{DEVICE_PATH_DEFINE} is set by device_path=True (the cpu-device backend), not a define")
     mode = [f"-D{DEVICE_PATH_DEFINE}=1"] if device_path else []
     flags = [*HOST_FLAGS, *mode, *define_flags(defines), f"-I{source.parent}"]
     key = source_digest(source, "\n".join([*flags, compiler_version(cxx), _cpu_model()]))
-    out_dir = cache_dir()
-    out_dir.mkdir(parents=True, exist_ok=True)
+    out_dir = ensure_cache_dir()
     library = out_dir / f"{source.stem}{'-device' if device_path else ''}-{key[:20]}.so"
     command = [cxx, *flags, str(source), "-o", str(library)]
     if library.is_file():

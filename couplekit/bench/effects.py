@@ -162,9 +162,16 @@ def measure(data: dict, backend: str = "cpu", steps: int = 10, repeats: int = 3)
     }
 
 
+MIN_PAIRS_95 = 6
+"""The fewest values whose range covers the median with 95 % confidence (1 − 2·2⁻ⁿ ≥ 0.95 from n = 6): below
+it no interval of order statistics is a 95 % one (2 values: 50 %), so no cost is called resolved."""
+
+
 def median_interval(xs: list[float], level: float = 0.95) -> tuple[float, float]:
     """Distribution-free confidence interval of the median: the order statistics x_(k), x_(n+1-k) with the
-    largest k for which P(Binomial(n, 1/2) < k) ≤ (1 − level)/2 (the whole range for fewer than 6 values)."""
+    largest k for which P(Binomial(n, 1/2) < k) ≤ (1 − level)/2. For fewer than :data:`MIN_PAIRS_95` values
+    it returns the whole range, which covers the median with only 1 − 2^(1−n) confidence (50 % for 2 values):
+    :func:`ratio_summary` and :func:`stage_cost` then call nothing resolved."""
     from math import comb
 
     ys, n = sorted(xs), len(xs)
@@ -181,7 +188,8 @@ def median_interval(xs: list[float], level: float = 0.95) -> tuple[float, float]
 def ratio_summary(block_ratios: list[float]) -> dict:
     """Median, quartiles, extremes and the 95 % confidence interval of the median of the per-pair on/off
     time ratios, and whether the cost is resolved: it is not when that interval contains 1.0 (the scatter of
-    the pairs, over their number, is larger than the effect's own size |median − 1|)."""
+    the pairs, over their number, is larger than the effect's own size |median − 1|), nor with fewer than
+    :data:`MIN_PAIRS_95` pairs (no 95 % interval exists)."""
     med = float(np.quantile(block_ratios, 0.5))
     lo, hi = median_interval(block_ratios)
     return {
@@ -191,7 +199,9 @@ def ratio_summary(block_ratios: list[float]) -> dict:
         "ratio_min": min(block_ratios),
         "ratio_max": max(block_ratios),
         "ratio_ci95": [lo, hi],
-        "resolved": not (lo <= 1.0 <= hi),
+        "pairs": len(block_ratios),
+        # fewer pairs than a 95 % interval needs: not resolved, whatever the range (MIN_PAIRS_95)
+        "resolved": len(block_ratios) >= MIN_PAIRS_95 and not (lo <= 1.0 <= hi),
     }
 
 
@@ -275,7 +285,7 @@ def stage_cost(pair: dict, own: tuple[str, ...]) -> dict:
     ]
     lo, hi = median_interval(fr)
     return {"stages": list(own), "fraction_median": float(np.quantile(fr, 0.5)), "fraction_ci95": [lo, hi],
-            "resolved": not (lo <= 0.0 <= hi)}  # fmt: skip
+            "pairs": len(fr), "resolved": len(fr) >= MIN_PAIRS_95 and not (lo <= 0.0 <= hi)}  # fmt: skip
 
 
 def run_effect_costs(
@@ -310,7 +320,9 @@ def run_effect_costs(
             "s_per_step_on": res["on"]["s_per_step"],
             "s_per_step_off": res["off"]["s_per_step"],
             "time_ratio_on_off": res["ratio_median"],
-            **{k: res[k] for k in ("ratio_q1", "ratio_q3", "ratio_min", "ratio_max", "ratio_ci95", "resolved")},
+            **{
+                k: res[k] for k in ("ratio_q1", "ratio_q3", "ratio_min", "ratio_max", "ratio_ci95", "pairs", "resolved")
+            },
             # the fastest block of each (contention only ever adds time): a second estimate
             "ratio_of_fastest": min(res["block_s_per_step"]["on"]) / min(res["block_s_per_step"]["off"]),
             "block_ratios": res["block_ratios"],
@@ -320,7 +332,10 @@ def run_effect_costs(
             "allocated_difference": res["on"]["allocated_bytes"] - res["off"]["allocated_bytes"],
             "reported_bytes_per_cell": table.get("bytes_per_cell"),
             "reported_bytes_per_particle": table.get("bytes_per_particle"),
-            "reported_total": table.get("bytes_total"),
+            # the effect table's per-cell total plus its per-particle bytes times the particles the run holds
+            "reported_total": None
+            if table.get("bytes_total") is None
+            else table["bytes_total"] + (table.get("bytes_per_particle") or 0.0) * res["on"]["particles"],
             "kept_when_off": table.get("kept_when_off", ""),
             "stage_cost": stage_cost(res, own) if own else None,
             "stages_ms_on": res["on"]["stages_ms_per_step"],
@@ -334,7 +349,8 @@ def run_effect_costs(
         "clock": clock,
         "method": "interleaved blocks (measure_pair); ratio = median of the per-pair on/off ratios, spread: "
         "interquartile range of the pairs and the 95 % interval of the median; not resolved when that "
-        "interval contains 1.0",
+        f"interval contains 1.0 or with fewer than {MIN_PAIRS_95} pairs (then the 'interval' is the pairs' range, "
+        "a 1 - 2^(1-n) one)",
         "effects": rows,
     }
 
@@ -356,7 +372,9 @@ def markdown_table(result: dict) -> str:
         rep = "-" if r["reported_bytes_per_cell"] is None else f"{r['reported_bytes_per_cell']:.3g}"
         if r["reported_bytes_per_particle"]:
             rep += f" + {r['reported_bytes_per_particle']:.3g}/particle"
+        few = r.get("pairs", MIN_PAIRS_95) < MIN_PAIRS_95
         cost = f"{100 * (r['time_ratio_on_off'] - 1):+.0f} %" if r["resolved"] else "not resolved"
+        cost += f" ({r['pairs']} pairs: too few for a 95 % interval)" if few else ""
         sc = r.get("stage_cost")
         if sc:
             lo, hi = sc["fraction_ci95"]

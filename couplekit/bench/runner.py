@@ -8,7 +8,9 @@ tables under an output folder (default ``benchmarks/results/``), with a progress
 
 from __future__ import annotations
 
+import contextlib
 import json
+import os
 import platform
 import time
 from pathlib import Path
@@ -90,8 +92,8 @@ def run_bench(
     ``effect_costs.json``, ``effect_costs.png``, ``effect_costs.md`` into ``out``; returns the paths and
     the markdown tables."""
     out = Path(out) if out is not None else RESULTS
-    out.mkdir(parents=True, exist_ok=True)
-    backend = backend or ("numpy" if tiny else "cpu")
+    check_writable(out)  # refused before anything is measured; the folder is made only to write the results
+    backend = (backend or ("numpy" if tiny else "cpu")).strip().lower()
     figures = QUICK_FIGURES if (quick or tiny) else None
     effect_names = (QUICK_EFFECTS[:2] if tiny else QUICK_EFFECTS) if (quick or tiny) else None
     n_rows = len(figures) if figures else len(table1_mod.TABLE1)
@@ -114,16 +116,56 @@ def run_bench(
     ec.update({"machine": machine, "quick": quick, "tiny": tiny})
     bar.close()
     md1, md2 = table1_mod.markdown_table(t1), effects_mod.markdown_table(ec)
-    paths = {
-        "table1.json": out / "table1.json",
-        "effect_costs.json": out / "effect_costs.json",
-        "table1.md": out / "table1.md",
-        "effect_costs.md": out / "effect_costs.md",
+    writers = {
+        "table1.json": lambda p: p.write_text(json.dumps(t1, indent=1, default=str) + "\n"),
+        "effect_costs.json": lambda p: p.write_text(json.dumps(ec, indent=1, default=str) + "\n"),
+        "table1.md": lambda p: p.write_text(md1 + "\n"),
+        "effect_costs.md": lambda p: p.write_text(md2 + "\n"),
+        "table1.png": lambda p: table1_mod.plot_table1(t1, p),
+        "effect_costs.png": lambda p: plot_effects(ec, p),
     }
-    paths["table1.json"].write_text(json.dumps(t1, indent=1, default=str) + "\n")
-    paths["effect_costs.json"].write_text(json.dumps(ec, indent=1, default=str) + "\n")
-    paths["table1.md"].write_text(md1 + "\n")
-    paths["effect_costs.md"].write_text(md2 + "\n")
-    paths["table1.png"] = table1_mod.plot_table1(t1, out / "table1.png")
-    paths["effect_costs.png"] = plot_effects(ec, out / "effect_costs.png")
+    paths = write_all(out, writers)
     return {"paths": paths, "table1_md": md1, "effect_costs_md": md2, "table1": t1, "effect_costs": ec}
+
+
+def check_writable(out: Path) -> None:
+    """OSError, before anything is measured, when the results folder ``out`` cannot be made or written: it is a
+    file, lies under a file, or its nearest existing folder is not writable."""
+    if out.exists() and not out.is_dir():
+        raise NotADirectoryError(f"{out} is a file, not a folder")
+    base = out
+    while not base.exists():
+        base = base.parent
+    if not base.is_dir():
+        raise NotADirectoryError(f"{base} is a file, not a folder")
+    if not os.access(base, os.W_OK | os.X_OK):
+        raise PermissionError(f"{base} is not writable")
+
+
+def write_all(out: Path, writers: dict) -> dict[str, Path]:
+    """Write every result of ``writers`` (name -> function writing that file at the path it is given) into
+    ``out`` all or nothing: each to a temporary file first, then all moved into place; on any failure or
+    Ctrl-C the temporary files are removed, the results already in ``out`` stay as they were, and a folder this
+    call made is removed again."""
+    made = []
+    for folder in (out, *out.parents):
+        if folder.exists():
+            break
+        made.append(folder)
+    tmps: dict[str, Path] = {}
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        for name, write in writers.items():
+            tmp = out / f".{Path(name).stem}.tmp{Path(name).suffix}"  # the suffix keeps matplotlib's format
+            tmps[name] = tmp
+            write(tmp)
+        for name, tmp in tmps.items():
+            os.replace(tmp, out / name)
+    except BaseException:
+        for tmp in tmps.values():
+            tmp.unlink(missing_ok=True)
+        for folder in made:  # innermost first; only folders this call made, and only if still empty
+            with contextlib.suppress(OSError):
+                folder.rmdir()
+        raise
+    return {name: out / name for name in writers}

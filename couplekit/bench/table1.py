@@ -242,7 +242,7 @@ def plot_table1(result: dict, path: Path) -> Path:
     ax.set_xticks(x, labels, rotation=45, ha="right")
     ax.set_yscale("log")
     ax.set_ylabel(f"s per frame (frame = {result['frame_duration_s']:.4g} s)")
-    ax.set_title("Paper 000 Table 1: paper's timings vs couplekit's bandwidth projection")
+    ax.set_title("Paper 000 Table 1:\npaper's timings vs couplekit's bandwidth projection", fontsize=10)  # fits
     ax.legend(fontsize=7)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -15,6 +15,7 @@ panel.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -58,7 +59,7 @@ class RunLog:
     def series(self, key: str) -> tuple[np.ndarray, np.ndarray]:
         """(time s, value) of ``key`` over the frames that logged it (NaN where a value is not a number)."""
         rows = [r for r in self.records if key in r]
-        t = np.array([float(r.get("time", np.nan)) for r in rows])
+        t = np.array([_number(r.get("time")) for r in rows])  # NaN where the log's time is not a number
         v = np.array([_number(r[key]) for r in rows])
         return t, v
 
@@ -90,12 +91,17 @@ def load_run(run_dir: str | Path) -> RunLog:
     while writing it) is skipped and noted in :attr:`RunLog.notes`; raises :class:`RunLogError` for a missing
     folder or log, an empty log, or an unreadable line before the last."""
     folder = Path(run_dir)
-    if not folder.is_dir():
-        what = "is a file, not a folder" if folder.exists() else "does not exist"
+    if folder.is_file():  # e.g. the run's diagnostics.jsonl itself: the folder holding it is what is meant
         raise RunLogError(
-            f"run folder {folder} {what}: give the folder a run wrote into (couplekit run SCENE --out {folder})"
+            f"run folder {folder} is a file, not a folder: give the run folder that holds it ({folder.parent})"
+        )
+    if not folder.is_dir():
+        raise RunLogError(
+            f"run folder {folder} does not exist: give the folder a run wrote into (couplekit run SCENE --out {folder})"
         )
     log = folder / "diagnostics.jsonl"
+    if log.exists() and not log.is_file():
+        raise RunLogError(f"{log} is not a file (a folder?): it is not a run's log; give a folder a run wrote into")
     if not log.is_file() and (folder / "run" / "diagnostics.jsonl").is_file():  # a sweep point's folder
         raise RunLogError(
             f"{folder} is a sweep point's folder: its run is in {folder / 'run'}; give that folder instead"
@@ -115,8 +121,6 @@ def load_run(run_dir: str | Path) -> RunLog:
     for idx, (n, s) in enumerate(lines):
         try:
             rec = json.loads(s)
-            if not isinstance(rec, dict):
-                raise ValueError("not a JSON object")
         except ValueError as exc:
             if idx == len(lines) - 1:
                 notes.append(
@@ -127,6 +131,11 @@ def load_run(run_dir: str | Path) -> RunLog:
                 f"{log}: line {n} is not a JSON object ({exc}); the log was damaged or edited; remove the line, or "
                 "run the scene again"
             ) from None
+        if not isinstance(rec, dict):  # whole JSON, but not a frame's record: damaged or edited, not cut short
+            raise RunLogError(
+                f"{log}: line {n} is JSON but not an object (a {type(rec).__name__}); the log was damaged or edited; "
+                "remove the line, or run the scene again"
+            )
         records.append({k: float(v) if v in ("nan", "inf", "-inf") else v for k, v in rec.items()})
     if not records:
         raise RunLogError(f"{log} holds no readable frame ({notes[0]}); run the scene again")
@@ -308,24 +317,49 @@ def _title(run: RunLog) -> str:
     return what
 
 
+OTHER_IMAGE_SUFFIXES = (".jpg", ".jpeg", ".pdf", ".svg", ".gif", ".tif", ".tiff", ".bmp", ".webp", ".eps", ".ps")
+"""``--out`` suffixes refused: the plots are PNG files, and such a name would otherwise become a folder."""
+
+
+class PlotOptionError(ValueError):
+    """An output path or legend label the plots cannot use; the message names it and the fix."""
+
+
 def _png_path(out: str | Path, default_name: str) -> Path:
+    """The PNG file ``out`` names: ``out`` itself when it ends in .png, else ``out / default_name`` (a folder,
+    made when the file is written)."""
     out = Path(out)
     if out.suffix.lower() == ".png":
-        out.parent.mkdir(parents=True, exist_ok=True)
         return out
-    out.mkdir(parents=True, exist_ok=True)
+    if out.suffix.lower() in OTHER_IMAGE_SUFFIXES and not out.is_dir():
+        raise PlotOptionError(f"--out {out}: the plots are PNG images; give a folder, or a path ending in .png")
     return out / default_name
 
 
-def _save_png(fig, path: Path) -> None:
-    """``fig`` as the PNG ``path``, written to a temporary file first: a full disk leaves no truncated image."""
-    path = Path(path)
-    tmp = path.with_name(path.name + ".tmp.png")
+def _save_pngs(figures: dict[Path, Any]) -> None:
+    """Each figure as its PNG path, all or nothing: every one to a temporary file first, then all moved into
+    place, so a full disk or Ctrl-C leaves neither a truncated image nor a mix of new and old ones; folders this
+    call made are removed again on failure."""
+    made: list[Path] = []
+    tmps: list[tuple[Path, Path]] = []
     try:
-        fig.savefig(tmp, dpi=100)
-        os.replace(tmp, path)
+        for path in figures:
+            for folder in reversed((path.parent, *path.parent.parents)):
+                if not folder.exists():
+                    folder.mkdir()
+                    made.append(folder)
+        for path, fig in figures.items():
+            tmp = path.with_name(path.name + ".tmp.png")
+            tmps.append((tmp, path))
+            fig.savefig(tmp, dpi=100)
+        for tmp, path in tmps:
+            os.replace(tmp, path)
     except BaseException:
-        tmp.unlink(missing_ok=True)
+        for tmp, _ in tmps:
+            tmp.unlink(missing_ok=True)
+        for folder in reversed(made):  # innermost first, only if still empty
+            with contextlib.suppress(OSError):
+                folder.rmdir()
         raise
 
 
@@ -349,7 +383,7 @@ def plot_run(run_dir: str | Path, out: str | Path | None = None) -> list[Path]:
     if costs:
         _stage_panel_single(axes[-1], run)
     path = _png_path(out if out is not None else run.folder, "summary.png")
-    _save_png(fig, path)
+    _save_pngs({path: fig})
     return [path]
 
 
@@ -358,7 +392,10 @@ def compare_runs(run_dirs: Sequence[str | Path], out: str | Path, labels: Sequen
     per run, and each run's total cost per step) and, when the runs logged stage costs, ``compare_stages.png``
     (mean ms per step of each stage, one bar per run). ``out``: a folder, or a ``.png`` path (the stage chart
     then goes next to it as ``<name>_stages.png``). ``labels``: the legend of each run (default the folder
-    names). Returns the PNG files written."""
+    names; each must be non-empty). Returns the PNG files written, all or none (:func:`_save_pngs`). A stage
+    chart an earlier compare left at the same path is removed when these runs logged no stage costs (it would
+    show other runs)."""
+    main = _png_path(out, "compare.png")  # an unusable --out is refused before any log is read
     runs = [load_run(d) for d in run_dirs]
     if len(runs) < 1:
         raise RunLogError("compare_runs needs at least one run folder")
@@ -369,6 +406,9 @@ def compare_runs(run_dirs: Sequence[str | Path], out: str | Path, labels: Sequen
     elif len(labels) != len(runs):
         raise RunLogError(f"{len(labels)} labels for {len(runs)} run folders: give one label per run")
     labels = list(labels)
+    empty = [i + 1 for i, lab in enumerate(labels) if not str(lab).strip()]
+    if empty:
+        raise PlotOptionError(f"--labels: label {empty[0]} is empty; give every run a label the legend can show")
     panels = panels_for(runs)
     costs = _has_costs(runs)
     n = len(panels) + int(costs)
@@ -392,21 +432,22 @@ def compare_runs(run_dirs: Sequence[str | Path], out: str | Path, labels: Sequen
             if t.size:
                 ax.plot(t, v, color=f"C{j % 10}", marker=".", ms=3, label=lab)
         _style(ax, "Cost per time step (all stages)", "ms per step")
-    main = _png_path(out, "compare.png")
-    _save_png(fig, main)
-    written = [main]
+    stages_path = (
+        main.with_name(main.stem + "_stages.png")
+        if Path(out).suffix.lower() == ".png"
+        else (main.parent / "compare_stages.png")
+    )
+    figures = {main: fig}
     if any(r.stage_names() for r in runs):
-        stages_path = (
-            main.with_name(main.stem + "_stages.png")
-            if Path(out).suffix.lower() == ".png"
-            else (main.parent / "compare_stages.png")
-        )
-        written.append(_stage_bars(runs, labels, stages_path))
-    return written
+        figures[stages_path] = _stage_bars(runs, labels)
+    _save_pngs(figures)
+    if stages_path not in figures:
+        stages_path.unlink(missing_ok=True)  # an earlier compare's chart, of other runs
+    return list(figures)
 
 
-def _stage_bars(runs: Sequence[RunLog], labels: Sequence[str], path: Path) -> Path:
-    """Mean ms per step of each stage over the frames, one bar per run (grouped by stage); runs that logged no
+def _stage_bars(runs: Sequence[RunLog], labels: Sequence[str]):
+    """The figure of the mean ms per step of each stage over the frames, one bar per run (grouped by stage); runs that logged no
     stage costs (logs written before couplekit logged them) are named in the title, not drawn as zeros."""
     without = [lab for r, lab in zip(runs, labels, strict=True) if not r.stage_names()]
     kept = [(j, r, lab) for j, (r, lab) in enumerate(zip(runs, labels, strict=True)) if r.stage_names()]
@@ -441,5 +482,4 @@ def _stage_bars(runs: Sequence[RunLog], labels: Sequence[str], path: Path) -> Pa
     ax.set_title("Stage costs" + (f" (no stage costs logged: {', '.join(without)})" if without else ""), fontsize=10)
     ax.grid(True, axis="x", alpha=0.3)
     ax.legend(fontsize=8, loc="lower right")
-    _save_png(fig, path)
-    return path
+    return fig
