@@ -32,7 +32,8 @@ Analysis, per scene:
   went unstable, or was refused by validation (and by which limit).
 
 Writes benchmarks/results/accuracy_vs_cost.json, accuracy_vs_cost_<scene>.png (work-precision, one panel per
-metric, Pareto fronts drawn) and accuracy_vs_cost_stability.png.
+metric, Pareto fronts drawn) and accuracy_vs_cost_stability.png, and the sweeps into runs/accuracy_vs_cost/;
+with ``--out DIR`` all of them (sweep folders, JSON, PNGs) go into DIR.
 """
 
 from __future__ import annotations
@@ -44,6 +45,8 @@ import platform
 import sys
 import time
 from pathlib import Path
+
+from _args import int_in
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results"
@@ -426,16 +429,36 @@ def warm_kernels(spec) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--scenes", nargs="*", default=list(SCENES), choices=list(SCENES))
-    ap.add_argument("--workers", type=int, default=2, help="LocalCluster worker processes (one thread each)")
-    ap.add_argument("--out", default=str(ROOT / "runs" / "accuracy_vs_cost"), help="sweep folders")
+    ap = argparse.ArgumentParser(
+        description="What accuracy costs in time: lockstep (paper Algorithm 1) against sub-cycled and multi-rate "
+        "coupling, on three scenes, each against a fine lockstep reference."
+    )
+    ap.add_argument("--scenes", nargs="+", default=list(SCENES), choices=list(SCENES))
+    ap.add_argument("--workers", type=int_in(1), default=2, help="LocalCluster worker processes (one thread each)")
+    ap.add_argument(
+        "--out",
+        default=None,
+        help="folder of every output: the sweep folders, accuracy_vs_cost.json and the PNGs (default: the sweeps "
+        "in runs/accuracy_vs_cost/, the JSON and PNGs in benchmarks/results/)",
+    )
     ap.add_argument("--analyse-only", action="store_true", help="do not run: analyse the sweeps in --out")
     ap.add_argument("--no-resolution", action="store_true", help="skip the two-resolution sweeps")
     args = ap.parse_args(argv)
+    out = Path(args.out) if args.out is not None else ROOT / "runs" / "accuracy_vs_cost"
+    results_dir = Path(args.out) if args.out is not None else RESULTS
+    if args.analyse_only:
+        missing = [
+            name
+            for scene in args.scenes
+            for name in [scene] + ([] if args.no_resolution else [f"{scene}_resolution"])
+            if not (out / name).is_dir()
+        ]
+        if missing:
+            ap.error(
+                f"--analyse-only: no sweep folder {', '.join(str(out / m) for m in missing)}; run the sweeps first"
+            )
     from couplekit.sweep import load_results, load_sweep, run_sweep
 
-    out = Path(args.out)
     results, timing = {}, {}
     for scene in args.scenes:
         names = [scene] + ([] if args.no_resolution else [f"{scene}_resolution"])
@@ -449,7 +472,8 @@ def main(argv: list[str] | None = None) -> int:
         rows = load_results(out / scene)
         res_rows = None if args.no_resolution else load_results(out / f"{scene}_resolution")
         results[scene] = analyse(scene, rows, res_rows)
-        plot_work_precision(scene, rows, results[scene], RESULTS / f"accuracy_vs_cost_{scene}.png")
+        results_dir.mkdir(parents=True, exist_ok=True)
+        plot_work_precision(scene, rows, results[scene], results_dir / f"accuracy_vs_cost_{scene}.png")
         sp = results[scene]["speedup_at_equal_error"]
         print(f"{scene}: speed-up at lockstep's {SCENES[scene]}: {sp if sp is None else f'{sp:.2f}x'}; "
               f"best over lockstep points: {results[scene]['best_speedup_at_equal_error']}")  # fmt: skip
@@ -458,15 +482,14 @@ def main(argv: list[str] | None = None) -> int:
             print(
                 f"  within 1.5x its error: {within['speedup']:.2f}x ({within['run']}, error x{within['error_ratio']:.2f})"
             )
-    plot_stability(results, RESULTS / "accuracy_vs_cost_stability.png")
-    RESULTS.mkdir(parents=True, exist_ok=True)
+    plot_stability(results, results_dir / "accuracy_vs_cost_stability.png")
     doc = {
         "command": "python benchmarks/accuracy_vs_cost.py " + " ".join(argv if argv is not None else sys.argv[1:]),
         "machine": f"{platform.machine()}, {platform.processor() or platform.system()}, workers={args.workers}",
         "sweep_seconds": timing,
         "scenes": results,
     }
-    path = RESULTS / "accuracy_vs_cost.json"
+    path = results_dir / "accuracy_vs_cost.json"
     if args.analyse_only and path.exists():
         doc["sweep_seconds"] = json.loads(path.read_text()).get("sweep_seconds", {})
     path.write_text(json.dumps(doc, indent=1, default=float))

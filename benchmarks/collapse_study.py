@@ -22,11 +22,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+from _args import float_in, int_in, positive_float
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "sand"))
 
@@ -109,17 +111,36 @@ def run(args) -> dict:
     return out
 
 
+def transfer(text: str) -> str:
+    """--transfer: apic, pic or flip:B with B a number."""
+    kind, _, blend = text.partition(":")
+    ok = text in ("apic", "pic")
+    if kind == "flip" and blend:
+        try:
+            ok = math.isfinite(float(blend))
+        except ValueError:
+            ok = False
+    if not ok:
+        raise argparse.ArgumentTypeError(f"must be apic, pic or flip:B (B the FLIP blend, e.g. flip:1), got {text!r}")
+    return text
+
+
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--cells", type=int, default=8)
-    ap.add_argument("--cfl", type=float, default=0.35, help="dt = cfl dx / c_p")
-    ap.add_argument("--viscosity", type=float, default=1.5, help="SandParams.viscosity, Pa s (0: Klar)")
-    ap.add_argument("--h0", type=float, default=20.0, help="constant friction angle, deg")
-    ap.add_argument("--friction", type=float, default=0.5, help="floor Coulomb friction")
-    ap.add_argument("--t-end", type=float, default=0.45)
-    ap.add_argument("--ppc", type=int, default=2, help="particles per cell per axis")
+    ap = argparse.ArgumentParser(
+        description="The planar column collapse of issue 16 with one thing changed at a time "
+        "(docs/sand-validation.md); prints one JSON line."
+    )
+    ap.add_argument("--cells", type=int_in(1), default=8, help="cells across the column (L0)")
+    ap.add_argument("--cfl", type=float_in(0.0, 0.5, lo_open=True, why="the MPM elastic limit 0.5 dx / c_p"),
+                    default=0.35, help="dt = cfl dx / c_p")  # fmt: skip
+    ap.add_argument("--viscosity", type=float_in(0.0), default=1.5, help="SandParams.viscosity, Pa s (0: Klar)")
+    ap.add_argument("--h0", type=float_in(0.0, 90.0, lo_open=True, hi_open=True), default=20.0,
+                    help="constant friction angle, deg")  # fmt: skip
+    ap.add_argument("--friction", type=float_in(0.0), default=0.5, help="floor Coulomb friction")
+    ap.add_argument("--t-end", type=positive_float(), default=0.45, help="simulated seconds")
+    ap.add_argument("--ppc", type=int_in(1), default=2, help="particles per cell per axis")
     ap.add_argument("--seed", type=int, default=1, help="seed of the particle jitter")
-    ap.add_argument("--transfer", default="apic", help="apic, pic or flip:B (B the FLIP blend)")
+    ap.add_argument("--transfer", type=transfer, default="apic", help="apic, pic or flip:B (B the FLIP blend)")
     ap.add_argument("--float64", action="store_true", help="the NumPy reference on float64 state")
     print(json.dumps(run(ap.parse_args())))
     return 0

@@ -28,6 +28,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+from _args import int_in
+
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results"
 
@@ -79,17 +81,19 @@ def main() -> None:
     parser.add_argument("old", help="git revision timed as 'old'")
     parser.add_argument("new", nargs="?", default=None, help="git revision timed as 'new' (default: working tree)")
     parser.add_argument("--scene", type=Path, default=ROOT / "examples" / "fig13_sand_drop_beaker_small.toml")
-    parser.add_argument("--steps", type=int, default=30)
-    parser.add_argument("--warm-up", type=int, default=5)
-    parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--steps", type=int_in(1), default=30)
+    parser.add_argument("--warm-up", type=int_in(1), default=5)
+    parser.add_argument("--repeats", type=int_in(1), default=3)
+    parser.add_argument("--threads", type=int_in(1), default=2)
     parser.add_argument("--out", type=Path, default=RESULTS / "compare_commits.json")
     args = parser.parse_args()
-    if args.steps < 1 or args.repeats < 1 or args.warm_up < 1:
-        parser.error("--steps, --repeats and --warm-up must be >= 1")
     scene = args.scene.resolve()
     if not scene.is_file():
         parser.error(f"no scene file {scene}")
+    for rev in (args.old, args.new):
+        if rev is not None and subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--verify", "-q", f"{rev}^{{commit}}"],
+                                              capture_output=True).returncode != 0:  # fmt: skip
+            parser.error(f"{rev!r} is not a git revision of {ROOT}")
 
     with tempfile.TemporaryDirectory(prefix="couplekit-compare-") as tmp:
         made, links = [], []

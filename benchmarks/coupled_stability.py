@@ -22,6 +22,8 @@ import platform
 import time
 from pathlib import Path
 
+from _args import float_in, float_list, int_in, name_list, one_line, shape3
+
 from couplekit.backend import get_backend
 from couplekit.coupling.stability_cases import CASES, stability_case
 
@@ -58,22 +60,35 @@ def run_case(case: str, be, shape, steps: int, nu: float, chunk: int = 250, clos
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--shape", default="32,32,32", help="nz,ny,nx cells")
-    ap.add_argument("--steps", type=int, default=20000)
-    ap.add_argument("--nu", default="1e-3,1e-4", help="comma-separated water lattice viscosities")
-    ap.add_argument("--cases", default=",".join(CASES))
-    ap.add_argument("--threads", type=int, default=None)
-    ap.add_argument("--smagorinsky", type=float, default=0.1, help="fluid Smagorinsky constant (scenes' default)")
-    ap.add_argument("--odd-lambda", type=float, default=0.015, help="fluid odd-rate floor (0 = paper's rates)")
+    ap = argparse.ArgumentParser(
+        description="Coupled stability runs of issue 5 (the long versions of "
+        "tests/coupling/test_coupled_validation.py), written to benchmarks/results/coupled_stability.json."
+    )
+    ap.add_argument("--shape", type=shape3(5), default="32,32,32", help="nz,ny,nx cells")
+    ap.add_argument("--steps", type=int_in(1), default=20000)
+    ap.add_argument("--nu", type=float_list(0.0), default="1e-3,1e-4", help="comma-separated water lattice viscosities")
+    ap.add_argument("--cases", type=name_list("case", CASES), default=",".join(CASES), help="comma-separated cases")
+    ap.add_argument("--threads", type=int_in(1), default=None)
+    ap.add_argument(
+        "--smagorinsky", type=float_in(0.0), default=0.1, help="fluid Smagorinsky constant (scenes' default)"
+    )
+    ap.add_argument("--odd-lambda", type=float_in(0.0), default=0.015, help="fluid odd-rate floor (0 = paper's rates)")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "coupled_stability.json"))
     a = ap.parse_args()
-    shape = tuple(int(v) for v in a.shape.split(","))
+    shape, nus, cases = a.shape, a.nu, a.cases
+    a.shape, a.nu, a.cases = ",".join(map(str, shape)), ",".join(f"{v:g}" for v in nus), ",".join(cases)
+    closures = {"smagorinsky": a.smagorinsky, "odd_lambda": a.odd_lambda}
+    check = get_backend("numpy")
+    for case in cases:  # every case builds at this shape (cheap), before any run is made or written
+        for nu in nus:
+            try:
+                stability_case(case, check, shape, nu, closures)
+            except ValueError as exc:
+                ap.error(f"case {case} does not build at --shape {a.shape}, --nu {nu:g}: {one_line(exc)}")
     be = get_backend("cpu", threads=a.threads)
     res: dict = {"runs": {}}
-    for nu in (float(v) for v in a.nu.split(",")):
-        for case in a.cases.split(","):
-            closures = {"smagorinsky": a.smagorinsky, "odd_lambda": a.odd_lambda}
+    for nu in nus:
+        for case in cases:
             res["runs"][f"{case}@nu={nu:g}"] = run_case(case, be, shape, a.steps, nu, closures=closures)
             Path(a.out).parent.mkdir(parents=True, exist_ok=True)
             res["meta"] = {"shape_nz_ny_nx": list(shape), "steps": a.steps, "dt": 1e-4, "dx": 0.005,

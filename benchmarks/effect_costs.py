@@ -13,19 +13,28 @@ import argparse
 import json
 from pathlib import Path
 
-from couplekit.bench.effects import markdown_table, run_effect_costs
+from _args import int_in, one_of
+
+from couplekit.bench.effects import base_scene, effect_variants, markdown_table, run_effect_costs
 from couplekit.bench.runner import plot_effects
+
+MIN_N = 11
+"""The smallest --n every effect's scenes build at: at 10 the sand_emission outlet, which carries sand, reaches
+the MPM wall layers (2 cells), below 10 the sand ball does (SceneError)."""
+EFFECTS = list(effect_variants(base_scene(MIN_N)))
 
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--n", type=int, default=32, help="cells per side")
-    ap.add_argument("--steps", type=int, default=4, help="steps per block")
-    ap.add_argument("--alternations", type=int, default=10, help="on/off pairs of blocks")
-    ap.add_argument("--backend", default="cpu")
+    ap.add_argument("--n", type=int_in(MIN_N, why="smaller boxes put the sand in the MPM wall layers"), default=32,
+                    help=f"cells per side (>= {MIN_N})")  # fmt: skip
+    ap.add_argument("--steps", type=int_in(1), default=4, help="steps per block")
+    ap.add_argument("--alternations", type=int_in(1), default=10, help="on/off pairs of blocks")
+    ap.add_argument("--backend", choices=("cpu", "numpy", "cuda", "cpu-device"), default="cpu")
     ap.add_argument(
         "--clock", choices=("wall", "cpu"), default="wall", help="cpu: process time (run with OMP_NUM_THREADS=1)"
     )
-    ap.add_argument("--only", nargs="*", default=None, help="effect names (default: all)")
+    ap.add_argument("--only", nargs="+", type=one_of("effect", EFFECTS), default=None, metavar="EFFECT",
+                    help=f"effect names (default: all): {', '.join(EFFECTS)}")  # fmt: skip
     ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "effect_costs.json")
     args = ap.parse_args()
     res = run_effect_costs(

@@ -25,6 +25,8 @@ import sys
 import time
 from pathlib import Path
 
+from _args import int_in
+
 from couplekit.io import read_diagnostics
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -86,14 +88,21 @@ def markdown(rows: list[dict]) -> str:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--threads", type=int, default=2, help="OpenMP threads (default 2, the issue's 2 cores)")
-    ap.add_argument("--only", nargs="*", default=None, help="substrings of the scene names to run")
+    ap = argparse.ArgumentParser(
+        description="Wall time of every small example scene, run the way a user runs it, written to "
+        "benchmarks/results/example_timings.json (and printed as the table in docs/examples.md)."
+    )
+    ap.add_argument("--threads", type=int_in(1), default=2, help="OpenMP threads (default 2, the issue's 2 cores)")
+    ap.add_argument("--only", nargs="+", default=None, help="substrings of the scene names to run")
     ap.add_argument("--out-dir", default=str(ROOT / "runs" / "timing"))
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "example_timings.json"))
     a = ap.parse_args()
     scenes = small_scenes()
     if a.only:
+        unmatched = [k for k in a.only if not any(k in s.name for s in scenes)]
+        if unmatched:
+            ap.error(f"--only: no small scene matches {', '.join(map(repr, unmatched))}; the scenes: "
+                     + ", ".join(s.name for s in scenes))  # fmt: skip
         scenes = [s for s in scenes if any(k in s.name for k in a.only)]
     rows = []
     for scene in scenes:
@@ -102,6 +111,7 @@ def main() -> None:
         print(f"{r['scene']:40s} exit {r['returncode']}  {r['seconds']:7.1f} s  frames {r['frames']:3d}  "
               f"load {r['load_average_before']:.1f}->{r['load_average_after']:.1f}", flush=True)  # fmt: skip
     out = Path(a.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
     previous = json.loads(out.read_text()) if out.exists() and a.only else {"scenes": {}}
     previous["scenes"].update({r["scene"]: r for r in rows})
     previous["meta"] = {"threads": a.threads, "machine": platform.platform(), "cpu_count": os.cpu_count(),

@@ -37,6 +37,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _args import positive_float
 
 from couplekit.scene import Scene
 from couplekit.simulation import Simulation
@@ -308,8 +309,8 @@ def radius_and_width(text: str) -> tuple[float, float]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--radii", type=float, nargs="+", default=[1.74, 2.0, 2.4, 3.0])
-    ap.add_argument("--widths", type=float, nargs="+", default=[4.0])
+    ap.add_argument("--radii", type=positive_float(), nargs="+", default=[1.74, 2.0, 2.4, 3.0])
+    ap.add_argument("--widths", type=positive_float(), nargs="+", default=[4.0])
     ap.add_argument(
         "--also",
         nargs="*",
@@ -319,7 +320,7 @@ def main() -> None:
     )
     ap.add_argument(
         "--time",
-        type=float,
+        type=positive_float(),
         default=3.0,
         help="simulated seconds (default 3: at 1 s, the small variant's end, the balls still bob)",
     )
@@ -334,7 +335,7 @@ def main() -> None:
     ap.add_argument(
         "--replace", action="store_true", help="overwrite the results file (default: add to it, same case replaced)"
     )
-    ap.add_argument("--backend", default="cpu")
+    ap.add_argument("--backend", choices=("cpu", "numpy", "cuda", "cpu-device"), default="cpu")
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "fig08_interface_width.json"))
     ap.add_argument(
         "--small-variant",

@@ -26,6 +26,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _args import int_in
 
 from couplekit.backend import get_backend
 from couplekit.backend.traffic import bytes_per_item, two_phase_step_bytes
@@ -206,9 +207,9 @@ def lbmpy_collide(n: int, threads: int):
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--sizes", type=int, nargs="+", default=[64, 128])
-    parser.add_argument("--threads", type=int, default=2)
-    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--sizes", type=int_in(2), nargs="+", default=[64, 128], help="box edges (n^3 cells)")
+    parser.add_argument("--threads", type=int_in(1), default=2)
+    parser.add_argument("--repeats", type=int_in(1), default=5)
     parser.add_argument("--out", type=Path, default=RESULTS / "fluid_throughput.json")
     parser.add_argument(
         "--storage",

@@ -1,6 +1,6 @@
 """Accuracy of fp16 storage of the populations f and h against fp32, on the cpu kernels (issue 14).
 
-    python benchmarks/fp16_accuracy.py [--quick] [--only taylor_green laplace shear_wave sand_drop]
+    python benchmarks/fp16_accuracy.py [--only taylor_green laplace shear_wave sand_drop] [--threads 1]
 
 Each case runs with ``storage="fp32"`` and ``storage="fp16"`` (same code, same run) and records both numbers:
 
@@ -25,10 +25,13 @@ import sys
 import time
 from pathlib import Path
 
+from _args import int_in, one_of
+
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results"
 sys.path.insert(0, str(ROOT / "tests" / "fluid"))
 
+CASES = ("taylor_green", "laplace", "shear_wave", "sand_drop")
 SAND_DROP_FRAMES = 4
 """Frames of the shortened Fig. 13 scene (69 steps each): the ball enters the water in frame 3."""
 
@@ -71,8 +74,9 @@ def sand_drop(storage: str, frames: int = SAND_DROP_FRAMES, threads: int = 2) ->
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--only", nargs="+", default=["taylor_green", "laplace", "shear_wave", "sand_drop"])
-    parser.add_argument("--threads", type=int, default=1, help="host threads of the kernels (sand drop: 2)")
+    parser.add_argument("--only", nargs="+", type=one_of("case", CASES), default=list(CASES), metavar="CASE",
+                        help=f"cases to run, updating them in --out (default all: {' '.join(CASES)})")  # fmt: skip
+    parser.add_argument("--threads", type=int_in(1), default=1, help="host threads of the kernels (sand drop: 2)")
     parser.add_argument("--out", type=Path, default=RESULTS / "fp16_accuracy.json")
     args = parser.parse_args()
     from couplekit.backend import get_backend
@@ -91,10 +95,8 @@ def main() -> None:
                 res = laplace(cpu, storage)
             elif case == "shear_wave":
                 res = shear_wave(storage)
-            elif case == "sand_drop":
+            else:  # "sand_drop" (--only accepts CASES only)
                 res = sand_drop(storage)
-            else:
-                raise SystemExit(f"unknown case {case!r}")
             out[case][storage] = res
             print(f"{case} {storage} ({time.perf_counter() - t:.0f} s): {json.dumps(res)}", flush=True)
         args.out.parent.mkdir(parents=True, exist_ok=True)

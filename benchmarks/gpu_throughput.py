@@ -24,6 +24,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from _args import float_in, int_in, positive_float  # noqa: E402
 from fluid_throughput import ours_collide, ours_two_phase_step  # noqa: E402
 
 from couplekit.backend import get_backend  # noqa: E402
@@ -39,6 +40,8 @@ from couplekit.sand.solver import SandSolver  # noqa: E402
 
 SAND_GRID = 256
 SAND_PARAMS = SandParams(youngs_modulus=3.537e5, density=2200.0)
+MAX_SAND_SIDE = SAND_GRID - 8  # the block starts 4 cells up and stays clear of the 3-cell walls
+MAX_MILLIONS = 120.0  # 8 * 248.5^3 / 1e6 = 122.8: the largest block of MAX_SAND_SIDE cells a side, rounded down
 SAND_STEP_BYTES = sum(KERNEL_TRAFFIC[k].bytes for k in ("mpm_p2g", "mpm_g2p"))
 
 
@@ -91,12 +94,21 @@ def sand(backend, millions: float, steps: int, repeats: int, bandwidth: float) -
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--cells", type=int, nargs="*", default=[256], help="fluid box edges (n^3 cells)")
-    ap.add_argument("--particles", type=float, nargs="*", default=[1, 4, 16], help="millions of sand particles")
-    ap.add_argument("--steps", type=int, default=20, help="sand steps per timing")
-    ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--bandwidth", type=float, default=4.8e12, help="the GPU's peak DRAM bandwidth, bytes/s")
+    ap = argparse.ArgumentParser(
+        description="Fluid and sand throughput on a GPU (the cuda backend) at GPU sizes, against the "
+        "bandwidth-bound ceilings of couplekit/backend/traffic.py."
+    )
+    ap.add_argument("--cells", type=int_in(2), nargs="*", default=[256], help="fluid box edges (n^3 cells)")
+    ap.add_argument(
+        "--particles",
+        type=float_in(0.0, MAX_MILLIONS, lo_open=True, why=f"the block must fit the {SAND_GRID}^3 grid"),
+        nargs="*",
+        default=[1, 4, 16],
+        help="millions of sand particles",
+    )
+    ap.add_argument("--steps", type=int_in(1), default=20, help="sand steps per timing")
+    ap.add_argument("--repeats", type=int_in(1), default=3)
+    ap.add_argument("--bandwidth", type=positive_float(), default=4.8e12, help="the GPU's peak DRAM bandwidth, bytes/s")
     ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "gpu_throughput.json")
     args = ap.parse_args(argv)
     backend = get_backend("cuda")

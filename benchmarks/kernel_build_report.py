@@ -21,6 +21,8 @@ import sys
 import time
 from pathlib import Path
 
+from _args import cuda_arch, one_of
+
 from couplekit.backend.nvcc import (
     REGISTER_EXCEPTIONS,
     REGISTER_LIMIT,
@@ -76,14 +78,20 @@ def over_budget(row: dict) -> bool:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--arch", nargs="+", default=["sm_80", "sm_90"])
+    parser = argparse.ArgumentParser(
+        description="GPU-side build report without a GPU: registers, stack, spills, occupancy and bandwidth-bound "
+        "throughput of every kernel for sm_80 and sm_90, written to benchmarks/results/kernel_build_report.json."
+    )
+    parser.add_argument("--arch", nargs="+", type=cuda_arch, default=["sm_80", "sm_90"])
     parser.add_argument("--out", type=Path, default=RESULTS / "kernel_build_report.json")
     parser.add_argument(
-        "--only", nargs="+", default=None, metavar="SOURCE",
+        "--only", nargs="+", type=one_of("kernel source", [p.name for p in kernel_sources()]), default=None,
+        metavar="SOURCE",
         help="rebuild only these sources (e.g. mpm_g2p.cu); the other rows are kept from the existing --out",
     )  # fmt: skip
     args = parser.parse_args(argv)
+    if args.only and not args.out.is_file():
+        parser.error(f"--only keeps the other rows of --out, and there is no {args.out}: run without --only first")
     nvcc = nvcc_path()
     if nvcc is None:
         print("nvcc is not on the PATH; nothing to report", file=sys.stderr)

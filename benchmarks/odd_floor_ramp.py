@@ -45,6 +45,8 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "benchmarks"))
 sys.path.insert(0, str(ROOT / "tests" / "fluid"))
 
+from _args import float_in, positive_float, shape3  # noqa: E402
+
 import couplekit.fluid.reference as ref  # noqa: E402
 from couplekit.backend import get_backend  # noqa: E402
 from couplekit.fluid.grid import Boundaries  # noqa: E402
@@ -178,22 +180,33 @@ def ball(D: float | None, t_end: float) -> dict:
     return out
 
 
+def ramp_type(text: str) -> float | None:
+    """--ramps: a ramp length D >= 0 in cells, or none (the floor off)."""
+    if text.lower() == "none":
+        return None
+    try:
+        return float_in(0.0)(text)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(f"must be a number >= 0 (cells) or none, got {text!r}") from None
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("case", choices=["linear", "noise", "tank", "wave", "ball"])
-    ap.add_argument("--ramps", nargs="+", default=["3"], help="ramp lengths D in cells; 0: floor everywhere; none: off")
-    ap.add_argument("--box", default="4x12x12", help="linear: nz x ny x nx")
-    ap.add_argument("--time", type=float, default=0.75, help="ball: simulated seconds")
+    ap.add_argument("--ramps", nargs="+", type=ramp_type, default=[3.0],
+                    help="ramp lengths D in cells; 0: floor everywhere; none: off")  # fmt: skip
+    ap.add_argument("--box", type=shape3(2, sep="x", label="NZxNYxNX"), default="4x12x12", help="linear: nz x ny x nx")
+    ap.add_argument("--time", type=positive_float(), default=0.75, help="ball: simulated seconds")
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "odd_floor_ramp.json"))
     args = ap.parse_args()
+    if args.case == "wave" and None in args.ramps:
+        ap.error("--ramps: wave: the standing wave is set up with the scenes' floor; give ramps >= 0, not none")
     path = Path(args.out)
     records = json.loads(path.read_text()) if path.exists() else []
-    for text in args.ramps:
-        D = None if text.lower() == "none" else float(text)
+    for D in args.ramps:
         t0 = time.perf_counter()
         if args.case == "linear":
-            box = tuple(int(v) for v in args.box.split("x"))
-            res, key = linear(box, D), {"box": list(box)}
+            res, key = linear(args.box, D), {"box": list(args.box)}
         elif args.case == "ball":
             res, key = ball(D, args.time), {"time_s": args.time}
         else:
@@ -201,6 +214,7 @@ def main() -> None:
         rec = {"case": args.case, "ramp_cells": D, **key, **res, "wall_s": time.perf_counter() - t0}
         records = [r for r in records if not (r["case"] == rec["case"] and r["ramp_cells"] == D and all(
             r.get(k) == v for k, v in key.items()))] + [rec]  # fmt: skip
+        path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps(records, indent=1) + "\n")
         shown = {k: v for k, v in rec.items() if not k.endswith("_history_cells") and not k.endswith("every_50")}
         print(json.dumps(shown), flush=True)

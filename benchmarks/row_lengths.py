@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _args import int_in
 
 from couplekit.backend import get_backend
 from couplekit.fluid import FluidParams, FluidSolver
@@ -63,9 +64,10 @@ def stage_calls(s: FluidSolver) -> dict:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--lengths", type=int, nargs="+", default=[24, 26, 31, 32, 33, 47, 48, 64, 128])
-    parser.add_argument("--threads", type=int, default=1)
-    parser.add_argument("--repeats", type=int, default=7)
+    parser.add_argument("--lengths", type=int_in(2), nargs="+", default=[24, 26, 31, 32, 33, 47, 48, 64, 128],
+                        help="x row lengths nx (cells)")  # fmt: skip
+    parser.add_argument("--threads", type=int_in(1), default=1)
+    parser.add_argument("--repeats", type=int_in(1), default=7)
     parser.add_argument("--out", type=Path, default=RESULTS / "row_lengths.json")
     args = parser.parse_args()
     backend = get_backend("cpu", threads=args.threads)

@@ -30,6 +30,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _args import int_in
 
 from couplekit.backend import get_backend
 from couplekit.sand import DomainWalls, SandParams
@@ -384,9 +385,9 @@ def time_peer(peer, steps: int) -> float:
 
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--steps", type=int, default=40)
-    ap.add_argument("--rounds", type=int, default=3)
-    ap.add_argument("--sizes", type=int, nargs="*", default=list(CASES))
+    ap.add_argument("--steps", type=int_in(1), default=40)
+    ap.add_argument("--rounds", type=int_in(1), default=3)
+    ap.add_argument("--sizes", type=int, nargs="+", choices=list(CASES), default=list(CASES), help="particle counts")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "sand_throughput.json"))
     args = ap.parse_args(argv)
 

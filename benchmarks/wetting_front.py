@@ -65,6 +65,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _args import float_in, int_in, one_line, positive_float, shape3
 
 from couplekit.backend import get_backend
 from couplekit.coupling.scenes import bed_under_partition, dry_plug_under_water
@@ -101,13 +102,24 @@ def front_depth(profile: np.ndarray, plug_top: float, level: float) -> float:
     return float(plug_top - crossing)
 
 
+def plug_scene(be, shape, ra: float, nu: float, plug_top: float, water_top: float, eta: float):
+    """The dry_plug_under_water scene of one plug run."""
+    return dry_plug_under_water(be, shape, retention=ra > 0, absorption_rate=max(ra, 0.0), plug=(1.0, plug_top),
+                                water=(plug_top, water_top), nu_h=nu, youngs_modulus=1e5, eta=eta,
+                                sand_params={"cohesion_max": 0.0})  # fmt: skip
+
+
+def plug_levels(shape) -> tuple[int, int]:
+    """The plug's top and the water's top (cells) for a grid ``shape``."""
+    nz = shape[0]
+    return round(nz / 2), round(nz / 2) + round(nz / 3)
+
+
 def run_case(
     be, shape, steps: int, every: int, ra: float, nu: float, plug_top: float, water_top: float, eta: float = 0.0
 ) -> dict:
     """One plug run; ``ra`` = 0: retention off; ``eta``: volume controller strength (0 = off)."""
-    sc = dry_plug_under_water(be, shape, retention=ra > 0, absorption_rate=max(ra, 0.0), plug=(1.0, plug_top),
-                              water=(plug_top, water_top), nu_h=nu, youngs_modulus=1e5, eta=eta,
-                              sand_params={"cohesion_max": 0.0})  # fmt: skip
+    sc = plug_scene(be, shape, ra, nu, plug_top, water_top, eta)
     rec: dict = {"absorption_rate": ra, "retention": ra > 0, "steps": [], "max_lattice_speed": [],
                  "fluid_volume_drift": [], "free_water_in_plug": [], "bound_water": [],
                  "front_depth": {str(v): [] for v in LEVELS}}  # fmt: skip
@@ -162,14 +174,20 @@ def partition_geometry(shape) -> dict:
             "partition_top": round(0.8 * nz), "water_top": round(0.75 * nz)}  # fmt: skip
 
 
+def partition_scene(be, shape, ra: float, nu: float, eta: float):
+    """The bed_under_partition scene of one partition run."""
+    geo = partition_geometry(shape)
+    return bed_under_partition(be, shape, retention=ra > 0, absorption_rate=max(ra, 0.0), nu_h=nu, eta=eta,
+                               youngs_modulus=1e5, sand_params={"cohesion_max": 0.0}, bed=float(geo["bed"]),
+                               partition=tuple(float(v) for v in geo["partition"]),
+                               partition_top=float(geo["partition_top"]), water_top=float(geo["water_top"]))  # fmt: skip
+
+
 def run_partition(shape, steps: int, every: int, ra: float, nu: float, eta: float, threads: int | None) -> dict:
     """One bed_under_partition run; ``ra`` = 0: retention off."""
     be = get_backend("cpu", threads=threads)
     geo = partition_geometry(shape)
-    sc = bed_under_partition(be, shape, retention=ra > 0, absorption_rate=max(ra, 0.0), nu_h=nu, eta=eta,
-                             youngs_modulus=1e5, sand_params={"cohesion_max": 0.0}, bed=float(geo["bed"]),
-                             partition=tuple(float(v) for v in geo["partition"]),
-                             partition_top=float(geo["partition_top"]), water_top=float(geo["water_top"]))  # fmt: skip
+    sc = partition_scene(be, shape, ra, nu, eta)
     sc.step(1)
     w0 = sc.water_volume()
     rec: dict = {"absorption_rate": ra, "retention": ra > 0, "steps": [], "front": [], "max_lattice_speed": [],
@@ -198,7 +216,7 @@ def main_partition(a) -> None:
     """The partition scene: one run without retention and one per R_a, ``--jobs`` at a time."""
     from concurrent.futures import ProcessPoolExecutor
 
-    shape = tuple(int(v) for v in (a.shape or "20,8,48").split(","))
+    shape = a.shape
     etas = [2.0, 0.0] if a.eta is None else a.eta
     runs = [(eta, ra) for eta in etas for ra in (0.0, *a.ra)]
     with ProcessPoolExecutor(max_workers=a.jobs) as pool:
@@ -212,36 +230,58 @@ def main_partition(a) -> None:
               "machine": {"platform": platform.platform(), "threads_per_run": 1, "jobs": a.jobs}}  # fmt: skip
     Path(a.out).parent.mkdir(parents=True, exist_ok=True)
     Path(a.out).write_text(json.dumps(result, indent=1))
+    first, stride = 999 // a.every, max(1, 1000 // a.every)  # the samples about every 1000 steps
     for name, rec in cases.items():
-        print(f"{name}: finite {rec['finite']}, front at steps {rec['steps'][999 // a.every :: 1000 // a.every]}: "
-              f"{np.round(rec['front'][999 // a.every :: 1000 // a.every], 2).tolist()}, arrival {rec['arrival_steps']}, "
+        if not rec["steps"]:  # not finite from its first chunk
+            print(f"{name}: finite {rec['finite']}, no samples, {rec['seconds']:.0f} s")
+            continue
+        print(f"{name}: finite {rec['finite']}, front at steps {rec['steps'][first::stride]}: "
+              f"{np.round(rec['front'][first::stride], 2).tolist()}, arrival {rec['arrival_steps']}, "
               f"max speed {max(rec['max_lattice_speed']):.3g}, drift {rec['water_drift'][-1]:.1e}, "
               f"{rec['seconds']:.0f} s")  # fmt: skip
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(
+        description="Wetting front through dry sand with and without water retention (paper 000 Fig. 10, "
+        "issue 5), written to benchmarks/results/wetting_front.json."
+    )
     ap.add_argument("--scene", choices=["partition", "plug"], default="partition")
-    ap.add_argument("--shape", default=None, help="nz,ny,nx cells (partition 20,8,48; plug 32,12,12)")
-    ap.add_argument("--steps", type=int, default=None, help="partition 8000, plug 3000")
-    ap.add_argument("--every", type=int, default=None, help="partition 250, plug 100")
-    ap.add_argument("--jobs", type=int, default=2, help="partition: runs at a time (one thread each)")
-    ap.add_argument("--ra", type=float, nargs="+", default=[0.01, 0.001], help="absorption rates R_a (retention on)")
-    ap.add_argument("--nu", type=float, default=1e-3, help="water lattice viscosity nu_h")
-    ap.add_argument("--eta", type=float, nargs="+", default=None,
+    ap.add_argument("--shape", type=shape3(5), default=None, help="nz,ny,nx cells (partition 20,8,48; plug 32,12,12)")
+    ap.add_argument("--steps", type=int_in(1), default=None, help="partition 8000, plug 3000")
+    ap.add_argument(
+        "--every", type=int_in(1), default=None, help="sampling interval, <= --steps (partition 250, plug 100)"
+    )
+    ap.add_argument("--jobs", type=int_in(1), default=2, help="partition: runs at a time (one thread each)")
+    ap.add_argument("--ra", type=positive_float(), nargs="+", default=[0.01, 0.001],
+                    help="absorption rates R_a (retention on)")  # fmt: skip
+    ap.add_argument("--nu", type=positive_float(), default=1e-3, help="water lattice viscosity nu_h")
+    ap.add_argument("--eta", type=float_in(0.0), nargs="+", default=None,
                     help="volume controller strength(s) (partition: 2 and 0; plug: 0 = off, the first value)")  # fmt: skip
-    ap.add_argument("--threads", type=int, default=None)
+    ap.add_argument("--threads", type=int_in(1), default=None)
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "wetting_front.json"))
     a = ap.parse_args()
-    if a.scene == "partition":
-        a.steps, a.every = a.steps or 8000, a.every or 250
+    partition = a.scene == "partition"
+    a.steps = a.steps or (8000 if partition else 3000)
+    a.every = a.every or (250 if partition else 100)
+    if a.every > a.steps:
+        ap.error(f"argument --every: must be <= --steps ({a.steps}), got {a.every}")
+    a.shape = a.shape or ((20, 8, 48) if partition else (32, 12, 12))
+    check = get_backend("numpy")
+    try:  # the scenes build at this shape (cheap), before any run is made or written
+        for ra in (0.0, *a.ra):
+            if partition:
+                partition_scene(check, a.shape, ra, a.nu, 2.0)
+            else:
+                plug_scene(check, a.shape, ra, a.nu, *plug_levels(a.shape), 0.0)
+    except ValueError as exc:
+        ap.error(f"the {a.scene} scene does not build at --shape {','.join(map(str, a.shape))}: {one_line(exc)}")
+    if partition:
         main_partition(a)
         return
-    a.steps, a.every = a.steps or 3000, a.every or 100
     a.eta = 0.0 if a.eta is None else a.eta[0]
-    shape = tuple(int(v) for v in (a.shape or "32,12,12").split(","))
-    nz = shape[0]
-    plug_top, water_top = round(nz / 2), round(nz / 2) + round(nz / 3)
+    shape = a.shape
+    plug_top, water_top = plug_levels(shape)
     be = get_backend("cpu", threads=a.threads)
     cases = {"no_retention": run_case(be, shape, a.steps, a.every, 0.0, a.nu, plug_top, water_top, a.eta)}
     for ra in a.ra:
