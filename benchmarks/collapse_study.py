@@ -56,7 +56,8 @@ def _flip(sol, blend: float) -> None:
 
     def patched_p2g(x, v, C, tau, mass, vol, gm, gmv, gvol, dx, dt):
         p2g(x, v, C, tau, mass, vol, gm, gmv, gvol, dx, dt)
-        m0, mv0, vol0 = np.zeros_like(gm), np.zeros_like(gmv), np.zeros_like(gvol)
+        # grid_vol is None with one particle density (SandSolver.node_volume)
+        m0, mv0, vol0 = np.zeros_like(gm), np.zeros_like(gmv), None if gvol is None else np.zeros_like(gvol)
         p2g(x, v, C, np.zeros_like(tau), mass, vol, m0, mv0, vol0, dx, dt)  # no stress: momentum before forces
         old["v"] = np.where(m0 > 0, mv0 / np.where(m0 > 0, m0, 1.0), 0.0).astype(np.float64)
 

@@ -5,11 +5,13 @@ sentence as its description."""
 from __future__ import annotations
 
 import importlib.util
+import json
 import os
 import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -127,3 +129,13 @@ def test_accuracy_vs_cost_out_holds_every_output(tmp_path, monkeypatch):
     assert mod.main(["--analyse-only", "--no-resolution", "--scenes", scene, "--out", str(tmp_path)]) == 0
     assert (tmp_path / "accuracy_vs_cost.json").is_file()
     assert written and all(p.parent == tmp_path for p in written)
+
+
+@pytest.mark.parametrize("extra", [[], ["--float64"]])
+def test_collapse_study_runs_with_the_flip_blend(extra):
+    """``--transfer flip:B`` crashed in the script's own P2G patch (a zeros_like of the absent grid volume of a
+    one-density sand, an object array the kernel refused; a broadcast error with --float64)."""
+    proc = _run("collapse_study.py", "--cells", "4", "--t-end", "0.005", "--transfer", "flip:1", *extra)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert out["transfer"] == "flip:1" and np.isfinite(out["runout"])
