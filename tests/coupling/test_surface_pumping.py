@@ -19,6 +19,8 @@ part of Eq. 39's porosity terms taken out at a time (monkeypatched, not in the c
   later, not gone; φ³ on both parts alike (1.6 kPa, climbing).
 
 So the loop closes through both parts in the interface; a stronger interface weight only moves the threshold.
+Both parts written with one effective porosity ε' = 1 − φ(1 − ε) and no separate φ weight (monkeypatched, a
+gradient field again): −5.5 mm at 60 ms, −10.0 mm at 0.135 s, settling (docs/fluid-stability.md, 'A direction').
 """
 
 from __future__ import annotations
