@@ -8,13 +8,13 @@ tables under an output folder (default ``benchmarks/results/``), with a progress
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
 import platform
 import time
 from pathlib import Path
 
+from ..io import files
 from . import effects as effects_mod
 from . import table1 as table1_mod
 from .traffic import assumptions
@@ -143,29 +143,9 @@ def check_writable(out: Path) -> None:
 
 
 def write_all(out: Path, writers: dict) -> dict[str, Path]:
-    """Write every result of ``writers`` (name -> function writing that file at the path it is given) into
-    ``out`` all or nothing: each to a temporary file first, then all moved into place; on any failure or
-    Ctrl-C the temporary files are removed, the results already in ``out`` stay as they were, and a folder this
-    call made is removed again."""
-    made = []
-    for folder in (out, *out.parents):
-        if folder.exists():
-            break
-        made.append(folder)
-    tmps: dict[str, Path] = {}
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        for name, write in writers.items():
-            tmp = out / f".{Path(name).stem}.tmp{Path(name).suffix}"  # the suffix keeps matplotlib's format
-            tmps[name] = tmp
-            write(tmp)
-        for name, tmp in tmps.items():
-            os.replace(tmp, out / name)
-    except BaseException:
-        for tmp in tmps.values():
-            tmp.unlink(missing_ok=True)
-        for folder in made:  # innermost first; only folders this call made, and only if still empty
-            with contextlib.suppress(OSError):
-                folder.rmdir()
-        raise
-    return {name: out / name for name in writers}
+    """Write every result of ``writers`` (file name -> function writing that file at the path it is given) into
+    ``out`` all or nothing (:func:`couplekit.io.files.write_all`): on any failure or Ctrl-C the results already
+    in ``out`` stay as they were and a folder this call made is removed again."""
+    paths = {name: out / name for name in writers}
+    files.write_all({paths[name]: write for name, write in writers.items()})
+    return paths

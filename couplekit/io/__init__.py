@@ -6,7 +6,8 @@ the diagnostics log (JSON lines) and HDF5 checkpoints.
 * :mod:`.preview` — :func:`render_preview` (off-screen PyVista);
 * :mod:`.surface` — :func:`water_surface` (the φ = ½ mesh), :func:`write_surface` (.ply, .obj, .vtp);
 * :mod:`.diagnostics` — :class:`DiagnosticsLog`, :func:`read_diagnostics`;
-* :mod:`.checkpoint` — :func:`save_checkpoint`, :func:`load_checkpoint`.
+* :mod:`.checkpoint` — :func:`save_checkpoint`, :func:`load_checkpoint`;
+* :mod:`.files` — :func:`~couplekit.io.files.write_all` (several files all or none).
 * :mod:`.plots` — :func:`~couplekit.io.plots.plot_run`, :func:`~couplekit.io.plots.compare_runs` (matplotlib;
   imported on use, not here).
 """

@@ -15,16 +15,16 @@ panel.
 
 from __future__ import annotations
 
-import contextlib
 import json
 import math
-import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from .files import write_all
 
 __all__ = ["RunLog", "RunLogError", "PANELS", "panels_for", "load_run", "plot_run", "compare_runs", "STAGE_PREFIX"]
 
@@ -337,30 +337,8 @@ def _png_path(out: str | Path, default_name: str) -> Path:
 
 
 def _save_pngs(figures: dict[Path, Any]) -> None:
-    """Each figure as its PNG path, all or nothing: every one to a temporary file first, then all moved into
-    place, so a full disk or Ctrl-C leaves neither a truncated image nor a mix of new and old ones; folders this
-    call made are removed again on failure."""
-    made: list[Path] = []
-    tmps: list[tuple[Path, Path]] = []
-    try:
-        for path in figures:
-            for folder in reversed((path.parent, *path.parent.parents)):
-                if not folder.exists():
-                    folder.mkdir()
-                    made.append(folder)
-        for path, fig in figures.items():
-            tmp = path.with_name(path.name + ".tmp.png")
-            tmps.append((tmp, path))
-            fig.savefig(tmp, dpi=100)
-        for tmp, path in tmps:
-            os.replace(tmp, path)
-    except BaseException:
-        for tmp, _ in tmps:
-            tmp.unlink(missing_ok=True)
-        for folder in reversed(made):  # innermost first, only if still empty
-            with contextlib.suppress(OSError):
-                folder.rmdir()
-        raise
+    """Each figure as its PNG path, all or none (:func:`couplekit.io.files.write_all`)."""
+    write_all({path: lambda p, fig=fig: fig.savefig(p, dpi=100) for path, fig in figures.items()})
 
 
 def plot_run(run_dir: str | Path, out: str | Path | None = None) -> list[Path]:
