@@ -456,6 +456,12 @@ def _cmd_plot(args: argparse.Namespace) -> int:
     return 0
 
 
+def _repeats(keys: list) -> list[tuple[int, int]]:
+    """(first index, index) of every key equal to an earlier one."""
+    first: dict = {}
+    return [(first[k], i) for i, k in enumerate(keys) if first.setdefault(k, i) != i]
+
+
 def _cmd_compare(args: argparse.Namespace) -> int:
     """``couplekit compare``: exit 0 when the PNGs are written, 2 for an unusable run folder, log or option."""
     from .io.plots import PlotOptionError, RunLogError, compare_runs, load_run
@@ -464,18 +470,13 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         print(f"error: {len(args.labels)} --labels for {len(args.run_dirs)} run folders: give one label per run",
               file=sys.stderr)  # fmt: skip
         return 2
-    seen: dict[Path, int] = {}
-    for i, run_dir in enumerate(args.run_dirs):
-        first = seen.setdefault(Path(run_dir).resolve(), i)
-        if first != i:
-            print(
-                f"note: {run_dir} is given twice (runs {first + 1} and {i + 1}): their lines coincide", file=sys.stderr
-            )
-    if args.labels is not None:
-        for i, lab in enumerate(args.labels):
-            if lab.strip() and args.labels.index(lab) < i:
-                print(f"note: label {lab!r} is given to runs {args.labels.index(lab) + 1} and {i + 1}: the legend "
-                      "cannot tell them apart", file=sys.stderr)  # fmt: skip
+    for first, i in _repeats([Path(d).resolve() for d in args.run_dirs]):
+        print(f"note: {args.run_dirs[i]} is given twice (runs {first + 1} and {i + 1}): their lines coincide",
+              file=sys.stderr)  # fmt: skip
+    for first, i in _repeats(args.labels or []):
+        if args.labels[i].strip():  # an empty label is refused by compare_runs
+            print(f"note: label {args.labels[i]!r} is given to runs {first + 1} and {i + 1}: the legend cannot tell "
+                  "them apart", file=sys.stderr)  # fmt: skip
     try:
         for run_dir in args.run_dirs:
             for note in load_run(run_dir).notes:
