@@ -34,10 +34,8 @@
 // vectoriser ("statement clobbers memory")
 #if defined(__CUDACC__)
 #define LBM_INLINE __device__ __forceinline__
-#define LBM_MEMBER_INLINE __device__ __forceinline__
 #else
 #define LBM_INLINE static inline __attribute__((always_inline))
-#define LBM_MEMBER_INLINE inline __attribute__((always_inline))
 #endif
 
 // clamp to [0, 1] (NaN passes through, as with the selects it replaces)
@@ -116,25 +114,6 @@ LBM_INLINE void lbm_store(ck_store_t* RESTRICT f, const long long c, const long 
 // corner differences), and alike for y, z (3 w = 2/9, 1/18, 1/72): 60 flops instead of 26 multiply-adds per
 // component; in the bulk the centre value cancels from the differences, so d_j = s(x + c_j) there (the
 // results differ from the other modes by float32 round-off only).
-// The field a gradient reads, s[i] for a padded cell index i: a float array (the default: the pointer as
-// `const float* RESTRICT`, so every stencil of an array compiles as it always has) or a struct whose
-// operator[] computes the value from arrays (LbmEffectivePorosity), so a derived field's gradient is one stencil
-// of the same rule with no array of its own.
-template <class Field>
-struct LbmField {
-    typedef Field type;
-};
-template <>
-struct LbmField<const float*> {
-    typedef const float* RESTRICT type;
-};
-// The effective porosity of two-phase Eq. 39 at cell i, eps' = 1 - phi (1 - eps) with phi clamped to [0, 1]:
-// eps in water, 1 in air (lbm_sand_terms.cuh; reference effective_porosity).
-struct LbmEffectivePorosity {
-    const float* RESTRICT phi;
-    const float* RESTRICT eps;
-    LBM_MEMBER_INLINE float operator[](const long long i) const { return 1.f - lbm_clamp01(phi[i]) * (1.f - eps[i]); }
-};
 #define LBM_NB_FLAGS 0
 #define LBM_NB_BULK 1
 #define LBM_NB_MASK 2
@@ -146,8 +125,8 @@ struct LbmEffectivePorosity {
 struct LbmVec3 {
     float x, y, z;
 };
-template <int EXTRAP, int MODE, class Field = const float*>
-static inline __attribute__((always_inline)) LbmVec3 lbm_gradient_host(typename LbmField<Field>::type s,
+template <int EXTRAP, int MODE>
+static inline __attribute__((always_inline)) LbmVec3 lbm_gradient_host(const float* RESTRICT s,
                                                                        const unsigned char* RESTRICT flags,
                                                                        const long long c, const int px,
                                                                        const long long pxy, const unsigned int mask) {
@@ -203,8 +182,8 @@ static inline __attribute__((always_inline)) LbmVec3 lbm_gradient_host(typename 
 // LAP = 1 (GPU, EXTRAP = 0 only): g[3] also receives the isotropic Laplacian's sum sum_j w_j d_j (Eq. 23 without
 // its factor 2 / cs^2 = 6) with the same rule and the same reads: the flow's collide takes the chemical potential
 // of Eq. 22 from it, so no mu field is stored (host: lbm_laplacian_sum).
-template <int EXTRAP, int MODE = LBM_NB_FLAGS, int LAP = 0, class Field = const float*>
-LBM_INLINE void lbm_gradient(typename LbmField<Field>::type s, const unsigned char* RESTRICT flags, const long long c,
+template <int EXTRAP, int MODE = LBM_NB_FLAGS, int LAP = 0>
+LBM_INLINE void lbm_gradient(const float* RESTRICT s, const unsigned char* RESTRICT flags, const long long c,
                              const int px, const long long pxy, float* RESTRICT g, const unsigned int mask = 0u) {
 #if CK_ON_GPU
     const float sc = s[c];
@@ -255,7 +234,7 @@ LBM_INLINE void lbm_gradient(typename LbmField<Field>::type s, const unsigned ch
     if (LAP) g[3] = lap;
 #else
     static_assert(!LAP, "host: the Laplacian's sum is lbm_laplacian_sum, in a loop of its own");
-    const LbmVec3 r = lbm_gradient_host<EXTRAP, MODE, Field>(s, flags, c, px, pxy, mask);
+    const LbmVec3 r = lbm_gradient_host<EXTRAP, MODE>(s, flags, c, px, pxy, mask);
     g[0] = r.x;
     g[1] = r.y;
     g[2] = r.z;

@@ -280,51 +280,38 @@ def from_stored(stored: np.ndarray) -> np.ndarray:
 
 
 def sand_pressure_terms(velocity, phi, eps, sand_v, slip, flags, two_phase: bool) -> np.ndarray:
-    """The sand's terms of Eq. 39 on the interior (float64), the slip terms only in the cells of ``slip``:
-    single-phase the paper's ((1 − ε) ∇·v + (u − v)·∇ε) / ε; two-phase (φ clamped to [0, 1], ε' the effective
-    porosity of :func:`effective_porosity`)
-
-        (φ [(1 − ε) ∇·v − v·∇ε] + u·∇ε') / ε',
-
-    the sand flux's divergence ∇·((1 − ε) v) counted in the water only and the fluid's part u·∇ ln ε' a gradient
-    field (why: :meth:`ReferenceOps.macro_pressure`).  ``velocity``: the Eq. 13
-    velocity of the last collision, or None for the terms without its part (u = 0: what is left once
-    :func:`slip_fluid_term` is taken out); ``eps``, ``sand_v``: the padded porosity and sand velocity (lattice
-    units), ghosts filled."""
+    """The sand's terms of Eq. 39 on the interior (float64): ((1 − ε) ∇·v + (u − v)·∇ε) / ε, the slip term
+    (u − v)·∇ε only in the cells of ``slip`` and weighted by the clamped water fraction φ in two-phase flow
+    (why both: :meth:`ReferenceOps.macro_pressure`).  ``velocity``: the Eq. 13 velocity of the last collision,
+    or None for the terms without its part (u = 0: what is left once :func:`slip_fluid_term` is taken out);
+    ``eps``, ``sand_v``: the padded porosity and sand velocity (lattice units), ghosts filled."""
     e = interior(eps).astype(np.float64)
     v = interior(sand_v).astype(np.float64)
-    div_v = sum(isotropic_gradient(sand_v[d], flags)[d] for d in range(3))  # Eq. 18
-    fluid_part = 0.0 if velocity is None else slip_fluid_term(velocity, phi, eps, slip, flags, two_phase)
-    on = interior(slip) != 0
+    # Eq. 13 velocity of the last collision (macro_pressure)
+    u = np.zeros_like(v) if velocity is None else interior(velocity).astype(np.float64)
     grad_e = isotropic_gradient(eps, flags)
-    v_grad_e = np.where(on, sum(v[d] * grad_e[d] for d in range(3)), 0.0)
-    if not two_phase:  # Eq. 39: ((1 − ε) ∇·v + (u − v)·∇ε) / ε
-        return ((1.0 - e) * div_v - v_grad_e) / e + fluid_part
-    ph = np.clip(interior(phi).astype(np.float64), 0.0, 1.0)
-    return ph * ((1.0 - e) * div_v - v_grad_e) / interior(effective_porosity(eps, phi)) + fluid_part
-
-
-def effective_porosity(eps, phi) -> np.ndarray:
-    """The effective porosity of two-phase Eq. 39, ε' = 1 − φ (1 − ε) with φ clamped to [0, 1] (float64, the shape
-    of ``eps``: padded in, padded out): ε in water, 1 in air; the sand the water sees is φ (1 − ε).  Its use and
-    why: :meth:`ReferenceOps.macro_pressure`."""
-    ph = np.clip(np.asarray(phi, np.float64), 0.0, 1.0)
-    return 1.0 - ph * (1.0 - np.asarray(eps, np.float64))
-
-
-def _slip_term(w, e_slip, slip, flags) -> np.ndarray:
-    """w·∇ε' / ε' (Eq. 18 gradient of the padded ``e_slip``) in the cells of ``slip`` (not near walls), else 0."""
-    grad = isotropic_gradient(e_slip, flags)
-    term = sum(w[d] * grad[d] for d in range(3)) / interior(e_slip).astype(np.float64)
-    return np.where(interior(slip) != 0, term, 0.0)
+    div_v = sum(isotropic_gradient(sand_v[d], flags)[d] for d in range(3))
+    u_grad_e = _slip_weighted(sum((u[d] - v[d]) * grad_e[d] for d in range(3)), phi, slip, two_phase)
+    return ((1.0 - e) * div_v + u_grad_e) / e
 
 
 def slip_fluid_term(velocity, phi, eps, slip, flags, two_phase: bool) -> np.ndarray:
-    """The fluid velocity's part of Eq. 39's slip term on the interior (float64): u·∇ε' / ε' (ε' = ε single-phase)
-    in the cells of ``slip``, 0 elsewhere; :func:`sand_pressure_terms` with ``velocity`` minus the same without it
-    (the lockstep step takes this part out while u is still stored, kernels/coupling_pressure.cu)."""
-    e_slip = effective_porosity(eps, phi) if two_phase else eps
-    return _slip_term(interior(velocity).astype(np.float64), e_slip, slip, flags)
+    """The fluid velocity's part of Eq. 39's slip term on the interior (float64): φ u·∇ε / ε in the cells of
+    ``slip`` (without φ single-phase), 0 elsewhere; :func:`sand_pressure_terms` with ``velocity`` minus the same
+    without it (the lockstep step takes this part out while u is still stored, kernels/coupling_pressure.cu)."""
+    e = interior(eps).astype(np.float64)
+    u = interior(velocity).astype(np.float64)
+    grad_e = isotropic_gradient(eps, flags)
+    return _slip_weighted(sum(u[d] * grad_e[d] for d in range(3)), phi, slip, two_phase) / e
+
+
+def _slip_weighted(slip_term, phi, slip, two_phase: bool) -> np.ndarray:
+    """A slip term of Eq. 39 kept only in the cells of ``slip`` (not near walls) and, two-phase, weighted by the
+    clamped water fraction φ (the light phase's slip pumped air: why both, :meth:`ReferenceOps.macro_pressure`)."""
+    slip_term = np.where(interior(slip) != 0, slip_term, 0.0)
+    if two_phase:
+        slip_term = np.clip(interior(phi).astype(np.float64), 0.0, 1.0) * slip_term
+    return slip_term
 
 
 def _pull_links(f, ghost):
@@ -492,23 +479,17 @@ class ReferenceOps:
         cost: the pressure of a cell in those layers does not see flow into a narrower pore there (its ∇·u
         still does).
 
-        Two-phase, the porosity terms are (φ ∇·((1 − ε) v) + u·∇ε') / ε' with the effective porosity
-        ε' = 1 − φ (1 − ε) (:func:`sand_pressure_terms`, :func:`effective_porosity`), not the paper's
-        ((1 − ε) ∇·v + (u − v)·∇ε) / ε.  Why not the paper's: in the light phase the pressure its slip term
-        raises accelerates the fluid by ∇p/ρ with ρ down to ρ_l, and a sand ball falling through the air side of
-        the interface (cells of ρ ≈ 0.01–0.08) pumped that air upward through itself, the pressure at its lower
-        edge and the slip feeding each other (×4 every ~40 steps, the drag ~50× too weak to stop it): the fluid in
-        a 1500 kg/m³ ball falling at 0.31 m/s rose at 1.2 m/s after 208 steps, and sand balls bounced off the
-        water (tests/test_fig08_sand_densities.py).  Why not the paper's slip term weighted by φ (sessions 5–26):
-        its fluid part φ u·∇ε/ε is not a gradient where ∇φ and ∇ε are not parallel (a floating body's sides), so
-        the pressure–velocity system has no energy bound there; the loop it allows is outrun by the drag (∝ Δt/Δx
-        per step) at the example files' Δt but not at a smaller one, and sand at the water surface was pumped out
-        of the water: Fig. 2's ring at Δt = 6e-5 s, Fig. 8's balls at a quarter of their Δt, a 600 kg/m³ ball
-        under the odd-rate floor at its own Δt (docs/fluid-stability.md, 'The slip term at a small time step').
-        With ε' the fluid part is u·∇ ln ε', a gradient field; the sand's part is the sand flux's divergence
-        counted in the water, what the fluid volume balance ∂ε'/∂t + ∇·(ε' u) = 0 gives for sand moving at v with
-        φ held over the step (∂(φ (1 − ε))/∂t = −φ ∇·((1 − ε) v)).  In water (φ = 1) both are the paper's terms;
-        in air (ε' = 1) both vanish, as the φ weight made the slip term do.
+        Why the slip term is weighted by the water fraction φ (two-phase): in the light phase the pressure it
+        raises accelerates the fluid by ∇p/ρ with ρ down to ρ_l, and a sand ball falling through the air
+        side of the interface (cells of ρ ≈ 0.01–0.08) pumped that air upward through itself, the pressure at
+        its lower edge and the slip feeding each other (×4 every ~40 steps, the drag ~50× too weak to stop
+        it): the fluid in a 1500 kg/m³ ball falling at 0.31 m/s rose at 1.2 m/s after 208 steps, and sand
+        balls bounced off the water (tests/test_fig08_sand_densities.py).  Weighted by φ it rises at
+        0.03 m/s.  The term keeps its full weight in water, where the mixture continuity matters for the
+        sand (air's drag on it is ~800× weaker).  The same loop returns in water at a small Δt, where the drag
+        per step (∝ Δt/Δx) no longer outruns it: Fig. 2's floating ring rises out of the pool at Δt = 6e-5 s
+        (docs/fluid-stability.md, 'The slip term at a small time step'; a strict xfail in
+        tests/test_paper_scenes.py).  Not fixed.
         """
         if fsum is None:
             s0 = self.load(f, flags, velocity, parity).sum(axis=0)

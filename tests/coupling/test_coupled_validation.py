@@ -89,13 +89,12 @@ def test_sand_ball_dropped_into_water(cpu1, density):
     if density < 640.0:
         # floats at rest with the grain volume submerged in the ratio of the densities (the pore water is
         # neutral): a sphere cap of height h = t r with t² (3 − t) / 4 = 600/1000, t = 1.134, so the centre
-        # sits at surface − h + r = 8.68 cells; measured 8.71, |vz| 0.001 m/s (8.76, 0.009 with the φ-weighted
-        # slip term of sessions 5–26). Bound 0.5 cell: the buoyancy is spread over the 4-cell diffuse interface.
-        # (With the paper's unweighted slip term the ball rested on the interface, bottom 10.0, held up by the air
-        # pumped through it: tests/test_fig08_sand_densities.py.)
+        # sits at surface − h + r = 8.68 cells; measured 8.69. Bound 0.5 cell: the buoyancy is spread over
+        # the 4-cell diffuse interface. (Before the φ weight of Eq. 39's slip term the ball rested on the
+        # interface, bottom 10.0, held up by the air pumped through it: tests/test_fig08_sand_densities.py.)
         t = 1.134
         assert abs(x[2].mean() - (surface - t * 2.4 + 2.4)) < 0.5 and vz < 0.02
-    elif density < 1000.0:  # measured: lowest particle 3.98 cells, centre 5.16, rising (3.56, 4.78 before)
+    elif density < 1000.0:
         assert x[2].min() > 2.5
     else:
         assert x[2].min() < 3.0 and vz < 0.02

@@ -90,10 +90,9 @@ def test_partition_runs_are_calm_and_conserve_water(runs):
 
 
 def test_wetting_front_advances_more_slowly_with_retention(runs):
-    """With retention the front reaches 1.5 cells under the wall > 1.3× later (measured: not by step 3000, at
-    1.49 cells, against step 1914 without; 1.49× with the φ-weighted slip term of sessions 5–26, 1.77× before
-    it), advances < 0.9× as far between steps 1000 and 3000 (measured 0.875×; 0.81× and 0.79× before) and lags by
-    > 0.8 cell at step 3000 (measured 1.41; 1.29 before).  Margins: about half the measured
+    """With retention the front reaches 1.5 cells under the wall > 1.3× later (measured 1.49×; 1.77× before
+    the φ weight of Eq. 39's slip term), advances < 0.9× as far between steps 1000 and 3000 (measured 0.81×;
+    0.79× before) and lags by > 0.8 cell at step 3000 (measured 1.29).  Margins: about half the measured
     effect each (0.3 of the arrival delay's 0.49), ~10× the step-to-step noise of the
     fronts (their 250-step increments vary smoothly, by < 0.05 cell)."""
     off, on = runs[False], runs[True]

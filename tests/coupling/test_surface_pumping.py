@@ -1,23 +1,26 @@
-"""Sand at the water surface and the time step: the smallest scene of the defect found in session 26 and fixed in
-session 27 (docs/fluid-stability.md, 'The slip term at a small time step').
+"""Sand at the water surface and the time step (session 26; docs/fluid-stability.md, 'The slip term at a small time
+step'): the smallest scene that shows the defect, for whoever fixes it, and its control.
 
 A 600 kg/m³ cohesive sand slab (6 × 6 × 2 cells, dx = 1 cm) released 2 mm above a 10-cell pool in a 12 × 12 × 20 box
-at the Table 1 lattice numbers of Fig. 2 (ν_h = 5e-4, ν_l = 2e-3, η = 2, physical σ). With Eq. 39's slip term
-weighted by the water fraction φ (sessions 5–26) it sank into the surface and floated at Δt = 5.8e-4 s (Fig. 2's Δt
-scaled with Δx), but at Δt = 5e-5 s the water in its cells rose from the first steps, their pressure grew linearly
-(1.3 kPa at 15 ms, 6.4 kPa at 60 ms; ~250 Pa at the larger Δt) and the slab came out of the water, 22 mm above its
-release height at 0.15 s (the cpu backend and the NumPy reference agreed to the printed digits).
+at the Table 1 lattice numbers of Fig. 2 (ν_h = 5e-4, ν_l = 2e-3, η = 2, physical σ). At Δt = 5.8e-4 s (Fig. 2's Δt
+scaled with Δx) it sinks into the surface and floats; at Δt = 5e-5 s the water in its cells rises from the first
+steps, their pressure grows linearly (1.3 kPa at 15 ms, 6.4 kPa at 60 ms; ~250 Pa at the larger Δt) and the slab
+comes out of the water, 22 mm above its release height at 0.15 s. The cpu backend and the NumPy reference agree
+to the printed digits (zmean − z0 +2.88 mm at 60 ms on both).
 
-Measured on the NumPy reference at Δt = 5e-5 s over 60 ms, with one part of the φ-weighted terms taken out at a time
-(monkeypatched): without the fluid velocity's part φ u·∇ε/ε it floated (−3.79 mm); without the sand's parts it sank,
-accelerating (no displacement); weighted by φ³ it came later. The fluid part was the culprit: φ u·∇ε/ε is not a
-gradient where ∇φ and ∇ε are not parallel. Since session 27 the two-phase terms are (φ ∇·((1 − ε) v) + u·∇ε') / ε'
-with ε' = 1 − φ (1 − ε), the fluid part u·∇ ln ε' (couplekit.fluid.reference.sand_pressure_terms).
+Measured on the NumPy reference at Δt = 5e-5 s over 60 ms (mean height − release / sand speed at 60 ms), with one
+part of Eq. 39's porosity terms taken out at a time (monkeypatched, not in the code):
 
-Measured since (kernels, this file's sampling): the mean height minus the release height at the end, −10.6 mm at
-Δt = 5.8e-4 s (0.1 s), −8.5 mm at 1.5e-4 s (0.1 s), −5.7 mm at 5e-5 s (0.15 s, sinking at 0.022 m/s); never above
-the release height. It sinks more slowly at the smaller Δt because the scene keeps the lattice viscosities, so its
-physical viscosities grow as Δx²/Δt.
+* as is: +2.88 mm, +0.231 m/s (rising);
+* without the fluid velocity's part φ u·∇ε/ε (`slip_fluid_term` zero): −3.79 mm, −0.060 m/s, ring-cell pressure
+  flat at ~850 Pa: it floats;
+* without the sand's parts ((1 − ε)∇·v − φ v·∇ε)/ε: −6.95 mm, −0.224 m/s and accelerating (no displacement);
+* the fluid part weighted by φ³ instead of φ: −2.47 mm, 0.003 m/s, but the pressure still climbing (1.8 kPa):
+  later, not gone; φ³ on both parts alike (1.6 kPa, climbing).
+
+So the loop closes through both parts in the interface; a stronger interface weight only moves the threshold.
+Both parts written with one effective porosity ε' = 1 − φ(1 − ε) and no separate φ weight (monkeypatched, a
+gradient field again): −5.5 mm at 60 ms, −10.0 mm at 0.135 s, settling (docs/fluid-stability.md, 'A direction').
 """
 
 from __future__ import annotations
@@ -63,10 +66,20 @@ def _heights(sim: Simulation, duration: float, samples: int) -> np.ndarray:
     return np.array(out)
 
 
-@pytest.mark.parametrize("dt, duration", [(5.8e-4, 0.1), (1.5e-4, 0.1), (5e-5, 0.15)])
-def test_a_floating_slab_sinks_into_the_surface_at_every_time_step(dt, duration):
-    """At Δt = 5.8e-4 s (Fig. 2's Δt scaled with Δx), 1.5e-4 s and 5e-5 s the slab never rises above its release
-    height and has sunk more than 3 mm into the surface by the end (measured in the module docstring; with the
-    φ-weighted slip term it rose 22.1 mm at 5e-5 s)."""
-    dz = _heights(_slab(dt), duration, 10)
-    assert dz.max() <= 0.0 and dz[-1] < -3e-3, np.round(1e3 * dz, 2)
+def test_a_floating_slab_sinks_into_the_surface_at_the_scaled_time_step():
+    """The control: at Δt = 5.8e-4 s the slab never rises above its release height and has sunk more than 5 mm
+    by 0.1 s (measured −10.7 mm at 0.102 s, the sinking slowing: −0.106 m/s)."""
+    dz = _heights(_slab(5.8e-4), 0.1, 5)
+    assert dz.max() <= 0.0 and dz[-1] < -5e-3, np.round(1e3 * dz, 2)
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="Eq. 39's porosity-slip term pumps water up through sand at the water surface at a small time step "
+    "(docs/fluid-stability.md, 'The slip term at a small time step')",
+)
+def test_a_floating_slab_stays_in_the_water_at_a_small_time_step():
+    """At Δt = 5e-5 s the same slab must not rise more than 1 mm above its release height over 0.15 s (measured:
+    +22.1 mm, the sand rising at up to 0.28 m/s)."""
+    dz = _heights(_slab(5e-5), 0.15, 10)
+    assert dz.max() <= 1e-3, np.round(1e3 * dz, 2)
