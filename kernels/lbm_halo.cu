@@ -1,5 +1,5 @@
 // Periodic and outflow ghost layers of the padded LBM grid.
-// Spec: couplekit/fluid/reference.py halo_copy / fold / outflow_fix.
+// Spec: couplekit/fluid/reference.py halo_copy / fold / outflow_fill / outflow_fix (backflow_correction).
 // The populations are ck_store_t (common.cuh, CK_STORAGE_FP16): the copies move stored values unchanged; the
 // wall links convert (CK_LOAD / CK_STORE) to add the moving wall's term in float32.
 // variants: CK_STORAGE_FP16=0,1
@@ -111,10 +111,64 @@ KERNEL void lbm_halo_boxes(const long long n, ck_store_t* RESTRICT f /* size: 27
 #endif
 }
 
+// The backflow an outflow ghost would send in (reference backflow_correction): m the momentum sum_j f*_j c_j of its
+// interior cell, o its `outward` directions (couplekit.fluid.grid.outflow_directions: +-1 on each axis the ghost
+// lies outside a non-periodic face, 0 elsewhere; layout (3, n)): du_a = -o_a min(o_a m_a, 0), the inward part of m
+// on those axes.  Returns whether any is non-zero (then f*_j += 3 w_j c_j.du on the links
+// into the domain; otherwise the zero-gradient copy stands as it is, bitwise).
+DEVICE bool lbm_backflow_du(const float m[3], const int ox, const int oy, const int oz, float du[3]) {
+    const int o[3] = {ox, oy, oz};
+    bool any = false;
+    for (int a = 0; a < 3; ++a) {
+        const float on = (float)o[a] * m[a];
+        du[a] = on < 0.f ? -(float)o[a] * on : 0.f;
+        any = any || on < 0.f;
+    }
+    return any;
+}
+
+// before an odd (pull) step, outflow ghosts: all 27 stored populations of ghost[i] copied from src[i] (zero
+// gradient), then the backflow taken out (lbm_backflow_du): after an even step f*_j of src sits in slot opp(j), so
+// m = -sum_k F[k] c_k over the copied slots and slot opp(j) takes f*_j + 3 w_j c_j.du (float32, CK_LOAD / CK_STORE);
+// du (layout (3, n)) is kept for lbm_outflow_fix after the step
+KERNEL void lbm_outflow_fill(const long long n, ck_store_t* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
+                             const long long* RESTRICT ghost /* size: n */, const long long* RESTRICT src /* size: n */,
+                             const signed char* RESTRICT outward /* size: 3 * n */,
+                             float* RESTRICT du_out /* size: 3 * n */, const int nx, const int ny, const int nz) {
+    const int px = nx + 2;
+    const long long pxy = (long long)px * (ny + 2);
+    const long long N = pxy * (nz + 2);
+    FOR_EACH(i, n) {
+        const long long g = ghost[i], s = src[i];
+        float m[3] = {0.f, 0.f, 0.f};
+        for (int k = 0; k < 27; ++k) {
+            f[k * N + g] = f[k * N + s];
+            const float v = CK_LOAD(f, k * N + g, CK_F_SCALE);
+            m[0] -= v * (float)CX27[k];
+            m[1] -= v * (float)CY27[k];
+            m[2] -= v * (float)CZ27[k];
+        }
+        float du[3];
+        const bool back = lbm_backflow_du(m, outward[i], outward[n + i], outward[2 * n + i], du);
+        du_out[i] = du[0], du_out[n + i] = du[1], du_out[2 * n + i] = du[2];
+        if (!back) continue;
+        for (int q = 1; q < 27; ++q) {
+            const long long k = (long long)opposite_dir(q) * N + g;
+            const float corr = 3.f * W27[q] * ((float)CX27[q] * du[0] + (float)CY27[q] * du[1] + (float)CZ27[q] * du[2]);
+            CK_STORE(f, k, CK_LOAD(f, k, CK_F_SCALE) + corr, CK_F_SCALE);
+        }
+    }
+}
+
 // after an odd (push) step, outflow ghosts: F[j][ghost + c_j] = F[j][src + c_j] for every direction j with
-// ghost + c_j and src + c_j interior (the ghost "pushes" what its interior neighbour src pushed: zero gradient)
+// ghost + c_j and src + c_j interior (the ghost "pushes" what its interior neighbour src pushed: zero gradient),
+// plus 3 w_j c_j.du with the du lbm_outflow_fill found before the step (src's momentum cannot be summed from its
+// neighbours' slots now: pushes toward walls stay at src).  No ghost writes a value another reads
+// (ghost + c_j = src' + c_j would need ghost = src').
 KERNEL void lbm_outflow_fix(const long long n, ck_store_t* RESTRICT f /* size: 27 * (nx + 2) * (ny + 2) * (nz + 2) */,
-                            const long long* RESTRICT ghost /* size: n */, const long long* RESTRICT src /* size: n */, const int nx, const int ny, const int nz) {
+                            const long long* RESTRICT ghost /* size: n */, const long long* RESTRICT src /* size: n */,
+                            const float* RESTRICT du_in /* size: 3 * n */, const int nx, const int ny,
+                            const int nz) {
     const int px = nx + 2;
     const long long pxy = (long long)px * (ny + 2);
     const long long N = pxy * (nz + 2);
@@ -122,12 +176,22 @@ KERNEL void lbm_outflow_fix(const long long n, ck_store_t* RESTRICT f /* size: 2
         const long long g = ghost[i], s = src[i];
         const int gz = (int)(g / pxy), gy = (int)((g / px) % (ny + 2)), gx = (int)(g % px);
         const int sz = (int)(s / pxy), sy = (int)((s / px) % (ny + 2)), sx = (int)(s % px);
+        const float du[3] = {du_in[i], du_in[n + i], du_in[2 * n + i]};
+        const bool back = du[0] != 0.f || du[1] != 0.f || du[2] != 0.f;
         for (int q = 1; q < 27; ++q) {
             const int tx = gx + CX27[q], ty = gy + CY27[q], tz = gz + CZ27[q];
             const int ux = sx + CX27[q], uy = sy + CY27[q], uz = sz + CZ27[q];
             if (tx >= 1 && tx <= nx && ty >= 1 && ty <= ny && tz >= 1 && tz <= nz && ux >= 1 && ux <= nx &&
-                uy >= 1 && uy <= ny && uz >= 1 && uz <= nz)
-                f[q * N + tx + px * (long long)ty + pxy * tz] = f[q * N + ux + px * (long long)uy + pxy * uz];
+                uy >= 1 && uy <= ny && uz >= 1 && uz <= nz) {
+                const long long t = q * N + tx + px * (long long)ty + pxy * tz, u = q * N + ux + px * (long long)uy + pxy * uz;
+                if (back) {
+                    const float corr =
+                        3.f * W27[q] * ((float)CX27[q] * du[0] + (float)CY27[q] * du[1] + (float)CZ27[q] * du[2]);
+                    CK_STORE(f, t, CK_LOAD(f, u, CK_F_SCALE) + corr, CK_F_SCALE);
+                } else {
+                    f[t] = f[u];
+                }
+            }
         }
     }
 }

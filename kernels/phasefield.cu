@@ -9,7 +9,8 @@
 //   flags (NZ, NY, NX) uint8, the flow's cell flags: FLUID 0 (updated), WALL 1 (solid / wall: no-flux
 //   bounce-back), INFLOW 2 (bounce-back plus the advective flux phi_b d_q.u_b of the phi and velocity stored at
 //   that cell: exactly phi_b u_b.n enters per face link, the fluid's volume flux times the carried phase value),
-//   OUTFLOW 3 (zero-gradient equilibrium: h enters at equilibrium with this cell's own phi and velocity).
+//   OUTFLOW 3 (zero-gradient equilibrium: h enters at equilibrium with this cell's own phi and velocity, the
+//   velocity's part into the cell through the face dropped: pf_feq_out).
 //   Ghost cells on non-periodic axes must be WALL/INFLOW/OUTFLOW (grid.build_flags, phasefield.pad_flags).
 //
 // Neighbours: constant offsets, except on a periodic axis where a step out of the interior wraps to the
@@ -154,6 +155,15 @@ PF_INLINE float pf_feq(const int q, const float phi, const float ux, const float
     return W7[q] * phi * (1.f + pf_dot(q, ux, uy, uz) / CS2_7);
 }
 
+// The equilibrium an outflow link feeds in along q (from the outflow ghost into the cell): pf_feq with the part of
+// u along q kept only where it points out of the cell through the face (d_q.u < 0): where the fluid comes in
+// through the outflow face (backflow) the link carries no advective flux of phi, w_q phi only, as the flow's
+// outflow takes the inward velocity out (lbm_outflow_fill).  Reference: phasefield_reference._feq_out.
+PF_INLINE float pf_feq_out(const int q, const float phi, const float ux, const float uy, const float uz) {
+    const float du = pf_dot(q, ux, uy, uz);
+    return W7[q] * phi * (1.f + (du < 0.f ? du : 0.f) / CS2_7);
+}
+
 // The flux part of an inflow link (q: the direction from the inflow cell into the fluid cell): the population that
 // enters is the bounced-back one plus 2 w_q phi_b d_q.u_b / cs^2, so the link's net flux is phi_b d_q.u_b (8 w_q = 1
 // with w_q = 1/8, cs^2 = 1/4).  The former equilibrium inflow, h = w_q phi_b (1 + d_q.u_b / cs^2), added a
@@ -189,7 +199,7 @@ DEVICE void pf_load(const ck_store_t* RESTRICT h, const unsigned char* RESTRICT 
         } else if (kind == PF_INFLOW) {
             v = PF_LDX(h, q, q * ncell + c) + pf_inflow(q, phi[p], u[p], u[ncell + p], u[2 * ncell + p]);
         } else if (kind == PF_OUTFLOW) {
-            outflow_weight += pf_feq(q, 1.f, ux, uy, uz);
+            outflow_weight += pf_feq_out(q, 1.f, ux, uy, uz);
         } else {
             v = PF_LDX(h, q, q * ncell + c);
         }
@@ -201,7 +211,7 @@ DEVICE void pf_load(const ck_store_t* RESTRICT h, const unsigned char* RESTRICT 
         const float phi_c = known / (1.f - outflow_weight);
         PF_UNROLL
         for (int q = 1; q < 7; ++q)
-            if (flags[nb[pf_opp(q)]] == PF_OUTFLOW) f[q] = pf_feq(q, phi_c, ux, uy, uz);
+            if (flags[nb[pf_opp(q)]] == PF_OUTFLOW) f[q] = pf_feq_out(q, phi_c, ux, uy, uz);
     }
 }
 
@@ -227,7 +237,7 @@ DEVICE void pf_store(ck_store_t* RESTRICT h, const unsigned char* RESTRICT flags
         } else if (kind == PF_INFLOW) {
             PF_STS(h, qo, qo * ncell + c, f[q] + pf_inflow(qo, phi[m], u[m], u[ncell + m], u[2 * ncell + m]));
         } else if (kind == PF_OUTFLOW) {
-            PF_STS(h, qo, qo * ncell + c, pf_feq(qo, phi_post, u[c], u[ncell + c], u[2 * ncell + c]));
+            PF_STS(h, qo, qo * ncell + c, pf_feq_out(qo, phi_post, u[c], u[ncell + c], u[2 * ncell + c]));
         } else {
             PF_STS(h, qo, qo * ncell + c, f[q]);
         }

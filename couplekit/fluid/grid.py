@@ -507,6 +507,24 @@ def outflow_lists(shape: tuple[int, int, int], flags: np.ndarray) -> tuple[np.nd
     return ghost, (sx + px * (sy + py * sz)).astype(np.int64)
 
 
+def outflow_directions(
+    shape: tuple[int, int, int], ghost: np.ndarray, src: np.ndarray, periodic_axes: tuple[bool, bool, bool]
+) -> np.ndarray:
+    """(3, n) int8: each outflow ghost's offset from its interior cell (:func:`outflow_lists`) on the axes it lies
+    outside a non-periodic face (±1), 0 on the others: the directions in which the outflow takes backflow out
+    (``ReferenceOps.outflow_fill``).  An edge ghost of an outflow face and a periodic face keeps only the outflow
+    face's axis: across the periodic seam the fluid may flow either way."""
+    pz, py, px = padded_shape(shape)
+    out = []
+    for idx in (ghost, src):
+        z, rem = np.divmod(np.asarray(idx, np.int64), px * py)
+        y, x = np.divmod(rem, px)
+        out.append(np.stack([x, y, z]))
+    offset = out[0] - out[1]
+    offset[np.asarray(periodic_axes, bool)] = 0
+    return offset.astype(np.int8)
+
+
 def wall_links(flags: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(cell, dir)``: every link from an interior FLUID cell ``c`` whose neighbour ``c − c_dir`` is a WALL or
     INFLOW cell, as padded index (int64) and D3Q27 direction (int32), sorted by direction, then cell: the list

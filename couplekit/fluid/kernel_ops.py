@@ -66,6 +66,7 @@ class KernelOps:
         self._halo_pop = halo.function("lbm_halo_copy_pop")
         self._halo_boxes = halo.function("lbm_halo_boxes")
         self._outflow_fix = halo.function("lbm_outflow_fix")
+        self._outflow_fill = halo.function("lbm_outflow_fill")
         self._prefill = halo.function("lbm_wall_prefill")
         self._bounce = halo.function("lbm_wall_bounce")
         self._links_flags = None  # the flags array the cached wall links belong to
@@ -293,9 +294,20 @@ class KernelOps:
             np.int32(pz - 2),
         )  # fmt: skip
 
-    def outflow_fix(self, f, ghost, src) -> None:
-        """After an odd step, set what the outflow ghosts would have pushed (zero gradient)."""
+    def outflow_fill(self, f, ghost, src, outward, du) -> None:
+        """Before an odd step, fill the outflow ghosts' populations from their interior cells, backflow taken out;
+        each ghost's Δu into ``du`` (3, n) for :meth:`outflow_fix` (ReferenceOps.outflow_fill)."""
         if ghost.size == 0:
             return
         pz, py, px = f.shape[-3:]
-        self._outflow_fix(int(ghost.size), f, ghost, src, np.int32(px - 2), np.int32(py - 2), np.int32(pz - 2))
+        self._outflow_fill(
+            int(ghost.size), f, ghost, src, outward, du, np.int32(px - 2), np.int32(py - 2), np.int32(pz - 2)
+        )
+
+    def outflow_fix(self, f, ghost, src, du) -> None:
+        """After an odd step, set what the outflow ghosts would have pushed (zero gradient, backflow taken out:
+        ReferenceOps.outflow_fix)."""
+        if ghost.size == 0:
+            return
+        pz, py, px = f.shape[-3:]
+        self._outflow_fix(int(ghost.size), f, ghost, src, du, np.int32(px - 2), np.int32(py - 2), np.int32(pz - 2))

@@ -46,6 +46,14 @@ def _feq(q, phi, u):
     return W7[q] * phi * (1.0 + (C7[q].astype(np.float64) @ u) / CS2_7)
 
 
+def _feq_out(q, phi, u):
+    """The equilibrium an outflow link feeds in along q (from the outflow ghost into the cell): :func:`_feq` with
+    d_q·u kept only where it is negative (the cell's fluid leaving through the face); where it comes in (backflow)
+    the link carries w_q φ only, no advective flux of φ, as the flow's outflow takes the inward velocity out
+    (couplekit.fluid.reference ReferenceOps.outflow_fill)."""
+    return W7[q] * phi * (1.0 + np.minimum(C7[q].astype(np.float64) @ u, 0.0) / CS2_7)
+
+
 def _inflow(q, phi_b, u_b):
     """The flux part 2 w_q phi_b d_q . u_b / cs^2 of an inflow link (q: from the inflow cell into the fluid): the
     entering population is the bounced-back one plus this, so the link's net flux is phi_b d_q . u_b."""
@@ -132,12 +140,12 @@ class PhaseFieldReferenceOps:
             bounced = H[q, c]  # own f*_{opp q} of the even step: bounce-back from a wall
             inflow = bounced + _inflow(q, P[p], U[:, p])  # bounce-back plus phi_b d_q . u_b of the inflow cell
             f[q] = np.select([kind == FLUID, kind == WALL, kind == INFLOW], [pulled, bounced, inflow], 0.0)
-            outflow_weight += np.where(kind == OUTFLOW, _feq(q, 1.0, U[:, c]), 0.0)
+            outflow_weight += np.where(kind == OUTFLOW, _feq_out(q, 1.0, U[:, c]), 0.0)
         # zero-gradient outflow: equilibrium with the cell's own phi, phi = known + phi * outflow_weight
         phi_c = f.sum(axis=0) / (1.0 - outflow_weight)
         for q in range(1, 7):
             out = grid.flags[grid.neighbour[OPP7[q]]] == OUTFLOW
-            f[q] = np.where(out, _feq(q, phi_c, U[:, c]), f[q])
+            f[q] = np.where(out, _feq_out(q, phi_c, U[:, c]), f[q])
         return f
 
     def _store(self, h, phi, u, fstar: np.ndarray, grid: _Grid, parity: int) -> None:
@@ -169,7 +177,7 @@ class PhaseFieldReferenceOps:
             inflow = kind == INFLOW
             H[qo, c[inflow]] = fs[q, inflow] + _inflow(qo, P[m[inflow]], U[:, m[inflow]])
             out = kind == OUTFLOW
-            H[qo, c[out]] = _feq(qo, phi_post[out], U[:, c[out]])
+            H[qo, c[out]] = _feq_out(qo, phi_post[out], U[:, c[out]])
 
     def _unload(self, h, feq: np.ndarray, grid: _Grid, parity: int, phi=None, u=None) -> None:
         """Write f (7, ncells) so that loading at ``parity`` returns it in every interior fluid cell (``phi``,

@@ -4,7 +4,8 @@ The solver owns the padded fields (layout: :mod:`couplekit.fluid.grid`) and call
 code path serves every backend: :class:`KernelOps` + :class:`PhaseFieldKernelOps` on cpu/cuda,
 :class:`ReferenceOps` + :class:`PhaseFieldReferenceOps` on numpy. One step (Algorithm 1's LBM stages):
 
-1. (odd parity) periodic and outflow ghosts of f are filled from the interior;
+1. (odd parity) periodic and outflow ghosts of f are filled from the interior (outflow: backflow taken out,
+   ``ReferenceOps.outflow_fill``);
 2. pressure update, Eq. 39, from the current populations and φ (``macro_pressure``);
 3. 27-point filter, Eq. 40 (by default the stored p is replaced by p̄, see FluidParams);
 4. fused forces (Eqs. 15-20) + NOCM-MRT collision + AA streaming of f, writing the velocity u^n;
@@ -44,6 +45,7 @@ from .grid import (
     build_flags,
     inflow_front_ramp,
     link_box_arrays,
+    outflow_directions,
     outflow_lists,
     padded_shape,
     periodic_link_boxes,
@@ -473,6 +475,9 @@ class FluidSolver:
         # the periodic ghosts' links of the odd step (halo_pull, fold)
         self._link_boxes = link_box_arrays(periodic_link_boxes(self.shape, self.boundaries)).on(backend)
         self._out_ghost, self._out_src = backend.asarray(out_ghost), backend.asarray(out_src)
+        # the axes on which each outflow ghost takes backflow out (ReferenceOps.outflow_fill)
+        self._out_dir = backend.asarray(outflow_directions(self.shape, out_ghost, out_src, periodic_axes))
+        self._out_du = xp.zeros((3, out_ghost.size), dtype=np.float32)  # fill -> fix of an odd step (12 B per ghost)
 
         u0 = np.zeros((3,) + self.shape) if velocity is None else np.asarray(velocity, np.float64)
         if u0.shape != (3,) + self.shape:
@@ -680,7 +685,7 @@ class FluidSolver:
             self._fsum_step, self._fsum_sand, self._force_step = None, False, None
             if parity:
                 ops.halo_pull(self.f, self._ghost, self._image, self._link_boxes)
-                ops.halo_copy(self.f, self._out_ghost, self._out_src)
+                ops.outflow_fill(self.f, self._out_ghost, self._out_src, self._out_dir, self._out_du)
             if self.mixture:
                 ops.halo_copy(self.fluid_fraction, self._ghost, self._image)
                 if self.sand_velocity is not None:
@@ -707,7 +712,7 @@ class FluidSolver:
             )  # fmt: skip
             if parity:
                 ops.fold(self.f, self._ghost, self._image, self._link_boxes)
-                ops.outflow_fix(self.f, self._out_ghost, self._out_src)
+                ops.outflow_fix(self.f, self._out_ghost, self._out_src, self._out_du)
             if self.two_phase:
                 self._set_inflow_front()  # first: the controller's target counts the inflow's φ_b of this step
                 if prm.eta > 0:
@@ -760,7 +765,7 @@ class FluidSolver:
         parity = self.step_count & 1
         if parity:
             self.ops.halo_pull(self.f, self._ghost, self._image, self._link_boxes)
-            self.ops.halo_copy(self.f, self._out_ghost, self._out_src)
+            self.ops.outflow_fill(self.f, self._out_ghost, self._out_src, self._out_dir, self._out_du)
         fsum = self.pbar if keep_fsum else None
         held = keep_fsum and self._slip_step == self.step_count
         self.ops.momentum(self.f, self.flags, self.velocity, out, parity, fsum=fsum, held=held)

@@ -216,7 +216,7 @@ def parse_toml(text: str, source: str = "<string>", error: type[ProblemError] = 
 
 
 # ------------------------------------------------------------------------------------------------ the schema
-_FACE_DOC = "boundary of the {face} face: 'wall' (no-slip, sand slides with wall friction), 'periodic' (both faces of the axis), 'inflow' (needs an [[inflows]] entry on this face), 'outflow' (zero-gradient, fluid leaves)"
+_FACE_DOC = "boundary of the {face} face: 'wall' (no-slip, sand slides with wall friction), 'periodic' (both faces of the axis), 'inflow' (needs an [[inflows]] entry on this face), 'outflow' (zero-gradient, fluid leaves; where fluid comes back in, the face takes its inward velocity out)"
 
 SECTIONS: dict[str, list[Key]] = {
     "scene": [

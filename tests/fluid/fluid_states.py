@@ -9,6 +9,7 @@ from couplekit.fluid.grid import (
     Face,
     build_flags,
     link_box_arrays,
+    outflow_directions,
     outflow_lists,
     padded_shape,
     periodic_link_boxes,
@@ -53,6 +54,7 @@ def random_state(
     ghost, image = periodic_lists(shape, boundaries)
     links = link_box_arrays(periodic_link_boxes(shape, boundaries))
     out_ghost, out_src = outflow_lists(shape, flags)
+    out_dir = outflow_directions(shape, out_ghost, out_src, boundaries.periodic_axes)
     state = {
         "f": to_stored(f),  # the fluid arrays hold f - w (shifted storage)
         "flags": flags,
@@ -69,6 +71,7 @@ def random_state(
         "links": links,
         "out_ghost": out_ghost,
         "out_src": out_src,
+        "out_dir": out_dir,
     }
     # cells with the porosity-slip term of Eq. 39: a random half of the fluid cells (drawn last, so the other
     # arrays are those of earlier versions), for the kernels must follow whatever mask they are given
