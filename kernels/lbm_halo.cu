@@ -114,8 +114,8 @@ KERNEL void lbm_halo_boxes(const long long n, ck_store_t* RESTRICT f /* size: 27
 // The backflow an outflow ghost would send in (reference backflow_correction): m the momentum sum_j f*_j c_j of its
 // interior cell, o its `outward` directions (couplekit.fluid.grid.outflow_directions: +-1 on each axis the ghost
 // lies outside a non-periodic face, 0 elsewhere; layout (3, n)): du_a = -o_a min(o_a m_a, 0), the inward part of m
-// on those axes.  Returns whether any is non-zero (then f*_j += 3 w_j c_j.du on the links
-// into the domain; otherwise the zero-gradient copy stands as it is, bitwise).
+// on those axes.  Returns whether any is non-zero (then f*_j += 3 w_j c_j.du on the links into the domain;
+// otherwise the zero-gradient copy stands as it is, bitwise).
 DEVICE bool lbm_backflow_du(const float m[3], const int ox, const int oy, const int oz, float du[3]) {
     const int o[3] = {ox, oy, oz};
     bool any = false;
@@ -154,7 +154,8 @@ KERNEL void lbm_outflow_fill(const long long n, ck_store_t* RESTRICT f /* size: 
         if (!back) continue;
         for (int q = 1; q < 27; ++q) {
             const long long k = (long long)opposite_dir(q) * N + g;
-            const float corr = 3.f * W27[q] * ((float)CX27[q] * du[0] + (float)CY27[q] * du[1] + (float)CZ27[q] * du[2]);
+            const float corr =
+                3.f * W27[q] * ((float)CX27[q] * du[0] + (float)CY27[q] * du[1] + (float)CZ27[q] * du[2]);
             CK_STORE(f, k, CK_LOAD(f, k, CK_F_SCALE) + corr, CK_F_SCALE);
         }
     }
@@ -183,7 +184,8 @@ KERNEL void lbm_outflow_fix(const long long n, ck_store_t* RESTRICT f /* size: 2
             const int ux = sx + CX27[q], uy = sy + CY27[q], uz = sz + CZ27[q];
             if (tx >= 1 && tx <= nx && ty >= 1 && ty <= ny && tz >= 1 && tz <= nz && ux >= 1 && ux <= nx &&
                 uy >= 1 && uy <= ny && uz >= 1 && uz <= nz) {
-                const long long t = q * N + tx + px * (long long)ty + pxy * tz, u = q * N + ux + px * (long long)uy + pxy * uz;
+                const long long t = q * N + tx + px * (long long)ty + pxy * tz;
+                const long long u = q * N + ux + px * (long long)uy + pxy * uz;
                 if (back) {
                     const float corr =
                         3.f * W27[q] * ((float)CX27[q] * du[0] + (float)CY27[q] * du[1] + (float)CZ27[q] * du[2]);
