@@ -9,8 +9,8 @@
 //   flags (NZ, NY, NX) uint8, the flow's cell flags: FLUID 0 (updated), WALL 1 (solid / wall: no-flux
 //   bounce-back), INFLOW 2 (bounce-back plus the advective flux phi_b d_q.u_b of the phi and velocity stored at
 //   that cell: exactly phi_b u_b.n enters per face link, the fluid's volume flux times the carried phase value),
-//   OUTFLOW 3 (zero-gradient equilibrium: h enters at equilibrium with this cell's own phi and velocity, the
-//   velocity's part into the cell through the face dropped: pf_feq_out).
+//   OUTFLOW 3 (zero-gradient equilibrium: h enters at equilibrium with this cell's own phi and velocity, with no
+//   advective flux of phi in where the velocity points into the cell through the face: pf_feq_out).
 //   Ghost cells on non-periodic axes must be WALL/INFLOW/OUTFLOW (grid.build_flags, phasefield.pad_flags).
 //
 // Neighbours: constant offsets, except on a periodic axis where a step out of the interior wraps to the
@@ -155,13 +155,14 @@ PF_INLINE float pf_feq(const int q, const float phi, const float ux, const float
     return W7[q] * phi * (1.f + pf_dot(q, ux, uy, uz) / CS2_7);
 }
 
-// The equilibrium an outflow link feeds in along q (from the outflow ghost into the cell): pf_feq with the part of
-// u along q kept only where it points out of the cell through the face (d_q.u < 0): where the fluid comes in
-// through the outflow face (backflow) the link carries no advective flux of phi, w_q phi only, as the flow's
-// outflow takes the inward velocity out (lbm_outflow_fill).  Reference: phasefield_reference._feq_out.
+// The equilibrium an outflow link feeds in along q (from the outflow ghost into the cell): w_q phi (1 - |d_q.u| /
+// cs^2).  Where the cell's fluid leaves through the face (d_q.u < 0) that is pf_feq; where it comes in (backflow)
+// it equals the population the cell sends out along -q, so the link carries no advective flux of phi in (with
+// pf_feq it carried phi d_q.u, with w_q phi half that), as the flow's outflow takes the inward velocity out
+// (lbm_outflow_fill).  Reference: phasefield_reference._feq_out.
 PF_INLINE float pf_feq_out(const int q, const float phi, const float ux, const float uy, const float uz) {
     const float du = pf_dot(q, ux, uy, uz);
-    return W7[q] * phi * (1.f + (du < 0.f ? du : 0.f) / CS2_7);
+    return W7[q] * phi * (1.f - (du < 0.f ? -du : du) / CS2_7);
 }
 
 // The flux part of an inflow link (q: the direction from the inflow cell into the fluid cell): the population that

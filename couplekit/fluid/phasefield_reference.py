@@ -47,11 +47,12 @@ def _feq(q, phi, u):
 
 
 def _feq_out(q, phi, u):
-    """The equilibrium an outflow link feeds in along q (from the outflow ghost into the cell): :func:`_feq` with
-    d_q·u kept only where it is negative (the cell's fluid leaving through the face); where it comes in (backflow)
-    the link carries w_q φ only, no advective flux of φ, as the flow's outflow takes the inward velocity out
-    (couplekit.fluid.reference ReferenceOps.outflow_fill)."""
-    return W7[q] * phi * (1.0 + np.minimum(C7[q].astype(np.float64) @ u, 0.0) / CS2_7)
+    """The equilibrium an outflow link feeds in along q (from the outflow ghost into the cell): w_q φ (1 − |d_q·u| /
+    c_s²).  Where the cell's fluid leaves through the face (d_q·u < 0) that is :func:`_feq`; where it comes in
+    (backflow) it equals the equilibrium the cell sends out along −q, so the link carries no advective flux of φ in
+    (with :func:`_feq` it carried φ d_q·u; with w_q φ, half that), as the flow's outflow takes the inward velocity
+    out (couplekit.fluid.reference ReferenceOps.outflow_fill)."""
+    return W7[q] * phi * (1.0 - np.abs(C7[q].astype(np.float64) @ u) / CS2_7)
 
 
 def _inflow(q, phi_b, u_b):

@@ -593,7 +593,8 @@ class FluidSolver:
         source term into a sink of the inflowing water). Per step the target moves by the water flux through
         the open faces (n_in the inward normal, unit face area): Σ φ_b u_b·n_in over the face-adjacent inflow
         ghosts (their carried phase value and velocity: exactly what the phase field's inflow links let in,
-        ``kernels/phasefield.cu`` pf_inflow), and Σ φ u·n_in over the interior cells behind the outflow ghosts."""
+        ``kernels/phasefield.cu`` pf_inflow), and Σ φ min(u·n_in, 0) over the interior cells behind the outflow
+        ghosts (what leaves: :meth:`_open_face_volume`)."""
         self._open_in = self._open_out = None
         self._closed_box = not bool(np.isin(flags, (INFLOW, OUTFLOW)).any())
         if not self.two_phase or self.params.eta <= 0:
@@ -610,16 +611,18 @@ class FluidSolver:
 
     def _open_face_volume(self) -> float:
         """Water volume (float64) the inflow faces let in minus what the outflow faces let out in one step:
-        Σ φ u·n_in over the inflow ghosts and over the interior cells behind the outflow ghosts (n_in the
-        inward normal)."""
+        Σ φ u·n_in over the inflow ghosts and Σ φ min(u·n_in, 0) over the interior cells behind the outflow ghosts
+        (n_in the inward normal): where fluid comes in through an outflow face it carries no φ in by advection
+        (the phase field's outflow rule, ``kernels/phasefield.cu`` pf_feq_out), so that cell lets no water in."""
         dv = 0.0
-        for open_cells in (self._open_in, self._open_out):
+        for open_cells, outflow in ((self._open_in, False), (self._open_out, True)):
             if open_cells is None:
                 continue
             idx, n_in = open_cells
             ph = self.backend.to_host(self.phi.reshape(-1)[idx]).astype(np.float64)
             u = self.backend.to_host(self.velocity.reshape(3, -1)[:, idx]).astype(np.float64)
-            dv += float((ph * (u * n_in).sum(axis=0)).sum())
+            un = (u * n_in).sum(axis=0)
+            dv += float((ph * (np.minimum(un, 0.0) if outflow else un)).sum())
         return dv
 
     def _setup_inflow_front(

@@ -159,9 +159,9 @@ def _outlet_scene(face_kind: str) -> dict:
 def test_a_water_outlet_in_an_outflow_face_is_named(face_kind):
     """A water outlet delivers its flux u A through a wall face (per 400 steps after the front's ramp: 8.0e-5 m³,
     measured 8.0) but lets more in through an outflow face, whose cells around the jet take water in with it:
-    measured 1.12x since the outflow takes backflow out (flow and phase field, session 28; 1.18x with the flow's
+    measured 1.08x since the outflow takes backflow out (flow and phase field, session 28; 1.18x with the flow's
     part alone, 1.4-1.9x before): the caution names the outlet, the face and the fix, and only for the outflow
-    face."""
+    face. Asserted above 1.04, outside the wall face's 1 ± 0.03."""
     from couplekit.simulation import Simulation
 
     d = _outlet_scene(face_kind)
@@ -177,7 +177,7 @@ def test_a_water_outlet_in_an_outflow_face_is_named(face_kind):
     if face_kind == "wall":
         assert ratio == pytest.approx(1.0, abs=0.03)
     else:
-        assert ratio > 1.06
+        assert ratio > 1.04
 
 
 def test_fp16_storage_is_cautioned_where_gravity_would_be_rounded_away():
