@@ -127,6 +127,11 @@ DEVICE bool lbm_backflow_du(const float m[3], const int ox, const int oy, const 
     return any;
 }
 
+// The change 3 w_q c_q.du of the population f*_q an outflow ghost sends in (reference backflow_correction).
+DEVICE float lbm_backflow_corr(const int q, const float du[3]) {
+    return 3.f * W27[q] * ((float)CX27[q] * du[0] + (float)CY27[q] * du[1] + (float)CZ27[q] * du[2]);
+}
+
 // before an odd (pull) step, outflow ghosts: all 27 stored populations of ghost[i] copied from src[i] (zero
 // gradient), then the backflow taken out (lbm_backflow_du): after an even step f*_j of src sits in slot opp(j), so
 // m = -sum_k F[k] c_k over the copied slots and slot opp(j) takes f*_j + 3 w_j c_j.du (float32, CK_LOAD / CK_STORE);
@@ -154,9 +159,7 @@ KERNEL void lbm_outflow_fill(const long long n, ck_store_t* RESTRICT f /* size: 
         if (!back) continue;
         for (int q = 1; q < 27; ++q) {
             const long long k = (long long)opposite_dir(q) * N + g;
-            const float corr =
-                3.f * W27[q] * ((float)CX27[q] * du[0] + (float)CY27[q] * du[1] + (float)CZ27[q] * du[2]);
-            CK_STORE(f, k, CK_LOAD(f, k, CK_F_SCALE) + corr, CK_F_SCALE);
+            CK_STORE(f, k, CK_LOAD(f, k, CK_F_SCALE) + lbm_backflow_corr(q, du), CK_F_SCALE);
         }
     }
 }
@@ -187,9 +190,7 @@ KERNEL void lbm_outflow_fix(const long long n, ck_store_t* RESTRICT f /* size: 2
                 const long long t = q * N + tx + px * (long long)ty + pxy * tz;
                 const long long u = q * N + ux + px * (long long)uy + pxy * uz;
                 if (back) {
-                    const float corr =
-                        3.f * W27[q] * ((float)CX27[q] * du[0] + (float)CY27[q] * du[1] + (float)CZ27[q] * du[2]);
-                    CK_STORE(f, t, CK_LOAD(f, u, CK_F_SCALE) + corr, CK_F_SCALE);
+                    CK_STORE(f, t, CK_LOAD(f, u, CK_F_SCALE) + lbm_backflow_corr(q, du), CK_F_SCALE);
                 } else {
                     f[t] = f[u];
                 }

@@ -507,22 +507,36 @@ def outflow_lists(shape: tuple[int, int, int], flags: np.ndarray) -> tuple[np.nd
     return ghost, (sx + px * (sy + py * sz)).astype(np.int64)
 
 
+def padded_coords(idx: np.ndarray, pshape: tuple[int, int, int]) -> np.ndarray:
+    """(3, n) int64 padded (x, y, z) of the flat padded indices ``idx`` (layout: the module docstring)."""
+    pz, py, px = pshape
+    z, rem = np.divmod(np.asarray(idx, np.int64), px * py)
+    y, x = np.divmod(rem, px)
+    return np.stack([x, y, z])
+
+
+def ghost_faces(idx: np.ndarray, pshape: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """For padded indices ``idx`` of ghost cells: their inward normals (3, k) (a sum of unit vectors at edges
+    and corners) and the padded index of the nearest interior cell of each."""
+    pz, py, px = pshape
+    x, y, z = padded_coords(idx, pshape)
+    inward = np.zeros((3, np.size(idx)))
+    for d, (c, n) in enumerate(((x, px), (y, py), (z, pz))):
+        inward[d] = (c == 0).astype(float) - (c == n - 1).astype(float)
+    near = np.clip(x, 1, px - 2) + px * (np.clip(y, 1, py - 2) + py * np.clip(z, 1, pz - 2))
+    return inward, near
+
+
 def outflow_directions(
-    shape: tuple[int, int, int], ghost: np.ndarray, src: np.ndarray, periodic_axes: tuple[bool, bool, bool]
+    shape: tuple[int, int, int], ghost: np.ndarray, periodic_axes: tuple[bool, bool, bool]
 ) -> np.ndarray:
-    """(3, n) int8: each outflow ghost's offset from its interior cell (:func:`outflow_lists`) on the axes it lies
-    outside a non-periodic face (±1), 0 on the others: the directions in which the outflow takes backflow out
-    (``ReferenceOps.outflow_fill``).  An edge ghost of an outflow face and a periodic face keeps only the outflow
-    face's axis: across the periodic seam the fluid may flow either way."""
-    pz, py, px = padded_shape(shape)
-    out = []
-    for idx in (ghost, src):
-        z, rem = np.divmod(np.asarray(idx, np.int64), px * py)
-        y, x = np.divmod(rem, px)
-        out.append(np.stack([x, y, z]))
-    offset = out[0] - out[1]
-    offset[np.asarray(periodic_axes, bool)] = 0
-    return offset.astype(np.int8)
+    """(3, n) int8: each outflow ghost's outward normal (:func:`ghost_faces`; its offset from its interior cell of
+    :func:`outflow_lists`) on the axes it lies outside a non-periodic face (±1), 0 on the others: the directions in
+    which the outflow takes backflow out (``ReferenceOps.outflow_fill``).  An edge ghost of an outflow face and a
+    periodic face keeps only the outflow face's axis: across the periodic seam the fluid may flow either way."""
+    outward = -ghost_faces(ghost, padded_shape(shape))[0]
+    outward[np.asarray(periodic_axes, bool)] = 0
+    return outward.astype(np.int8)
 
 
 def wall_links(flags: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -40,7 +40,7 @@ import numpy as np
 
 from ..lattice import C27, CS2, OPP27, W27
 from . import moments
-from .grid import FLUID, INTERIOR, OUTFLOW, stencil_cell, three_point_links
+from .grid import FLUID, INTERIOR, OUTFLOW, padded_coords, stencil_cell, three_point_links
 from .storage import check_storage, decode_f, encode_f, weights27
 
 
@@ -314,13 +314,6 @@ def _slip_weighted(slip_term, phi, slip, two_phase: bool) -> np.ndarray:
     return slip_term
 
 
-def _flat_coords(idx, px: int, py: int) -> np.ndarray:
-    """(3, n) integer (x, y, z) of padded flat indices ``idx``."""
-    z, rem = np.divmod(np.asarray(idx, np.int64), px * py)
-    y, x = np.divmod(rem, px)
-    return np.stack([x, y, z])
-
-
 def backflow_velocity(m, outward) -> np.ndarray:
     """Δu (3, n, float32) that removes backflow at outflow ghosts: with ``m`` (3, n) the momentum Σ_j f*_j c_j of
     each ghost's interior cell and ``outward`` (3, n) the ghost's offset from it on the axes it lies outside a
@@ -347,8 +340,7 @@ def backflow_correction(du) -> np.ndarray:
 def _pull_links(f, ghost):
     """(j, mask) for j = 1..26: which periodic ghosts g have g − c_j interior (the odd step's links)."""
     pz, py, px = f.shape[-3:]
-    gz, rem = np.divmod(ghost, px * py)
-    gy, gx = np.divmod(rem, px)
+    gx, gy, gz = padded_coords(ghost, f.shape[-3:])
     for j in range(1, 27):
         sx, sy, sz = gx - C27[j, 0], gy - C27[j, 1], gz - C27[j, 2]
         yield j, (sx >= 1) & (sx <= px - 2) & (sy >= 1) & (sy <= py - 2) & (sz >= 1) & (sz <= pz - 2)
@@ -724,7 +716,7 @@ class ReferenceOps:
         """
         pz, py, px = f.shape[-3:]
         flat = f.reshape(27, -1)
-        g, s = _flat_coords(ghost, px, py), _flat_coords(src, px, py)
+        g, s = padded_coords(ghost, f.shape[-3:]), padded_coords(src, f.shape[-3:])
 
         def inside(p):
             x, y, z = p

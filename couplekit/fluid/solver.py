@@ -43,6 +43,7 @@ from .grid import (
     OUTFLOW,
     Boundaries,
     build_flags,
+    ghost_faces,
     inflow_front_ramp,
     link_box_arrays,
     outflow_directions,
@@ -77,19 +78,6 @@ def _checked_solid(solid: Any, shape: tuple[int, int, int]) -> np.ndarray | None
             "for a signed distance field pass solid=sdf < 0"
         )
     return mask.astype(bool)
-
-
-def _ghost_faces(idx: np.ndarray, pshape: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray]:
-    """For padded indices ``idx`` of ghost cells: their inward normals (3, k) (a sum of unit vectors at edges
-    and corners) and the padded index of the nearest interior cell of each."""
-    pz, py, px = pshape
-    z, rem = np.divmod(idx, px * py)
-    y, x = np.divmod(rem, px)
-    inward = np.zeros((3, idx.size))
-    for d, (c, n) in enumerate(((x, px), (y, py), (z, pz))):
-        inward[d] = (c == 0).astype(float) - (c == n - 1).astype(float)
-    near = np.clip(x, 1, px - 2) + px * (np.clip(y, 1, py - 2) + py * np.clip(z, 1, pz - 2))
-    return inward, near
 
 
 @dataclass(frozen=True)
@@ -476,7 +464,7 @@ class FluidSolver:
         self._link_boxes = link_box_arrays(periodic_link_boxes(self.shape, self.boundaries)).on(backend)
         self._out_ghost, self._out_src = backend.asarray(out_ghost), backend.asarray(out_src)
         # the axes on which each outflow ghost takes backflow out (ReferenceOps.outflow_fill)
-        self._out_dir = backend.asarray(outflow_directions(self.shape, out_ghost, out_src, periodic_axes))
+        self._out_dir = backend.asarray(outflow_directions(self.shape, out_ghost, periodic_axes))
         self._out_du = xp.zeros((3, out_ghost.size), dtype=np.float32)  # fill -> fix of an odd step (12 B per ghost)
 
         u0 = np.zeros((3,) + self.shape) if velocity is None else np.asarray(velocity, np.float64)
@@ -600,11 +588,11 @@ class FluidSolver:
         if not self.two_phase or self.params.eta <= 0:
             return
         idx = np.flatnonzero(flags.reshape(-1) == INFLOW)
-        n_in, src = _ghost_faces(idx, flags.shape)
+        n_in, src = ghost_faces(idx, flags.shape)
         keep = (np.abs(n_in).sum(axis=0) == 1) & (flags.reshape(-1)[src] == FLUID)  # face ghosts before fluid
         if keep.any():
             self._open_in = (self.backend.asarray(idx[keep]), n_in[:, keep])  # the ghosts: φ_b, u_b
-        n_in, _ = _ghost_faces(out_ghost, flags.shape)  # out_src: the same nearest interior cells
+        n_in, _ = ghost_faces(out_ghost, flags.shape)  # out_src: the same nearest interior cells
         keep = np.abs(n_in).sum(axis=0) == 1
         if keep.any():
             self._open_out = (self.backend.asarray(out_src[keep]), n_in[:, keep])
@@ -641,7 +629,7 @@ class FluidSolver:
         resolved profile allows. Where the adjacent fluid is already of phase φ_w nothing changes.
         """
         idx = np.flatnonzero(flags.reshape(-1) == INFLOW)
-        inward, near = _ghost_faces(idx, flags.shape)
+        inward, near = ghost_faces(idx, flags.shape)
         norm = np.sqrt((inward**2).sum(axis=0))
         u_w = wall_u.reshape(3, -1)[:, idx].astype(np.float64)
         speed = (u_w * inward).sum(axis=0) / np.where(norm > 0, norm, 1.0)

@@ -54,7 +54,7 @@ def random_state(
     ghost, image = periodic_lists(shape, boundaries)
     links = link_box_arrays(periodic_link_boxes(shape, boundaries))
     out_ghost, out_src = outflow_lists(shape, flags)
-    out_dir = outflow_directions(shape, out_ghost, out_src, boundaries.periodic_axes)
+    out_dir = outflow_directions(shape, out_ghost, boundaries.periodic_axes)
     state = {
         "f": to_stored(f),  # the fluid arrays hold f - w (shifted storage)
         "flags": flags,
