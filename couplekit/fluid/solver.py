@@ -936,7 +936,8 @@ class FluidSolver:
     def diagnostics(self) -> dict[str, float]:
         """Float64 global quantities: fluid_volume (Σφ; Σ ε φ + held_volume with a mixture; the fluid cell
         count single-phase),
-        fluid_volume_drift (relative to the start), max_lattice_speed, momentum_x/y/z (Σ ρu) and
+        fluid_volume_drift (relative to the target V0: the start, moved by what open faces let in and out,
+        :meth:`_open_face_step`), max_lattice_speed, momentum_x/y/z (Σ ρu) and
         kinetic_energy (½ Σ ρ|u|²) over fluid cells, step."""
         u = self._host_interior(self.velocity).astype(np.float64) * self._fluid_host[None]
         rho = self.density().astype(np.float64) * self._fluid_host
