@@ -505,9 +505,7 @@ def _input_cautions(scene: Scene) -> list[str]:
     """Cautions about what a scene asks of the fluid beyond what was measured or what can have a steady state:
     a density ratio beyond :data:`MEASURED_DENSITY_RATIO`; a water body smaller than its interface
     (:func:`_small_drop_cautions`); multi-rate blocks that do not fit a frame (:func:`_multirate_frame_caution`);
-    a water outlet in an outflow face (the zero-gradient
-    outflow cells around it let water in with the jet: a 4 × 4-cell outlet delivered 1.08× its flux, 1.4-1.9× before
-    the outflow took backflow out, exactly its flux in a wall face); a single-phase fluid let in through an inflow with no
+    a single-phase fluid let in through an inflow with no
     outflow face (the liquid has nowhere to go: its pressure rises for as long as the inflow runs); sand kept only
     one cell off the walls (:func:`_wall_layer_caution`); an absorption rate beyond the measured one
     (:func:`_absorption_caution`)."""
@@ -520,14 +518,6 @@ def _input_cautions(scene: Scene) -> list[str]:
             f"{MEASURED_DENSITY_RATIO:g}:1 the two-phase validations ran at (the paper's scenes: 800:1): the "
             "interface may not hold; check it on a small variant first"
         )
-    for i, inf in enumerate(scene.inflows):
-        if inf.shape != "face" and inf.kind == "water" and scene.domain.boundary.get(inf.face) == "outflow":
-            out.append(
-                f"inflows[{i}] is a water outlet in the {inf.face} face, which is an outflow: the outflow cells "
-                "around the jet let water in with it (measured 1.08x the outlet's flux u A, "
-                f"tests/scene/test_stability_cautions.py); make domain.boundary.{inf.face} a wall and put the "
-                "outflow on another face"
-            )
     if fl.phases == 2:
         out += _small_drop_cautions(scene)
     out += _multirate_frame_caution(scene)

@@ -9,8 +9,9 @@
 //   flags (NZ, NY, NX) uint8, the flow's cell flags: FLUID 0 (updated), WALL 1 (solid / wall: no-flux
 //   bounce-back), INFLOW 2 (bounce-back plus the advective flux phi_b d_q.u_b of the phi and velocity stored at
 //   that cell: exactly phi_b u_b.n enters per face link, the fluid's volume flux times the carried phase value),
-//   OUTFLOW 3 (zero-gradient equilibrium: h enters at equilibrium with this cell's own phi and velocity, with no
-//   advective flux of phi in where the velocity points into the cell through the face: pf_feq_out).
+//   OUTFLOW 3 (bounce-back less the advective flux phi max(d_q.u, 0) of this cell's own phi and velocity: phi
+//   leaves only by advection where the cell's velocity points out through the face, and nothing comes in:
+//   pf_outflux).
 //   Ghost cells on non-periodic axes must be WALL/INFLOW/OUTFLOW (grid.build_flags, phasefield.pad_flags).
 //
 // Neighbours: constant offsets, except on a periodic axis where a step out of the interior wraps to the
@@ -25,8 +26,9 @@
 //                                          cell) with phi_b, u_b stored at the inflow cell, so that the link's
 //                                          net flux is phi_b d_q.u_b: no diffusive or interface flux crosses
 //                                          an inflow, the water it delivers is u_in x area x phi_b (pf_inflow);
-//     OUTFLOW: the same with this cell's u and phi; on a pull phi solves phi = sum of the other populations
-//                                          + its own outflow equilibria; on a push phi = sum_k f*_k.
+//     pull from OUTFLOW / push to OUTFLOW: as a WALL less 2 w_q phi max(d_q.u, 0) / cs^2 (d_q the direction out
+//                                          of the cell; pf_outflux) with this cell's u; on a pull phi solves
+//                                          phi = sum of the populations so loaded, on a push phi = sum_k f*_k.
 // After an even step the populations sit in reversed slots, after an odd step in natural order.
 #include "common.cuh"
 #include "lattice.cuh"
@@ -155,14 +157,15 @@ PF_INLINE float pf_feq(const int q, const float phi, const float ux, const float
     return W7[q] * phi * (1.f + pf_dot(q, ux, uy, uz) / CS2_7);
 }
 
-// The equilibrium an outflow link feeds in along q (from the outflow ghost into the cell): w_q phi (1 - |d_q.u| /
-// cs^2).  Where the cell's fluid leaves through the face (d_q.u < 0) that is pf_feq; where it comes in (backflow)
-// it equals the population the cell sends out along -q, so the link carries no advective flux of phi in (with
-// pf_feq it carried phi d_q.u, with w_q phi half that), as the flow's outflow takes the inward velocity out
-// (lbm_outflow_fill).  Reference: phasefield_reference._feq_out.
-PF_INLINE float pf_feq_out(const int q, const float phi, const float ux, const float uy, const float uz) {
+// The advective flux an outflow link passes out along q (from the cell into the outflow ghost): 2 w_q phi
+// max(d_q.u, 0) / cs^2 = phi max(d_q.u, 0).  The ghost returns the cell's own f*_q bounced back less this, so the
+// link's net flux is phi d_q.u where the fluid leaves and 0 where it comes in (backflow), and none of the
+// sharpening or diffusive flux crosses the face (the former equilibrium feed let (1 - omega/2) H_q leave but not
+// return: an outflow face drew phi in from a haze of it, and a water outlet in an outflow face delivered 1.08x
+// its flux).  Reference: phasefield_reference._outflux.
+PF_INLINE float pf_outflux(const int q, const float phi, const float ux, const float uy, const float uz) {
     const float du = pf_dot(q, ux, uy, uz);
-    return W7[q] * phi * (1.f - (du < 0.f ? -du : du) / CS2_7);
+    return du > 0.f ? 2.f * W7[q] * phi * du / CS2_7 : 0.f;
 }
 
 // The flux part of an inflow link (q: the direction from the inflow cell into the fluid cell): the population that
@@ -189,30 +192,30 @@ DEVICE void pf_load(const ck_store_t* RESTRICT h, const unsigned char* RESTRICT 
     }
     const float ux = u[c], uy = u[ncell + c], uz = u[2 * ncell + c];
     f[0] = PF_LDX(h, 0, c);
-    float known = f[0], outflow_weight = 0.f;
+    float known = f[0], outflow_rate = 0.f;
     PF_UNROLL
     for (int q = 1; q < 7; ++q) {
         const long long p = nb[pf_opp(q)];  // c - d_q
         const int kind = flags[p];
-        float v = 0.f;
+        float v;
         if (kind == PF_FLUID) {
             v = PF_LDX(h, q, pf_opp(q) * ncell + p);
         } else if (kind == PF_INFLOW) {
             v = PF_LDX(h, q, q * ncell + c) + pf_inflow(q, phi[p], u[p], u[ncell + p], u[2 * ncell + p]);
-        } else if (kind == PF_OUTFLOW) {
-            outflow_weight += pf_feq_out(q, 1.f, ux, uy, uz);
-        } else {
+        } else {  // WALL; OUTFLOW bounced back here, less its advective flux below
             v = PF_LDX(h, q, q * ncell + c);
+            if (kind == PF_OUTFLOW) outflow_rate += pf_outflux(pf_opp(q), 1.f, ux, uy, uz);
         }
         f[q] = v;
         known += v;
     }
-    if (outflow_weight != 0.f) {
-        // zero-gradient outflow: phi = known + phi * outflow_weight
-        const float phi_c = known / (1.f - outflow_weight);
+    if (outflow_rate != 0.f) {
+        // outflow links: bounced back less phi_c times their rates, phi_c the cell's own sum (phi_c = known -
+        // phi_c rate), so that the load reads no stored phi (phase_macroscopic writes phi while it loads)
+        const float phi_c = known / (1.f + outflow_rate);
         PF_UNROLL
         for (int q = 1; q < 7; ++q)
-            if (flags[nb[pf_opp(q)]] == PF_OUTFLOW) f[q] = pf_feq_out(q, phi_c, ux, uy, uz);
+            if (flags[nb[pf_opp(q)]] == PF_OUTFLOW) f[q] -= pf_outflux(pf_opp(q), phi_c, ux, uy, uz);
     }
 }
 
@@ -238,7 +241,7 @@ DEVICE void pf_store(ck_store_t* RESTRICT h, const unsigned char* RESTRICT flags
         } else if (kind == PF_INFLOW) {
             PF_STS(h, qo, qo * ncell + c, f[q] + pf_inflow(qo, phi[m], u[m], u[ncell + m], u[2 * ncell + m]));
         } else if (kind == PF_OUTFLOW) {
-            PF_STS(h, qo, qo * ncell + c, pf_feq_out(qo, phi_post, u[c], u[ncell + c], u[2 * ncell + c]));
+            PF_STS(h, qo, qo * ncell + c, f[q] - pf_outflux(q, phi_post, u[c], u[ncell + c], u[2 * ncell + c]));
         } else {
             PF_STS(h, qo, qo * ncell + c, f[q]);
         }
@@ -272,7 +275,8 @@ KERNEL void phase_set_equilibrium(const long long n,
                 else if (kind == PF_WALL) PF_ST(h, q, q * ncell + c, feq);
                 else if (kind == PF_INFLOW)
                     PF_ST(h, q, q * ncell + c, feq - pf_inflow(q, phi[p], u[p], u[ncell + p], u[2 * ncell + p]));
-                // OUTFLOW links: the load rule computes the value
+                else if (kind == PF_OUTFLOW)
+                    PF_ST(h, q, q * ncell + c, feq + pf_outflux(pf_opp(q), p0, ux, uy, uz));
             }
         }
     }

@@ -46,13 +46,18 @@ def _feq(q, phi, u):
     return W7[q] * phi * (1.0 + (C7[q].astype(np.float64) @ u) / CS2_7)
 
 
-def _feq_out(q, phi, u):
-    """The equilibrium an outflow link feeds in along q (from the outflow ghost into the cell): w_q φ (1 − |d_q·u| /
-    c_s²).  Where the cell's fluid leaves through the face (d_q·u < 0) that is :func:`_feq`; where it comes in
-    (backflow) it equals the equilibrium the cell sends out along −q, so the link carries no advective flux of φ in
-    (with :func:`_feq` it carried φ d_q·u; with w_q φ, half that), as the flow's outflow takes the inward velocity
-    out (couplekit.fluid.reference ReferenceOps.outflow_fill)."""
-    return W7[q] * phi * (1.0 - np.abs(C7[q].astype(np.float64) @ u) / CS2_7)
+def _outflux(q, phi, u):
+    """The advective flux 2 w_q φ max(d_q·u, 0) / c_s² = φ max(d_q·u, 0) an outflow link passes out along q (from
+    the cell into the outflow ghost): the population the ghost returns along −q is the cell's own f*_q bounced
+    back less this, so the link's net flux is φ d_q·u where the fluid leaves and 0 where it comes in (backflow), and
+    none of the phase field's sharpening or diffusive flux crosses the face.
+
+        Why (session 29): the former rule fed back the equilibrium w_q φ (1 − |d_q·u|/c_s²) of the cell, which let
+        the sharpening term (1 − ω/2) w_q d_q·H and the non-equilibrium part of f*_q leave, but not return: where the
+        air at an outflow face holds a little φ, H points from it towards the water and the face drew φ in from the
+        ghost (a slab's ceiling +0.081 of 1440 units of water in 200 steps while only air left), and a water outlet
+        in an outflow face delivered 1.08× its flux (docs/fluid-stability.md, 'The volume target at open faces')."""
+    return 2.0 * W7[q] * phi * np.maximum(C7[q].astype(np.float64) @ u, 0.0) / CS2_7
 
 
 def _inflow(q, phi_b, u_b):
@@ -133,20 +138,21 @@ class PhaseFieldReferenceOps:
             return H[:, c]  # even: natural order, purely local
         f = np.zeros((7, c.size))
         f[0] = H[0, c]
-        outflow_weight = np.zeros(c.size)
+        outflow_rate = np.zeros(c.size)
         for q in range(1, 7):
             p = grid.neighbour[OPP7[q]]  # the upstream cell c - d_q
             kind = grid.flags[p]
             pulled = H[OPP7[q], p]  # AA pull
             bounced = H[q, c]  # own f*_{opp q} of the even step: bounce-back from a wall
             inflow = bounced + _inflow(q, P[p], U[:, p])  # bounce-back plus phi_b d_q . u_b of the inflow cell
-            f[q] = np.select([kind == FLUID, kind == WALL, kind == INFLOW], [pulled, bounced, inflow], 0.0)
-            outflow_weight += np.where(kind == OUTFLOW, _feq_out(q, 1.0, U[:, c]), 0.0)
-        # zero-gradient outflow: equilibrium with the cell's own phi, phi = known + phi * outflow_weight
-        phi_c = f.sum(axis=0) / (1.0 - outflow_weight)
+            f[q] = np.select([kind == FLUID, kind == INFLOW], [pulled, inflow], bounced)  # WALL, OUTFLOW: bounced
+            outflow_rate += np.where(kind == OUTFLOW, _outflux(OPP7[q], 1.0, U[:, c]), 0.0)
+        # outflow links: bounced back less phi_c times their rates, phi_c the cell's own sum (phi_c = known - phi_c
+        # rate), so that the load reads no stored phi
+        phi_c = f.sum(axis=0) / (1.0 + outflow_rate)
         for q in range(1, 7):
             out = grid.flags[grid.neighbour[OPP7[q]]] == OUTFLOW
-            f[q] = np.where(out, _feq_out(q, phi_c, U[:, c]), f[q])
+            f[q] = np.where(out, f[q] - _outflux(OPP7[q], phi_c, U[:, c]), f[q])
         return f
 
     def _store(self, h, phi, u, fstar: np.ndarray, grid: _Grid, parity: int) -> None:
@@ -178,11 +184,12 @@ class PhaseFieldReferenceOps:
             inflow = kind == INFLOW
             H[qo, c[inflow]] = fs[q, inflow] + _inflow(qo, P[m[inflow]], U[:, m[inflow]])
             out = kind == OUTFLOW
-            H[qo, c[out]] = _feq_out(qo, phi_post[out], U[:, c[out]])
+            H[qo, c[out]] = fs[q, out] - _outflux(q, phi_post[out], U[:, c[out]])
 
     def _unload(self, h, feq: np.ndarray, grid: _Grid, parity: int, phi=None, u=None) -> None:
         """Write f (7, ncells) so that loading at ``parity`` returns it in every interior fluid cell (``phi``,
-        ``u``: the inflow cells' values, needed at odd parity for the inflow links)."""
+        ``u``: the inflow cells' and the fluid cells' values, needed at odd parity for the inflow and outflow
+        links)."""
         if h.dtype == np.float16:
             work = decode_h(h)
             self._unload(work, feq, grid, parity, phi, u)
@@ -201,6 +208,9 @@ class PhaseFieldReferenceOps:
             kind = grid.flags[p]
             H[OPP7[q], p[kind == FLUID]] = f[q, kind == FLUID]
             H[q, c[kind == WALL]] = f[q, kind == WALL]
+            out = kind == OUTFLOW
+            if out.any():
+                H[q, c[out]] = f[q, out] + _outflux(OPP7[q], phi.reshape(-1)[c[out]], u.reshape(3, -1)[:, c[out]])
             inflow = kind == INFLOW
             if inflow.any():
                 pb = phi.reshape(-1)[p[inflow]].astype(np.float64)

@@ -137,6 +137,38 @@ def test_inflow_link_lets_in_exactly_phi_b_u_b(cpu, parity):
         assert abs(dv - 0.7 * 0.05 * ny * nz) < 1e-5, (type(ops).__name__, dv, 0.7 * 0.05 * ny * nz)
 
 
+@pytest.mark.parametrize("parity", [0, 1])
+@pytest.mark.parametrize("u_x", [0.05, 0.0, -0.05])
+def test_outflow_link_passes_only_the_advective_flux(cpu, parity, u_x):
+    """An outflow face (x+) of a box whose φ rises towards it (0.2 + 0.03 x: an interface normal, so the sharpening
+    flux H points out through the face), every other face a wall, the fluid at u = (u_x, 0, 0): one step changes
+    Σφ by exactly −u_x Σ φ over the face's cells where the fluid leaves (u_x > 0; φ the cell's own sum when the
+    link is loaded: after the step at parity 0, before it at parity 1), and by 0 where it is at rest or comes in.
+    The former rule (the cell's equilibrium fed back, session 28) let H and the non-equilibrium part leave too:
+    Σφ changed at rest."""
+    periodic = (False, False, False)
+    nz, ny, nx = SHAPE
+    flags = pad_flags(None, SHAPE, periodic)
+    flags[1:-1, 1:-1, -1] = OUTFLOW
+    pshape = padded_shape(SHAPE)
+    phi = np.zeros(pshape, np.float32)
+    phi[1:-1, 1:-1, 1:-1] = 0.2 + 0.03 * np.arange(nx, dtype=np.float32)
+    u = np.zeros((3, *pshape), np.float32)
+    u[0] = u_x
+    for ops in (PhaseFieldKernelOps(cpu, periodic), PhaseFieldReferenceOps(periodic)):
+        h = np.zeros((7, *pshape), np.float32)
+        ops.set_equilibrium(h, phi, u, flags, parity)
+        p0, p1 = phi.copy(), phi.copy()
+        ops.macroscopic(h, p0, u, flags, parity)
+        np.testing.assert_allclose(p0[1:-1, 1:-1, 1:-1], phi[1:-1, 1:-1, 1:-1], atol=2e-7)  # loads back as set
+        ops.collide_stream(h, p0, u, np.zeros(pshape, np.float32), flags, parity, 0.02, 4.0)
+        ops.macroscopic(h, p1, u, flags, parity + 1)
+        dv = float(p1[1:-1, 1:-1, 1:-1].astype(np.float64).sum() - p0[1:-1, 1:-1, 1:-1].astype(np.float64).sum())
+        face = (p1 if parity == 0 else p0)[1:-1, 1:-1, nx].astype(np.float64).sum()
+        expect = -max(u_x, 0.0) * face
+        assert abs(dv - expect) < 2e-6, (type(ops).__name__, dv, expect)
+
+
 @pytest.mark.parametrize("periodic", PERIODIC_CASES)
 @pytest.mark.parametrize("parity", [0, 1])
 def test_macroscopic_matches_reference(cpu, periodic, parity):
