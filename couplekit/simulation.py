@@ -430,7 +430,8 @@ class Simulation:
         mean ms per step over the frame).
 
         Fluid: ``fluid_volume`` (water volume in cells, Σ φ, with sand Σ ε φ + bound water; Δx³ = 1),
-        ``fluid_volume_drift`` (relative to the start, moved by what inflow and outflow faces let in and out), ``max_lattice_speed`` (Δx/Δt), ``mach``, ``max_speed``
+        ``fluid_volume_drift`` (relative to the start, moved by what inflow and outflow faces let in and out),
+        ``max_lattice_speed`` (Δx/Δt), ``mach``, ``max_speed``
         (m/s), ``fluid_momentum_x/y/z`` (Σ ε ρ u dV, kg m/s: ε the fluid fraction where there is sand, else 1;
         u = Σ_j f_j c_j, the velocity of the populations the drag exchange sees; the Eq. 13 velocity of
         :meth:`fields` is the last collision's, half a step behind it: from rest under a uniform body force g,
