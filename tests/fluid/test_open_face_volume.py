@@ -44,6 +44,22 @@ def test_controller_lets_the_jet_in(cpu):
     assert solver.volume0 > v0 + 0.5 * u_in * n[0] * n[1] * 200  # the target moved with the jet
 
 
+def test_the_target_continues_across_a_restart(cpu):
+    """The target's bookkeeping keeps the last step's Σφ between steps; a solver restored from a state (a
+    checkpoint) sums it again: the jet run 100 + 150 steps and the same run restored at step 100 into a solver
+    that had run 30 steps of its own reach the same target and volume (bitwise: the same sums of the same φ)."""
+    solver = water_jet_into_air(cpu, eta=2.0)
+    solver.step(100)
+    state = solver.state()
+    solver.step(150)
+    restored = water_jet_into_air(cpu, eta=2.0)
+    restored.step(30)  # its own last Σφ, which the restored state must not inherit
+    restored.load_state(state)
+    restored.step(150)
+    assert restored.volume0 == solver.volume0
+    assert restored.diagnostics()["fluid_volume"] == solver.diagnostics()["fluid_volume"]
+
+
 def _slab_run(top: str, dt: float, samples: int = 4, every: int = 50):
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "coupling"))
     from test_surface_pumping import _slab
