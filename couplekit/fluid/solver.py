@@ -598,8 +598,8 @@ class FluidSolver:
         One reduction per step: Σφ before the step is the last step's Σφ after it (nothing else writes φ: the
         coupling only reads it; :meth:`load_state` forgets it), and Σ S_φ is read with it (the step does not
         change S_φ; the interface correction that does acts only in closed boxes). Measured on Fig. 4 small (cpu,
-        2 threads, `benchmarks/compare_commits.py`): with two reductions per step the volume-controller stage
-        took 0.22 ms instead of 0.09 of a 4.4 ms step."""
+        2 threads, `benchmarks/compare_commits.py ed97ed7 bfe56f5`): the volume-controller stage 0.24 ms per step
+        with two reductions, 0.15 with one, of a 4.5 ms step (0.09-0.12 with the former estimate)."""
         raw_after, raw_source = self.pf_ops.volume_sums(self.phi, self.source_term, self.flags)
         self.volume0 += raw_after - self._phi_sum - source_scale * raw_source
         self._phi_sum = raw_after
