@@ -591,7 +591,7 @@ class FluidSolver:
             behind outflow ghosts, until session 29): an outflow link carries the phase field's Allen–Cahn
             sharpening and diffusive fluxes too, not only φ u. Under Fig. 2's 12 m/s wind without sand
             (dx = 15 mm) the air at the ceiling holds φ ≈ 0.006 and the estimate counted 4.7 units of water
-            leaving per 100 steps while Σφ changed by +0.06 … +0.18: the target fell 7 % below the water in
+            leaving per 100 steps while Σφ changed by +0.18 … −0.09: the target fell 7 % below the water in
             0.6 s (``fluid_volume_drift`` +4.6 %), and in a coupled scene the controller would have taken
             that water out through S_φ (tests/fluid/test_open_face_volume.py).
 
@@ -862,6 +862,8 @@ class FluidSolver:
         Σ ε S is the first sum of ``volume_sums`` with S in place of φ.
         """
         if not self.mixture:
+            if self._phi_sum is not None and self.source_term is None:
+                return self._phi_sum, 0.0  # Σφ of this φ, kept by the open faces' bookkeeping (_open_face_step)
             return self.pf_ops.volume_sums(self.phi, self.source_term, self.flags)
         eps = self.fluid_fraction
         if self.source_term is None:  # S_φ compiled out: nothing for the controller to scale
