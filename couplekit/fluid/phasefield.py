@@ -27,9 +27,10 @@ Storage: the flow's padded grid (:mod:`couplekit.fluid.grid`)
   and obstacles): FLUID 0 cells are updated; WALL 1 is a no-flux wall (halfway bounce-back of h, Sigma phi
   conserved); INFLOW 2 is that wall plus the advective flux phi_in d_q.u_in of the phase value and velocity
   stored at that cell (``phi`` and ``u`` there): each face link lets in exactly phi_in u_in.n, no diffusive
-  or interface flux (:func:`inflow_flux`); OUTFLOW 3 feeds the zero-gradient equilibrium h^eq(phi, u) of the
-  cell itself, except that where u enters the cell through the face the link carries no advective flux of φ in
-  (backflow brings no water in, as the flow's outflow takes the inward velocity out).
+  or interface flux (:func:`inflow_flux`); OUTFLOW 3 is that wall less the advective flux phi max(d_q.u, 0) of
+  the cell's own phase value and velocity (d_q out of the box): phi leaves only by advection where the fluid
+  leaves, nothing comes in on backflow (as the flow's outflow takes the inward velocity out), and no diffusive
+  or interface flux crosses (``phasefield_reference._outflux``).
   Ghost cells of non-periodic axes must not be FLUID (:func:`check_flags`).
 * D3Q7 directions in the order of :mod:`couplekit.lattice`: rest, (+x, -x), (+y, -y), (+z, -z); weights
   1/4, 1/8 (cs^2 = 1/4).
