@@ -155,23 +155,28 @@ def _outlet_scene(face_kind: str) -> dict:
     }
 
 
+@pytest.mark.parametrize("dx", [0.01, 0.008])
 @pytest.mark.parametrize("face_kind", ["wall", "outflow"])
-def test_a_water_outlet_delivers_its_flux_in_a_wall_or_an_outflow_face(face_kind):
+def test_a_water_outlet_delivers_its_flux_in_a_wall_or_an_outflow_face(face_kind, dx):
     """A water outlet delivers its flux u A whether its face is a wall or an outflow (per 400 steps after the
     front's ramp: 8.0e-5 m³; measured 1.000x through the wall face, 0.997x through the outflow face). An outflow
     face used to let water in with the jet: 1.4-1.9x before session 28's backflow rule, 1.08x after it, because the
     phase field's outflow links passed the sharpening and diffusive fluxes of the jet's edge cells in; since
     session 29 they pass only the advective flux out (kernels/phasefield.cu pf_outflux), and the caution that
-    named such an outlet is gone. Bound: 1 ± 0.03 for both."""
+    named such an outlet is gone. At dx = 8 mm (a 5 × 5-cell outlet, Δt scaled with dx so the lattice speed stays,
+    the steps with 1/dx): 1.000x and 1.000x (0.9996). Bound: 1 ± 0.03 for both."""
     from couplekit.simulation import Simulation
 
     d = _outlet_scene(face_kind)
+    dt = 2.5e-4 * dx / 0.01
+    d["domain"]["dx"], d["time"]["dt"] = dx, dt
     assert not [c for c in _cautions(d) if "water outlet" in c]
     sim = Simulation(Scene.from_dict(d), "cpu", log=None)
-    sim.step(800)  # past the front's ramp
-    v0 = float(sim.fields()["phi"].sum()) * 1e-6
-    sim.step(400)
-    ratio = (float(sim.fields()["phi"].sum()) * 1e-6 - v0) / (0.5 * 0.04**2 * 400 * 2.5e-4)
+    sim.step(round(800 * 0.01 / dx))  # past the front's ramp
+    v0 = float(sim.fields()["phi"].sum()) * dx**3
+    steps = round(400 * 0.01 / dx)
+    sim.step(steps)
+    ratio = (float(sim.fields()["phi"].sum()) * dx**3 - v0) / (0.5 * 0.04**2 * steps * dt)
     assert ratio == pytest.approx(1.0, abs=0.03)
 
 
