@@ -430,6 +430,45 @@ def _fp16_gravity_caution(scene: Scene) -> list[str]:
     ]
 
 
+NARROW_INTERFACE_RATIO = 400.0
+"""The largest density ratio at which a water ball moving at lattice speed 0.04 ran at interface width 2
+(:func:`narrow_interface_caution`)."""
+
+NARROW_INTERFACE_SPEED = 0.01
+"""The lattice speed a water ball ran at through air at 800:1 and interface width 2 (:func:`narrow_interface_caution`)."""
+
+
+def narrow_interface_caution(scene: Scene) -> list[str]:
+    """An interface narrower than :data:`couplekit.scene.model.OUTLET_MIN_INTERFACE_WIDTH` cells at a density
+    ratio above :data:`NARROW_INTERFACE_RATIO` in a scene whose fastest expected flow is above
+    :data:`NARROW_INTERFACE_SPEED` (lattice): a moving interface that sharp diverges at 800:1.
+
+    Measured (session 30; tests/fluid/test_narrow_interface.py): a water ball of radius 6 cells moving through
+    still air in a periodic 24 × 24 × 32 box with the scenes' fluid (lattice viscosities 1e-4 / 1e-2, their
+    closures, M = 0.02, σ = 0.0728 N/m at dx = 1 cm, dt = 1 ms), 1000 steps: at 800:1 width 2 diverges at lattice
+    speed 0.02 (by step 200; runs at 0.01, also with radius 4), width 2.25 at 0.04 (by step 220; runs at 0.02 and
+    0.03); widths 2.4 and 2.5 run at 0.04, 2.5 at 0.06 (0.08 diverges by step 80, as a Mach limit would); at
+    width 2, 400:1 and 200:1 run at 0.04. Water outlets, whose speed is known, are refused below that width
+    (:func:`couplekit.scene.model.water_outlet_speed_limit`); elsewhere the speed is an estimate
+    (``Scene.expected_max_speed``), hence a caution."""
+    from .scene.model import OUTLET_MIN_INTERFACE_WIDTH
+
+    fl = scene.fluid
+    ratio = fl.water_density / fl.air_density
+    if fl.phases != 2 or fl.interface_width >= OUTLET_MIN_INTERFACE_WIDTH or ratio <= NARROW_INTERFACE_RATIO:
+        return []
+    speed, _ = scene.expected_max_speed()
+    u_lat = scene.units().to_lattice(speed, "velocity")
+    if u_lat <= NARROW_INTERFACE_SPEED:
+        return []
+    return [
+        f"fluid.interface_width = {fl.interface_width:g} cells at {ratio:.3g}:1 with flow expected up to lattice "
+        f"speed {u_lat:.2g}: an interface this sharp is under-resolved once it moves (a water ball moving through "
+        f"air at 800:1 diverged at lattice speed 0.02 at width 2 and 0.04 at width 2.25, and ran at 0.06 at width "
+        f"2.5); set fluid.interface_width >= {OUTLET_MIN_INTERFACE_WIDTH:g} (4, the default, is the validated one)"
+    ]
+
+
 def _small_drop_cautions(scene: Scene) -> list[str]:
     """A water body smaller than its own interface on every axis (under 2 interface widths across): the phase
     field's tanh profile (``build_fluid``) holds far more water than the body (a probe's sphere of 0.2 cell took
@@ -504,7 +543,8 @@ def _multirate_frame_caution(scene: Scene) -> list[str]:
 def _input_cautions(scene: Scene) -> list[str]:
     """Cautions about what a scene asks of the fluid beyond what was measured or what can have a steady state:
     a density ratio beyond :data:`MEASURED_DENSITY_RATIO`; a water body smaller than its interface
-    (:func:`_small_drop_cautions`); multi-rate blocks that do not fit a frame (:func:`_multirate_frame_caution`);
+    (:func:`_small_drop_cautions`); a moving interface narrower than 2.5 cells at 800:1
+    (:func:`narrow_interface_caution`); multi-rate blocks that do not fit a frame (:func:`_multirate_frame_caution`);
     a single-phase fluid let in through an inflow with no
     outflow face (the liquid has nowhere to go: its pressure rises for as long as the inflow runs); sand kept only
     one cell off the walls (:func:`_wall_layer_caution`); an absorption rate beyond the measured one
@@ -520,6 +560,7 @@ def _input_cautions(scene: Scene) -> list[str]:
         )
     if fl.phases == 2:
         out += _small_drop_cautions(scene)
+        out += narrow_interface_caution(scene)
     out += _multirate_frame_caution(scene)
     out += _wall_layer_caution(scene)
     out += _absorption_caution(scene)

@@ -2157,20 +2157,35 @@ def water_outlet_speed_limit(interface_width: float, across_cells: int, air_latt
     * 3 ≤ ξ < 4: outlets of ≥ 2 cells finite to 0.06 (NaN at 0.08: 5 cells at ν = 0.01 and ξ = 3; 3 and 5 cells
       with the viscous air, 2 cells with the scenes' closures, at ξ = 3), except 2-cell outlets with the viscous
       air: to 0.02 (NaN at 0.04 by step 200 at ξ = 3). 1-cell outlets as 2-cell ones.
-    * ξ < 3: refused. At ξ = 2 and 800:1 the interface is under-resolved independently of outlets: a drop
-      moving at 0.04 through still air in a periodic box diverges by step 80 with the paper's collision
-      (Eq. 48), and with two rates (Λ = 1/6) a drop at 0.02 diverges by step 520.
+    * 2.5 ≤ ξ < 3 (session 30, the same box and the scenes' closures, 1500 steps): outlets of 1-8 cells finite to
+      0.04 (ν_h = 1e-4, ν_l = 0.01: peak ≤ 1.8 u_in; ν_h = ν_l = 0.01 alike); with the viscous air outlets of
+      ≥ 3 cells to 0.02 (5 cells ✗ at 0.04 by step 150), under 3 cells to 0.01 (1 cell ✗ at 0.02 by step 1150,
+      2 cells by step 300).
+    * ξ < 2.5: refused. Below 2.5 cells the interface at 800:1 is under-resolved independently of outlets: a
+      water ball moving through still air in a periodic box with the scenes' fluid (:func:`couplekit.assembly.
+      narrow_interface_caution`) diverges at 0.02 at ξ = 2 and at 0.04 at ξ = 2.25; outlets at ξ = 2 diverge
+      at 0.02 within 1500 steps (2-8 cells, by steps 200-1200; with the viscous air at 0.01), 2 cells at
+      ξ = 2.25 at 0.02 by step 1150.
 
     A whole-face inflow is not limited (an 8 × 8 duct runs at ξ = 2, u = 0.02 and at ξ = 4, u = 0.08).
     """
     viscous = _viscous_air(air_lattice_viscosity)
-    if interface_width < 3.0:
+    if interface_width < OUTLET_MIN_INTERFACE_WIDTH:
         return 0.0
+    if interface_width < 3.0:
+        if viscous:
+            return 0.02 if across_cells >= 3 else 0.01
+        return 0.04
     if interface_width >= 4.0:
         return 0.04 if (viscous and across_cells < 2) else math.inf
     if viscous and across_cells < 3:
         return 0.02
     return 0.06
+
+
+OUTLET_MIN_INTERFACE_WIDTH = 2.5
+"""The narrowest interface (cells) at which water outlets into air at 800:1 run (:func:`water_outlet_speed_limit`):
+below it a moving interface is under-resolved whether or not an outlet makes it."""
 
 
 def _check_water_outlets(domain: Domain, time: Time, fluid: Fluid | None, inflows, problems: list[Problem]) -> None:
@@ -2196,14 +2211,15 @@ def _check_water_outlets(domain: Domain, time: Time, fluid: Fluid | None, inflow
         limit = water_outlet_speed_limit(xi, across, nu_air)
         if lattice <= limit * (1.0 + 1e-9):
             continue
-        if xi < 3.0:
+        if xi < OUTLET_MIN_INTERFACE_WIDTH:
             what = (
                 f"a water outlet at fluid.interface_width = {xi:g} is refused at any speed: at 800:1 an interface "
-                "this sharp is under-resolved, independently of outlets (a drop moving at lattice speed 0.04 "
-                "through still air diverges)"
+                f"narrower than {OUTLET_MIN_INTERFACE_WIDTH:g} cells is under-resolved, independently of outlets "
+                "(a water ball moving through still air at lattice speed 0.02 diverges at width 2)"
             )
             fix = (
-                "set fluid.interface_width >= 4 (outlets at least 2 cells across then run at lattice speeds up to 0.08)"
+                "set fluid.interface_width >= 4 (outlets at least 2 cells across then run at lattice speeds up to "
+                f"0.08; at {OUTLET_MIN_INTERFACE_WIDTH:g} up to 0.04)"
             )
         else:
             cells = f"{across} cell{'s' if across != 1 else ''}"

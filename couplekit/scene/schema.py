@@ -890,10 +890,11 @@ INFLOW_KEYS: list[Key] = [
         "face",
         "'face': the whole face (its domain.boundary must be 'inflow'); 'rect' or 'disc': an outlet in the face "
         "(a jet), the rest of the face keeps its domain.boundary ('wall' or 'outflow'); several outlets may "
-        "share a face if they do not overlap. A water outlet needs fluid.interface_width >= 3; at interface_width "
-        ">= 4 outlets at least 2 cells across are not limited (measured to lattice speed 0.08) and 1-cell outlets "
-        "are limited to lattice speed 0.04 with an air_lattice_viscosity above 0.01; below 4 the limit is 0.06 "
-        "(0.02 for outlets under 3 cells with the more viscous air) (measured to diverge beyond: "
+        "share a face if they do not overlap. A water outlet needs fluid.interface_width >= 2.5; at "
+        "interface_width >= 4 outlets at least 2 cells across are not limited (measured to lattice speed 0.08) and "
+        "1-cell outlets are limited to lattice speed 0.04 with an air_lattice_viscosity above 0.01; from 3 to 4 "
+        "the limit is 0.06 (0.02 for outlets under 3 cells with the more viscous air); from 2.5 to 3 it is 0.04 "
+        "(with the more viscous air 0.02, and 0.01 for outlets under 3 cells) (measured to diverge beyond: "
         "couplekit.scene.model.water_outlet_speed_limit, tests/fluid/test_inflow_region.py)",
         choices=("face", "rect", "disc"),
     ),

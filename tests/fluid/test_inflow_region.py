@@ -394,6 +394,10 @@ def _closure_jet(cpu, across: int, u_in: float, width: float, nu_h: float, nu_l:
         (4.0, 2, 0.08, 5e-4, 0.1),
         (3.0, 3, 0.06, 5e-4, 0.1),
         (3.0, 2, 0.06, 1e-4, 0.01),
+        (2.5, 2, 0.04, 1e-4, 0.01),
+        (2.5, 8, 0.04, 1e-4, 0.01),
+        (2.5, 3, 0.02, 5e-4, 0.1),
+        (2.5, 2, 0.01, 5e-4, 0.1),
     ],
     ids=[
         "xi4_3x3",
@@ -403,6 +407,10 @@ def _closure_jet(cpu, across: int, u_in: float, width: float, nu_h: float, nu_l:
         "xi4_2x2_viscous_air",
         "xi3_3x3_u0.06_viscous_air",
         "xi3_2x2_u0.06",
+        "xi2.5_2x2_u0.04",
+        "xi2.5_8x8_u0.04",
+        "xi2.5_3x3_u0.02_viscous_air",
+        "xi2.5_2x2_u0.01_viscous_air",
     ],
 )
 def test_narrow_outlet_jet_runs_with_the_scene_closures(cpu, width, across, u_in, nu_h, nu_l):
@@ -438,7 +446,23 @@ def test_narrow_outlet_jet_runs_with_the_scene_closures(cpu, width, across, u_in
     ξ = 4, 6: 1 cell            ✓ to 0.08                          ✓ 0.04; ✗ 350 at 0.08 (ξ = 4)
     ξ = 3, 3.5: 3, 5 cells      ✓ to 0.08                          ✓ to 0.06; ✗ 100 at 0.08 (ξ = 3)
     ξ = 3, 3.5: 2 cells         ✓ 0.06; ✗ 100 at 0.08 (ξ = 3)      ✓ 0.02 (3.5: 0.04); ✗ 200 at 0.04
-    ==========================  ================================="""
+    ==========================  =================================
+
+    Session 30, below ξ = 3 (1500 steps; the cases run here at ξ = 2.5 are the validation limits of
+    couplekit.scene.model.water_outlet_speed_limit for that band):
+
+    ==========================  =================================  =================================
+    outlet                      ν_h = 1e-4, ν_l = 0.01             ν_h = 5e-4, ν_l = 0.1
+    ==========================  =================================  =================================
+    ξ = 2.5, 2.75: 1-8 cells    ✓ 0.04 (peak ≤ 1.8 u_in); 3 cells  ≥ 3 cells ✓ 0.02, ✗ 150 at 0.04
+                                ✓ 0.05; 5 cells ✗ 100 at 0.08      (5 cells); 1-2 cells ✓ 0.01,
+                                                                   ✗ 1150 / 300 at 0.02
+    ξ = 2.25: 2 cells           ✗ 1150 at 0.02
+    ξ = 2: 2-8 cells            ✗ 200-1200 at 0.02 (1 cell ✓)      ✗ 300-900 at 0.01
+    ==========================  =================================  =================================
+
+    (ν_h = ν_l = 0.01 without the closures: ξ = 2.5, 1-8 cells ✓ 0.04.) Below 2.5 cells it is the interface, not
+    the outlet: tests/fluid/test_narrow_interface.py."""
     solver, mask = _closure_jet(cpu, across, u_in, width, nu_h, nu_l)
     assert solver.phase_trt_lambda == pytest.approx(1 / 6) and solver.params.smagorinsky > 0
     assert solver.params.odd_lambda > 0 or nu_h >= 5e-4  # the floor acts at the scenes' ν_h = 1e-4
@@ -506,9 +530,10 @@ def test_scene_refuses_a_water_outlet_outside_the_measured_stable_range():
     0.08 are accepted, with the viscous air too; a 1-cell outlet with the viscous air is refused at 0.08 (✗ by step
     350), naming inflows[0].velocity and the fix (<= 0.04, or widen to >= 2 cells), and accepted at 0.04; at
     ξ = 3 outlets are limited to 0.06 (✗ at 0.08), the fix naming interface_width >= 4; with the viscous air
-    2-cell outlets at ξ < 4 to 0.02 (✗ at 0.04), the fix naming 3 cells; ξ = 2 is refused at any speed (a
-    resolution limit independent of outlets: a drop moving at 0.04 diverges). A whole-face inflow is not
-    limited."""
+    2-cell outlets at ξ < 4 to 0.02 (✗ at 0.04), the fix naming 3 cells; at 2.5 ≤ ξ < 3 outlets are limited to
+    0.04, with the viscous air to 0.02 from 3 cells and 0.01 under (session 30); ξ < 2.5 is refused at any speed
+    (a resolution limit independent of outlets: tests/fluid/test_narrow_interface.py). A whole-face inflow is
+    not limited."""
     from couplekit.scene import Scene
     from couplekit.scene.model import water_outlet_speed_limit
     from couplekit.scene.schema import SceneError
@@ -544,16 +569,27 @@ def test_scene_refuses_a_water_outlet_outside_the_measured_stable_range():
     assert p is not None and "<= 2 m/s" in p.fix, p
     assert "widen the outlet to >= 3 cells" in p.fix and "interface_width >= 4" in p.fix, p
     assert problem(viscous(_outlet_scene(2, 2.0, interface_width=3.0))) is None
-    p = problem(_outlet_scene(8, 2.0, interface_width=2.0))
-    assert p is not None and "any speed" in p.message and "independently of outlets" in p.message, p
-    assert "interface_width >= 4" in p.fix, p
+    # 2.5 <= ξ < 3: 0.04, with the viscous air 0.02 from 3 cells, 0.01 under
+    assert problem(_outlet_scene(2, 4.0, interface_width=2.5)) is None
+    p = problem(_outlet_scene(8, 5.0, interface_width=2.75))
+    assert p is not None and "<= 4 m/s" in p.fix and "interface_width >= 4" in p.fix and "widen" not in p.fix, p
+    assert problem(viscous(_outlet_scene(3, 2.0, interface_width=2.5))) is None
+    p = problem(viscous(_outlet_scene(2, 2.0, interface_width=2.5)))
+    assert p is not None and "<= 1 m/s" in p.fix and "widen the outlet to >= 3 cells" in p.fix, p
+    # below 2.5: refused at any speed
+    for xi in (2.0, 2.4):
+        p = problem(_outlet_scene(8, 1.0, interface_width=xi))
+        assert p is not None and "any speed" in p.message and "independently of outlets" in p.message, p
+        assert "interface_width >= 4" in p.fix, p
     # the limit itself, cell by cell of the map
     assert water_outlet_speed_limit(4.0, 2) == math.inf and water_outlet_speed_limit(6.0, 8, 0.1) == math.inf
     assert water_outlet_speed_limit(4.0, 1) == math.inf and water_outlet_speed_limit(4.0, 2, 0.1) == math.inf
     assert water_outlet_speed_limit(6.0, 1, 0.1) == 0.04 and water_outlet_speed_limit(3.9, 8, 0.1) == 0.06
     assert water_outlet_speed_limit(3.0, 5) == 0.06 and water_outlet_speed_limit(3.5, 2) == 0.06
     assert water_outlet_speed_limit(3.0, 2, 0.1) == 0.02 and water_outlet_speed_limit(3.0, 1, 0.1) == 0.02
-    assert water_outlet_speed_limit(2.0, 8) == 0.0 and water_outlet_speed_limit(2.9, 8) == 0.0
+    assert water_outlet_speed_limit(2.5, 1) == 0.04 and water_outlet_speed_limit(2.9, 8) == 0.04
+    assert water_outlet_speed_limit(2.5, 3, 0.1) == 0.02 and water_outlet_speed_limit(2.5, 2, 0.1) == 0.01
+    assert water_outlet_speed_limit(2.0, 8) == 0.0 and water_outlet_speed_limit(2.49, 8) == 0.0
     # a whole-face inflow at the failing speed is not refused by this check
     d = _outlet_scene(2, 8.0)
     d["domain"]["boundary"]["z_min"] = "inflow"
