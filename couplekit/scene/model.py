@@ -240,6 +240,8 @@ class Sand:
     """Node layers of the MPM domain walls; sand keeps this many cells from each face."""
     periodic_walls: bool = False
     """Periodic faces allowed with sand (the sand meets a wall there)."""
+    absorption_time: float | None = None
+    """``sand.absorption_time`` (s) when the scene gave R_a that way; ``absorption_rate`` is then time.dt / it."""
     walls: dict[str, SandWall] = field(default_factory=dict)
     """The sand's wall on every face (scene names x_min … z_max); faces not in ``[sand.walls]`` are 'separate'
     with ``wall_friction``."""
@@ -739,6 +741,8 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
     # ---- sand material
     sand = _sand(snd, problems)
     if sand is not None:
+        sand = _with_absorption_time(sand, snd_raw, tim["dt"], problems)
+    if sand is not None:
         sand = _with_sand_walls(sand, walls_raw, problems)
 
     # ---- bodies
@@ -1138,7 +1142,39 @@ def _sand(snd: dict, problems: list[Problem]) -> Sand | None:
         snd["periodic_walls"],
         grain_diameter=snd.get("grain_diameter"),
         viscosity=snd["viscosity"],
+        absorption_time=snd.get("absorption_time"),
     )
+
+
+def _with_absorption_time(sand: Sand, raw: Any, dt: float | None, problems: list[Problem]) -> Sand | None:
+    """``sand`` with R_a from ``sand.absorption_time`` (s) where the scene gives it: R_a = dt / absorption_time per
+    lattice step (Eq. 55 takes R_a r_max ε per step, so the uptake per second is then the same at any dt).
+    Refused together with ``absorption_rate``, and below one time step (R_a > 1)."""
+    tau = sand.absorption_time
+    if tau is None:
+        return sand
+    if isinstance(raw, dict) and "absorption_rate" in raw:
+        problems.append(
+            Problem(
+                "sand.absorption_time",
+                "both absorption_time and absorption_rate are given",
+                "keep one of sand.absorption_time (s) and sand.absorption_rate (per lattice step)",
+            )
+        )
+        return sand
+    if dt is None:
+        return sand
+    if tau < dt:
+        problems.append(
+            Problem(
+                "sand.absorption_time",
+                f"{tau:g} s is shorter than one time step (time.dt = {dt:g} s): R_a = dt / absorption_time would be "
+                f"{dt / tau:.3g} per step, above 1",
+                f"use sand.absorption_time >= {dt:g} s",
+            )
+        )
+        return sand
+    return replace(sand, absorption_rate=dt / tau)
 
 
 def _with_sand_walls(sand: Sand, raw: Any, problems: list[Problem]) -> Sand:

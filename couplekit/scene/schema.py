@@ -530,6 +530,19 @@ SECTIONS: dict[str, list[Key]] = {
             hi=1.0,
         ),
         Key(
+            "absorption_time",
+            "float",
+            None,
+            "R_a in seconds instead (give this or absorption_rate): the time in which sand under water would take up "
+            "its whole capacity at Eq. 55's rate, R_a = time.dt / absorption_time per lattice step, so the bound "
+            "water's history in seconds is the same at any time.dt (a per-step R_a binds twice as fast per second "
+            "at half the dt). Table 1's R_a at its dt: absorption_time = dt / R_a (Fig. 17: 1.2e-4 s / 0.001 = "
+            "0.12 s). At least time.dt",
+            "s",
+            lo=0.0,
+            lo_open=True,
+        ),
+        Key(
             "max_moisture",
             "float",
             0.28,
