@@ -602,11 +602,16 @@ def _absorption_caution(scene: Scene) -> list[str]:
     0.05: lattice speed 0.034 at step 300, 1.5 at 325, NaN at 327, in cells of φ ≈ −0.01)."""
     if scene.sand is None or True not in sand_retention_flags(scene):
         return []
-    rate = scene.sand.absorption_rate
+    rate, tau = scene.sand.absorption_rate, scene.sand.absorption_time
     if rate <= MEASURED_ABSORPTION_RATE:
         return []
+    given = (
+        f"sand.absorption_time = {tau:g} s gives R_a = time.dt / absorption_time = {rate:.3g} per step, which"
+        if tau is not None
+        else f"sand.absorption_rate = {rate:g}"
+    )
     return [
-        f"sand.absorption_rate = {rate:g} is above the {MEASURED_ABSORPTION_RATE:g} measured to run: a dry bed under "
+        f"{given} is above the {MEASURED_ABSORPTION_RATE:g} measured to run: a dry bed under "
         "water went non-finite at 0.05 (step 327) and 0.1 (step 171), its drained pores' air accelerating; the "
         "paper's scenes use 0.001-0.003 (docs/examples.md, Fig. 10)"
     ]

@@ -257,3 +257,12 @@ def test_an_absorption_rate_beyond_the_measured_one_is_named():
     d = tiny_coupled(retention=False)
     d["sand"]["absorption_rate"] = 0.5
     assert not [c for c in _cautions(d) if "absorption_rate" in c]
+    # given in seconds (sand.absorption_time): the caution names that key and the R_a it makes at this dt
+    d = tiny_coupled(retention=True)
+    d["sand"].pop("absorption_rate", None)
+    dt = d["time"]["dt"]
+    d["sand"]["absorption_time"] = dt / 0.05
+    (c,) = [c for c in _cautions(d) if "absorption" in c]
+    assert f"sand.absorption_time = {dt / 0.05:g} s" in c and "R_a = time.dt / absorption_time = 0.05" in c, c
+    d["sand"]["absorption_time"] = dt / 0.029
+    assert not [c for c in _cautions(d) if "absorption" in c]
