@@ -290,8 +290,8 @@ nearly the same map (session 13). Before session 12, examples/fig04_colander_sma
 session 12's three-point wall rule of the pressure filter (which removed a period-2 pressure mode in that
 ceiling layer, docs/fluid-stability.md) it runs with 1/6 too: 20 frames (max lattice speed 0.098, volume drift +2.4e-4), and the other scenes with
 inflows (Figs. 1, 2, 5, 9) run as with 0.1. Larger values make drops at ξ = 2 diverge sooner (a drop through
-still air at u = 0.02: step 160 with 1/4, 520 with 1/6; the single rate ran it 600 steps); scenes refuse water outlets at ξ < 2.5 and caution a moving interface there
-(tests/fluid/test_narrow_interface.py)."""
+still air at u = 0.02: step 160 with 1/4, 520 with 1/6; the single rate ran it 600 steps); scenes refuse water
+outlets at ξ < 2.5 and caution a moving interface there (tests/fluid/test_narrow_interface.py)."""
 
 
 class OddFloorInactiveWarning(UserWarning):
