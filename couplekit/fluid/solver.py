@@ -700,11 +700,13 @@ class FluidSolver:
                 self._set_inflow_front()
                 if not self._closed_box and self._phi_sum is None:  # the water the faces pass: _open_face_step
                     self._phi_sum = self.pf_ops.volume_sums(self.phi, self.source_term, self.flags)[0]
-                if prm.eta > 0:
+                if prm.eta > 0 and self.source_term is not None:
                     volume, source_sum = self._controller_sums()
                     self.gamma = self._pf.volume_controller_gamma(self.volume0, volume, source_sum, prm.eta)
                     source_scale = self._interface_correction(volume, source_sum)
                 else:
+                    if prm.eta > 0:  # S_φ compiled out: Eq. 52's γ with Σ S = 0, without summing the volume
+                        self.gamma = 0.0
                     source_scale = self.gamma
                 self.pf_ops.collide_stream(
                     self.h, self.phi, self.velocity, self.source_term, self.flags, self.step_count,
@@ -860,15 +862,12 @@ class FluidSolver:
         Σ ε φ from one step to the next) and corrects only the transport and rounding error.  With the
         plain sums (Σφ, ΣS) the controller fights the source: the mixture's Σφ must change as sand enters
         the water, so γ drives S towards 0 (measured: the drift returned to the no-source −2.5 % at η = 2).
-        Σ ε S is the first sum of ``volume_sums`` with S in place of φ.
+        Σ ε S is the first sum of ``volume_sums`` with S in place of φ.  Called only with an S_φ: without one
+        (a fluid alone, or the source term's ablation) γ is 0 and nothing is summed (:meth:`step`).
         """
         if not self.mixture:
-            if self._phi_sum is not None and self.source_term is None:
-                return self._phi_sum, 0.0  # Σφ of this φ, kept by the open faces' bookkeeping (_open_face_step)
             return self.pf_ops.volume_sums(self.phi, self.source_term, self.flags)
         eps = self.fluid_fraction
-        if self.source_term is None:  # S_φ compiled out: nothing for the controller to scale
-            return self.pf_ops.volume_sums(self.phi, self.source_term, self.flags, eps)[0] + self.held_volume, 0.0
         volume, weighted_source = self.pf_ops.mixture_sums(self.phi, eps, self.source_term, self.flags)
         return volume + self.held_volume, weighted_source
 

@@ -44,6 +44,33 @@ def test_controller_lets_the_jet_in(cpu):
     assert solver.volume0 > v0 + 0.5 * u_in * n[0] * n[1] * 200  # the target moved with the jet
 
 
+def test_without_a_source_term_the_controller_sums_nothing(cpu):
+    """A fluid alone has no S_φ for Eq. 52's γ to scale (γ = 0): a step sums φ only for an open face's
+    bookkeeping (one reduction per step with the jet's faces, none in a closed box), and γ reads 0 as Eq. 52 gives
+    it for Σ S = 0. Before session 30 a closed box summed Σφ every step for the controller (bitwise the same
+    results: Fig. 16's water-only dam break, Fig. 14's and Fig. 16's sand dam break without the source term,
+    60 steps)."""
+    from couplekit.fluid.solver import FluidParams, FluidSolver
+
+    for solver, per_step in ((water_jet_into_air(cpu, eta=2.0), 1), (None, 0)):
+        if solver is None:  # the same fluid in a closed box: a drop at rest
+            n = (12, 12, 12)
+            z, y, x = np.meshgrid(*(np.arange(k) + 0.5 for k in n), indexing="ij")
+            phi0 = 0.5 * (1 + np.tanh(2 * (4 - np.sqrt((x - 6) ** 2 + (y - 6) ** 2 + (z - 6) ** 2)) / 4.0))
+            params = FluidParams(rho_h=1.0, rho_l=1 / 800, nu_h=0.01, nu_l=0.01, sigma=1e-4, width=4.0, eta=2.0)
+            solver = FluidSolver(cpu, n, params, phi=phi0)
+        solver.step(2)  # the open faces' first sum is taken at the first step
+        calls = []
+        sums = solver.pf_ops.volume_sums
+        solver.pf_ops.volume_sums = lambda *a, calls=calls, sums=sums, **k: (calls.append(1), sums(*a, **k))[1]
+        try:
+            solver.step(10)
+        finally:
+            solver.pf_ops.volume_sums = sums
+        assert len(calls) == 10 * per_step, len(calls)
+        assert solver.gamma == 0.0
+
+
 def test_the_target_continues_across_a_restart(cpu):
     """The target's bookkeeping keeps the last step's Σφ between steps; a solver restored from a state (a
     checkpoint) sums it again: the jet run 100 + 150 steps and the same run restored at step 100 into a solver
