@@ -449,7 +449,7 @@ def narrow_interface_caution(scene: Scene) -> list[str]:
     speed 0.02 (by step 200; runs at 0.01, also with radius 4), width 2.25 at 0.04 (by step 220; runs at 0.02 and
     0.03); widths 2.4 and 2.5 run at 0.04, 2.5 at 0.06 (0.08 diverges by step 80, as a Mach limit would); at
     width 2, 400:1 and 200:1 run at 0.04. On a case not measured for it, Fig. 16's water-only dam break (small
-    variant, lattice speeds to 0.084) diverges by step 800 of 960 at width 2 and runs to its end at 2.5 (and 4).
+    variant, lattice speed 0.084 at its end at width 4) diverges by step 800 of 960 at width 2 and runs to its end at 2.5 (and 4).
     Water outlets, whose speed is known, are refused below that width
     (:func:`couplekit.scene.model.water_outlet_speed_limit`); elsewhere the speed is an estimate
     (``Scene.expected_max_speed``), hence a caution."""

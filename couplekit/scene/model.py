@@ -741,9 +741,7 @@ def _build(data: Any, base_dir: Path, problems: list[Problem]) -> Scene | None:
     # ---- sand material
     sand = _sand(snd, problems)
     if sand is not None:
-        sand = _with_absorption_time(sand, snd_raw, tim["dt"], problems)
-    if sand is not None:
-        sand = _with_sand_walls(sand, walls_raw, problems)
+        sand = _with_sand_walls(_with_absorption_time(sand, snd_raw, tim["dt"], problems), walls_raw, problems)
 
     # ---- bodies
     bodies, body_ids = [], []  # the bodies that were read, and their index in [[bodies]]
@@ -1146,7 +1144,7 @@ def _sand(snd: dict, problems: list[Problem]) -> Sand | None:
     )
 
 
-def _with_absorption_time(sand: Sand, raw: Any, dt: float | None, problems: list[Problem]) -> Sand | None:
+def _with_absorption_time(sand: Sand, raw: Any, dt: float | None, problems: list[Problem]) -> Sand:
     """``sand`` with R_a from ``sand.absorption_time`` (s) where the scene gives it: R_a = dt / absorption_time per
     lattice step (Eq. 55 takes R_a r_max ε per step, so the uptake per second is then the same at any dt).
     Refused together with ``absorption_rate``, and below one time step (R_a > 1)."""
