@@ -432,7 +432,8 @@ class Simulation:
         Fluid: ``fluid_volume`` (water volume in cells, Σ φ, with sand Σ ε φ + bound water; Δx³ = 1),
         ``fluid_volume_drift`` (relative to the start, moved by what inflow and outflow faces let in and out),
         ``max_lattice_speed`` (Δx/Δt), ``mach``, ``max_speed``
-        (m/s), ``fluid_momentum_x/y/z`` (Σ ε ρ u dV, kg m/s: ε the fluid fraction where there is sand, else 1;
+        (m/s), two-phase ``max_water_speed`` and ``max_air_speed`` (m/s: the fastest cell with φ ≥ ½ and with
+        φ < ½; the air beside water is often the fastest, docs/fluid-stability.md 'The air beside water'), ``fluid_momentum_x/y/z`` (Σ ε ρ u dV, kg m/s: ε the fluid fraction where there is sand, else 1;
         u = Σ_j f_j c_j, the velocity of the populations the drag exchange sees; the Eq. 13 velocity of
         :meth:`fields` is the last collision's, half a step behind it: from rest under a uniform body force g,
         (N − ½) g Δt after N steps where Σ f c gives N g Δt), ``fluid_kinetic_energy_si`` (½ Σ ε ρ |u|² dV with
@@ -468,6 +469,9 @@ class Simulation:
             d.pop("step", None)
             for k in ("momentum_x", "momentum_y", "momentum_z", "kinetic_energy"):
                 out["lattice_" + k] = d.pop(k)  # lattice sums over every fluid cell (the solver's)
+            for phase in ("water", "air"):  # two-phase: the fastest cell of each phase, in m/s
+                if f"max_lattice_speed_{phase}" in d:
+                    out[f"max_{phase}_speed"] = d.pop(f"max_lattice_speed_{phase}") * sc.domain.dx / sc.time.dt
             out.update(d)
             out["mach"] = d["max_lattice_speed"] / math.sqrt(CS2)
             out["max_speed"] = d["max_lattice_speed"] * sc.domain.dx / sc.time.dt

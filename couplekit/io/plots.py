@@ -179,7 +179,16 @@ PANELS: tuple[Panel, ...] = (
         (("max_lattice_speed", "max lattice speed"),),
         secondary=("Mach", 1.0 / math.sqrt(1.0 / 3.0)),
     ),
-    Panel("Largest speed", "m/s", (("max_speed", "fluid"), ("sand_max_speed", "sand"))),
+    Panel(
+        "Largest speed",
+        "m/s",
+        (
+            ("max_speed", "fluid"),
+            ("max_water_speed", "water (φ ≥ ½)"),
+            ("max_air_speed", "air (φ < ½)"),
+            ("sand_max_speed", "sand"),
+        ),
+    ),
     Panel(
         "Kinetic energy",
         "J",
