@@ -550,7 +550,8 @@ def _input_cautions(scene: Scene) -> list[str]:
     a single-phase fluid let in through an inflow with no
     outflow face (the liquid has nowhere to go: its pressure rises for as long as the inflow runs); sand kept only
     one cell off the walls (:func:`_wall_layer_caution`); an absorption rate beyond the measured one
-    (:func:`_absorption_caution`)."""
+    (:func:`_absorption_caution`); sand that falls onto the water at a lattice speed below the examples'
+    (:func:`sand_entry_caution`)."""
     fl, out = scene.fluid, []
     if fl.storage == "fp16":
         out += _fp16_gravity_caution(scene)
@@ -566,6 +567,7 @@ def _input_cautions(scene: Scene) -> list[str]:
     out += _multirate_frame_caution(scene)
     out += _wall_layer_caution(scene)
     out += _absorption_caution(scene)
+    out += sand_entry_caution(scene)
     if fl.phases == 1 and scene.inflows and "outflow" not in scene.domain.boundary.values():
         out.append(
             "a single-phase fluid enters through inflows[0] but no face is an outflow: the liquid has nowhere to "
@@ -616,6 +618,77 @@ def _absorption_caution(scene: Scene) -> list[str]:
         f"{given} is above the {MEASURED_ABSORPTION_RATE:g} measured to run: a dry bed under "
         "water went non-finite at 0.05 (step 327) and 0.1 (step 171), its drained pores' air accelerating; the "
         "paper's scenes use 0.001-0.003 (docs/examples.md, Fig. 10)"
+    ]
+
+
+SAND_ENTRY_LATTICE_SPEED = 0.01
+"""The smallest lattice speed U Δt/Δx at which the example scenes' sand meets the water surface (Fig. 8's balls,
+0.0102 by :func:`sand_entry_speeds`' free fall; Figs. 2, 13, 14: 0.016-0.033): the scenes were checked there
+(:func:`sand_entry_caution`)."""
+
+
+def sand_entry_speeds(scene: Scene) -> list[tuple[int, float, float]]:
+    """(body index, fall h in m, speed U in m/s) of each sand body released above a water body's top (under it
+    along gravity, where gravity lies along an axis): U = |v0| + sqrt(2 g h), h from the sand's lowest point to the
+    highest water top under it (the bodies' bounding boxes; drag in the air ignored, so U is an upper bound: Fig. 8's
+    balls measure ~2.7 m/s where this gives 3.2). Two-phase fluids only; empty without gravity."""
+    fl, dom = scene.fluid, scene.domain
+    if fl is None or fl.phases != 2:
+        return []
+    g = np.asarray(fl.gravity if fl.gravity is not None else dom.gravity, dtype=np.float64)
+    gmag = float(np.linalg.norm(g))
+    if gmag == 0:
+        return []
+    down = g / gmag
+    along = np.flatnonzero(np.abs(down) > 1e-12)
+    across = [a for a in range(3) if a != along[0]] if along.size == 1 else []
+
+    def extent(body):  # (lo, hi, depth of the top, depth of the bottom) along gravity
+        lo, hi = (np.asarray(v, dtype=np.float64) for v in body.geometry.bounds(dom))
+        depth = [float(np.dot((x, y, z), down)) for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
+        return lo, hi, min(depth), max(depth)
+
+    waters = [extent(b) for b in scene.bodies if b.kind == "water"]
+    out = []
+    for i, body in enumerate(scene.bodies):
+        if body.kind != "sand":
+            continue
+        lo, hi, _, bottom = extent(body)
+        tops = [w_top for w_lo, w_hi, w_top, _ in waters if all(w_hi[a] > lo[a] and w_lo[a] < hi[a] for a in across)]
+        if not tops or min(tops) <= bottom:
+            continue  # no water under it, or it starts at or in the water
+        h = min(tops) - bottom
+        out.append((i, h, float(np.linalg.norm(body.velocity)) + math.sqrt(2.0 * gmag * h)))
+    return out
+
+
+def sand_entry_caution(scene: Scene) -> list[str]:
+    """A sand body that falls onto the water and meets its surface at a lattice speed U Δt/Δx below
+    :data:`SAND_ENTRY_LATTICE_SPEED`: at so small a time step for its Δx the porosity-slip term of Eq. 39 pumps
+    water up through sand in the surface's interface and the sand comes back out of the water
+    (docs/fluid-stability.md, 'The slip term at a small time step'; not fixed). Measured with the physical
+    viscosities kept (session 31; U from :func:`sand_entry_speeds`): Fig. 13's small ball sinks from 0.108 m to
+    0.043 m by 0.2 s at its file's Δt (lattice 0.0176), to 0.052 at Δt/2 (0.0088) and rises to 0.110, above the
+    surface at 0.08, at Δt/4 (0.0044); Fig. 8's three balls' mean height at 0.8 s is 0.649 m at its Δt (0.0102) and
+    0.883, above the surface at 0.80, at Δt/2 (0.0051); the floating ring of Fig. 2 (0.0162 at its Δt) bobs at
+    0.0028 and rises out at 0.0014; `tests/coupling/test_surface_pumping.py`'s slab sinks at 0.0115 and rises out
+    at 0.0010."""
+    dx, dt = scene.domain.dx, scene.time.dt
+    slow = [(i, h, speed) for i, h, speed in sand_entry_speeds(scene) if speed * dt / dx < SAND_ENTRY_LATTICE_SPEED]
+    if not slow:
+        return []
+    _, h, speed = min(slow, key=lambda e: e[2])  # the slowest: the time step that lifts it lifts all
+    names = ", ".join(f"bodies[{j}] ({scene.bodies[j].name!r})" for j, _, _ in slow)
+    one = len(slow) == 1
+    return [
+        f"{names} {'falls' if one else 'fall'} onto the water and {'meets' if one else 'meet'} it at "
+        f"{'' if one else 'as little as '}{speed:.3g} m/s (a fall of {h:.3g} m, no drag), lattice speed "
+        f"{speed * dt / dx:.2g} (U time.dt / dx), "
+        f"below the {SAND_ENTRY_LATTICE_SPEED:g} the example scenes were checked at: at so small a time step for this "
+        "dx, sand at the water surface is pumped back out of it (Fig. 13's ball ends above the surface at 0.0044, "
+        "Fig. 8's balls at 0.0051; docs/fluid-stability.md, 'The slip term at a small time step'); use time.dt >= "
+        f"{SAND_ENTRY_LATTICE_SPEED * dx / speed:.3g} s if the other time-step limits allow it, or refine dx and dt "
+        "together"
     ]
 
 

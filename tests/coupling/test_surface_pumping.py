@@ -32,8 +32,9 @@ from couplekit.scene import Scene
 from couplekit.simulation import Simulation
 
 
-def _slab(dt: float) -> Simulation:
-    d = {
+def _slab_scene(dt: float) -> dict:
+    """The slab released 2 mm above the pool, as a scene dict (time step ``dt``)."""
+    return {
         "scene": {"name": "surface_slab"},
         "domain": {"size": [0.12, 0.12, 0.2], "dx": 0.01},
         "time": {"dt": dt, "frame_duration": 0.01, "frames": 1, "max_speed": 2.8},
@@ -52,7 +53,10 @@ def _slab(dt: float) -> Simulation:
             {"kind": "sand", "geometry": {"type": "box", "min": [0.03, 0.03, 0.102], "max": [0.09, 0.09, 0.122]}},
         ],
     }
-    return Simulation(Scene.from_dict(d), backend="cpu", log=None)
+
+
+def _slab(dt: float) -> Simulation:
+    return Simulation(Scene.from_dict(_slab_scene(dt)), backend="cpu", log=None)
 
 
 def _heights(sim: Simulation, duration: float, samples: int) -> np.ndarray:

@@ -266,3 +266,72 @@ def test_an_absorption_rate_beyond_the_measured_one_is_named():
     assert f"sand.absorption_time = {dt / 0.05:g} s" in c and "R_a = time.dt / absorption_time = 0.05" in c, c
     d["sand"]["absorption_time"] = dt / 0.029
     assert not [c for c in _cautions(d) if "absorption" in c]
+
+
+def _with_dt(name: str, divide: float) -> Scene:
+    d = Scene.load(ROOT / "examples" / f"{name}.toml").to_dict()
+    d["time"]["dt"] = d["time"]["dt"] / divide
+    return Scene.from_dict(d)
+
+
+@pytest.mark.parametrize(
+    "name,divide,bodies,lattice",
+    [
+        ("fig08_sand_densities_small", 2, ("bodies[1]", "bodies[2]", "bodies[3]"), "0.0051"),
+        ("fig13_sand_drop_beaker_small", 2, ("bodies[2]",), "0.0088"),
+        ("fig13_sand_drop_beaker_small", 4, ("bodies[2]",), "0.0044"),
+    ],
+)
+def test_sand_falling_onto_water_at_a_small_time_step_is_named(name, divide, bodies, lattice):
+    """Fig. 8's and Fig. 13's small variants at half (a quarter of) their time step, where their sand was measured
+    to stay above the water or come back out of it (couplekit.assembly.sand_entry_caution): one caution naming the
+    bodies, their lattice entry speed and the time step that brings it to the examples' 0.01; none at the file's
+    time step (0.0102 and 0.0176)."""
+    from couplekit.assembly import SAND_ENTRY_LATTICE_SPEED, sand_entry_caution, sand_entry_speeds
+
+    scene = _with_dt(name, divide)
+    (c,) = sand_entry_caution(scene)
+    assert all(b in c for b in bodies) and f"lattice speed {lattice}" in c, c
+    assert c in stability_cautions(scene)
+    slowest = min(speed for _, _, speed in sand_entry_speeds(scene))
+    assert f"time.dt >= {SAND_ENTRY_LATTICE_SPEED * scene.domain.dx / slowest:.3g} s" in c, c
+    assert sand_entry_caution(_with_dt(name, 1)) == []
+
+
+def test_the_pumping_slab_is_named_where_it_rises_and_not_where_it_sinks():
+    """The caution agrees with tests/coupling/test_surface_pumping.py: its slab, 2 mm above the pool, meets the
+    water at 0.198 m/s, lattice 0.0010 at Δt = 5e-5 s (it comes 22 mm out of the water: the strict xfail) and
+    0.0115 at 5.8e-4 s (it sinks and floats: the control)."""
+    from couplekit.assembly import sand_entry_caution
+
+    sys.path.insert(0, str(ROOT / "tests" / "coupling"))
+    from test_surface_pumping import _slab_scene
+
+    (c,) = sand_entry_caution(Scene.from_dict(_slab_scene(5e-5)))
+    assert "bodies[1]" in c and "lattice speed 0.00099" in c and "a fall of 0.002 m" in c, c
+    assert sand_entry_caution(Scene.from_dict(_slab_scene(5.8e-4))) == []
+
+
+def test_sand_that_does_not_fall_onto_water_gets_no_entry_caution():
+    """Only sand released above a water body's top, under it along gravity: not sand resting on the floor under
+    the water, not sand above dry floor beside the pool, not a single-phase fluid, not without gravity."""
+    from couplekit.assembly import sand_entry_caution, sand_entry_speeds
+
+    sys.path.insert(0, str(ROOT / "tests" / "coupling"))
+    from test_surface_pumping import _slab_scene
+
+    small_dt = 5e-5
+    d = _slab_scene(small_dt)
+    assert sand_entry_caution(Scene.from_dict(d))  # as built: cautioned
+    on_floor = _slab_scene(small_dt)
+    on_floor["bodies"][1]["geometry"] = {"type": "box", "min": [0.03, 0.03, 0.02], "max": [0.09, 0.09, 0.04]}
+    beside = _slab_scene(small_dt)
+    beside["bodies"][0]["geometry"] = {"type": "box", "min": [0, 0, 0], "max": [0.12, 0.02, 0.1]}
+    one_phase = _slab_scene(small_dt)
+    one_phase["fluid"] = {"phases": 1, "water_lattice_viscosity": 5e-4}
+    one_phase["bodies"] = one_phase["bodies"][1:]
+    no_gravity = _slab_scene(small_dt)
+    no_gravity["domain"]["gravity"] = [0.0, 0.0, 0.0]
+    for case in (on_floor, beside, one_phase, no_gravity):
+        scene = Scene.from_dict(case)
+        assert sand_entry_speeds(scene) == [] and sand_entry_caution(scene) == []
