@@ -635,7 +635,7 @@ def sand_entry_speeds(scene: Scene) -> list[tuple[int, float, float]]:
     fl, dom = scene.fluid, scene.domain
     if fl is None or fl.phases != 2:
         return []
-    g = np.asarray(fl.gravity if fl.gravity is not None else dom.gravity, dtype=np.float64)
+    g = np.asarray(dom.gravity, dtype=np.float64)  # the sand falls under domain.gravity (fluid.gravity is the fluid's)
     gmag = float(np.linalg.norm(g))
     if gmag == 0:
         return []
