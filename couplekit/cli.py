@@ -125,6 +125,43 @@ def _load_with_sets(args: argparse.Namespace, scheduler: str | None = None):
     return Scene.from_dict(data, base_dir=base_dir, source_name=f"{args.scene} with {shown}")
 
 
+def _viscosity_note(args: argparse.Namespace, scene) -> str | None:
+    """A note when ``--set`` changed the time step or the grid spacing of a file whose fluid viscosities are
+    lattice numbers (``fluid.water_lattice_viscosity``, Table 1's form, or the default): ν = ν_lattice Δx²/Δt, so
+    the run's water and air are then more (or less) viscous than the file's, which a time-step study does not
+    want (session 31 found a Δt study of Fig. 17's saturation confounded by it: docs/fluid-stability.md). None
+    when the physical viscosities are unchanged or a ``--set`` names a viscosity."""
+    from .scene import Scene, SceneError
+    from .simulation import parse_setting
+
+    if any("viscosity" in parse_setting(s)[0] for s in args.set):
+        return None
+    try:
+        file_scene = Scene.load(args.scene)
+    except (SceneError, OSError):
+        return None
+    if file_scene.fluid is None or scene.fluid is None:
+        return None
+
+    def physical(sc, phase: str) -> float:
+        return getattr(sc.fluid, f"{phase}_lattice_viscosity") * sc.domain.dx**2 / sc.time.dt
+
+    phases = ("water", "air") if scene.fluid.phases == 2 else ("water",)
+    changed = [p for p in phases if abs(physical(scene, p) - physical(file_scene, p)) > 1e-9 * physical(file_scene, p)]
+    if not changed:
+        return None
+    keep = scene.time.dt / scene.domain.dx**2  # lattice ν = ν Δt / Δx² at this run's Δt and Δx
+    now, then = physical(scene, changed[0]), physical(file_scene, changed[0])
+    sets = " ".join(f"--set fluid.{p}_lattice_viscosity={physical(file_scene, p) * keep:.6g}" for p in changed)
+    also = f" (the {changed[1]}'s likewise)" if len(changed) > 1 else ""
+    return (
+        f"note: {args.scene} gives the fluid's viscosities as lattice numbers, so at time.dt = {scene.time.dt:g} s "
+        f"and dx = {scene.domain.dx:g} m the {changed[0]}'s is {now:.3g} m²/s, {now / then:.3g}× the file's "
+        f"{then:.3g}{also}; to keep the file's viscosities add {sets} (or give the file fluid.water_viscosity and "
+        "fluid.air_viscosity in m²/s instead of the lattice numbers)"
+    )
+
+
 def _cmd_validate(args: argparse.Namespace) -> int:
     """Exit 0 valid, 2 invalid, 3 refused with ``run``'s message and exit code: an effect the coupling cannot
     switch off yet, or a memory estimate beyond what any machine holds.  What ``run`` refuses on this machine
@@ -184,6 +221,9 @@ def _cmd_validate(args: argparse.Namespace) -> int:
         print(f"caution: {line}")
     if note is not None:
         print(note)
+    viscosity = _viscosity_note(args, scene)
+    if viscosity is not None:
+        print(viscosity)
     return 0
 
 
@@ -295,6 +335,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
             # --scheduler and --set together, validated once: each alone may be refused where the pair is valid
             # (multirate:2 with a softer sand.youngs_modulus), so neither is checked against the file's other half
             scene = _load_with_sets(args, scheduler=args.scheduler)
+            viscosity = _viscosity_note(args, scene)
+            if viscosity is not None:
+                print(viscosity)
             # the output folder before anything is allocated: a used one is refused unless overwritten, and an
             # earlier run's files are deleted only by sim.run (below), once the run is built: a run refused for
             # memory or an unsupported effect (exit 3), or failing to build, keeps them, and a folder this

@@ -132,13 +132,16 @@ def with_settings(scene: Scene | str | Path, settings: Mapping[str, Any], base_d
 def apply_settings(data: dict, settings: Mapping[str, Any]) -> str:
     """Write the dotted keys of ``settings`` into the scene dict ``data`` (in place, in order; a key the scene
     format does not have raises :class:`~couplekit.sweep.KeyPathError`) and return them as ``"key = value, ..."``
-    for messages. :func:`with_settings` applies them to a validated scene's dict; ``couplekit run --set`` to a
+    for messages. A key that says what the scene already gives in another form replaces it
+    (:func:`couplekit.sweep.keys.drop_replaced`: an SI viscosity the lattice one, absorption_time the rate, dx the
+    resolution). :func:`with_settings` applies them to a validated scene's dict; ``couplekit run --set`` to a
     scene file's own table when the file alone does not validate."""
-    from .sweep.keys import check_key, set_key
+    from .sweep.keys import check_key, drop_replaced, set_key
 
     for key, value in settings.items():
         check_key(key, data)
         set_key(data, key, value)
+    drop_replaced(data, settings)  # fluid.water_viscosity set: the file's water_lattice_viscosity goes
     return ", ".join(f"{k} = {v!r}" for k, v in settings.items())
 
 

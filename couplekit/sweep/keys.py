@@ -24,7 +24,7 @@ from ..scene.schema import (
     TOP_LEVEL,
 )
 
-__all__ = ["KeyPathError", "parse_key", "check_key", "set_key", "flatten_keys"]
+__all__ = ["KeyPathError", "parse_key", "check_key", "set_key", "flatten_keys", "ALTERNATIVE_KEYS", "drop_replaced"]
 
 _SEGMENT = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)((?:\[[0-9]+\])*)")
 _INDEX = re.compile(r"\[([0-9]+)\]")
@@ -216,6 +216,33 @@ def set_key(scene: dict, key: str, value: Any) -> None:
         if not isinstance(container, dict):
             raise KeyPathError(f"{done} is {_describe(container)}, not a table", f"end the key at {done}")
         container[last] = value
+
+
+ALTERNATIVE_KEYS: tuple[tuple[str, str], ...] = (
+    ("domain.dx", "domain.resolution"),
+    ("fluid.water_viscosity", "fluid.water_lattice_viscosity"),
+    ("fluid.air_viscosity", "fluid.air_lattice_viscosity"),
+    ("sand.absorption_rate", "sand.absorption_time"),
+)
+"""Pairs of keys that say one thing two ways (the scene takes one of each pair: SI or lattice viscosity, a
+per-step or a per-second absorption, a spacing or a cell count): a setting of one replaces the other
+(:func:`drop_replaced`)."""
+
+
+def drop_replaced(scene: dict, keys) -> None:
+    """Remove from the scene dict ``scene`` (in place) the other key of each :data:`ALTERNATIVE_KEYS` pair of which
+    ``keys`` (the dotted keys just set) name exactly one: ``--set fluid.water_viscosity=1e-6`` on a file that gives
+    ``water_lattice_viscosity`` sets the water's viscosity instead of being refused as giving both (session 31:
+    docs/sweeps.md's own example was refused so at every point). Where ``keys`` name both, both stay, and the
+    scene's validation refuses the pair."""
+    given = set(keys)
+    for a, b in ALTERNATIVE_KEYS:
+        if (a in given) == (b in given):
+            continue
+        table, name = (b if a in given else a).split(".")
+        section = scene.get(table)
+        if isinstance(section, dict):
+            section.pop(name, None)
 
 
 def flatten_keys(table: dict, prefix: str = "") -> dict[str, Any]:

@@ -35,7 +35,7 @@ from typing import Any
 from ..backend import max_threads
 from ..scene import Scene, SceneError
 from ..scene.schema import Problem, ProblemError, read_toml
-from .keys import KeyPathError, check_key, flatten_keys, parse_key, set_key
+from .keys import KeyPathError, check_key, drop_replaced, flatten_keys, parse_key, set_key
 
 __all__ = [
     "BACKENDS",
@@ -580,6 +580,9 @@ def _apply(base: dict, layers: list[tuple[str, dict[str, Any]]], problems: list[
                 if not any(p.key == at for p in problems):
                     problems.append(Problem(at, exc.message, exc.fix))
                 ok = False
+    drop_replaced(
+        scene, [key for _, overrides in layers for key in overrides]
+    )  # an SI viscosity replaces the base's lattice one
     return scene if ok else None
 
 
