@@ -28,6 +28,7 @@ from pathlib import Path
 from _args import int_in
 
 from couplekit.io import read_diagnostics
+from couplekit.scene import Scene
 
 ROOT = Path(__file__).resolve().parent.parent
 LIMIT_SECONDS = 300.0
@@ -56,13 +57,9 @@ def time_scene(scene: Path, out_dir: Path, threads: int) -> dict:
     diag = read_diagnostics(log) if log.exists() else []
     last = diag[-1] if diag else {}
     speeds = [d["max_lattice_speed"] for d in diag if "max_lattice_speed" in d]
-    # the water's own fastest cell (φ ≥ ½), in lattice units: max_water_speed (m/s) × (Δt/Δx), the ratio that
-    # max_lattice_speed / max_speed carries; at 800:1 the fastest cell is often air beside the water
-    water = [
-        d["max_water_speed"] * d["max_lattice_speed"] / d["max_speed"]
-        for d in diag
-        if "max_water_speed" in d and d.get("max_speed", 0) > 0
-    ]
+    # the water's own fastest cell (φ ≥ ½) in lattice units: at 800:1 the fastest cell is often air beside the water
+    water_si = [d["max_water_speed"] for d in diag if "max_water_speed" in d]  # two-phase runs only
+    water = [Scene.load(scene).units().to_lattice(max(water_si), "velocity")] if water_si else []
     return {
         "scene": scene.name,
         "returncode": proc.returncode,

@@ -632,6 +632,8 @@ def sand_entry_speeds(scene: Scene) -> list[tuple[int, float, float]]:
     along gravity, where gravity lies along an axis): U = |v0| + sqrt(2 g h), h from the sand's lowest point to the
     highest water top under it (the bodies' bounding boxes; drag in the air ignored, so U is an upper bound: Fig. 8's
     balls measure ~2.7 m/s where this gives 3.2). Two-phase fluids only; empty without gravity."""
+    from .scene.model import depth_range
+
     fl, dom = scene.fluid, scene.domain
     if fl is None or fl.phases != 2:
         return []
@@ -645,8 +647,7 @@ def sand_entry_speeds(scene: Scene) -> list[tuple[int, float, float]]:
 
     def extent(body):  # (lo, hi, depth of the top, depth of the bottom) along gravity
         lo, hi = (np.asarray(v, dtype=np.float64) for v in body.geometry.bounds(dom))
-        depth = [float(np.dot((x, y, z), down)) for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
-        return lo, hi, min(depth), max(depth)
+        return (lo, hi, *depth_range(lo, hi, down))
 
     waters = [extent(b) for b in scene.bodies if b.kind == "water"]
     out = []
@@ -673,17 +674,18 @@ def sand_entry_caution(scene: Scene) -> list[str]:
     0.883, above the surface at 0.80, at Δt/2 (0.0051); the floating ring of Fig. 2 (0.0162 at its Δt) bobs at
     0.0028 and rises out at 0.0014; `tests/coupling/test_surface_pumping.py`'s slab sinks at 0.0115 and rises out
     at 0.0010."""
-    dx, dt = scene.domain.dx, scene.time.dt
-    slow = [(i, h, speed) for i, h, speed in sand_entry_speeds(scene) if speed * dt / dx < SAND_ENTRY_LATTICE_SPEED]
+    units = scene.units()
+    slow = [e for e in sand_entry_speeds(scene) if units.to_lattice(e[2], "velocity") < SAND_ENTRY_LATTICE_SPEED]
     if not slow:
         return []
     _, h, speed = min(slow, key=lambda e: e[2])  # the slowest: the time step that lifts it lifts all
+    dx = scene.domain.dx
     names = ", ".join(f"bodies[{j}] ({scene.bodies[j].name!r})" for j, _, _ in slow)
     one = len(slow) == 1
     return [
         f"{names} {'falls' if one else 'fall'} onto the water and {'meets' if one else 'meet'} it at "
         f"{'' if one else 'as little as '}{speed:.3g} m/s (a fall of {h:.3g} m, no drag), lattice speed "
-        f"{speed * dt / dx:.2g} (U time.dt / dx), "
+        f"{units.to_lattice(speed, 'velocity'):.2g} (U time.dt / dx), "
         f"below the {SAND_ENTRY_LATTICE_SPEED:g} the example scenes were checked at: at so small a time step for this "
         "dx, sand at the water surface is pumped back out of it (Fig. 13's ball ends above the surface at 0.0044, "
         "Fig. 8's balls at 0.0051; docs/fluid-stability.md, 'The slip term at a small time step'); use time.dt >= "

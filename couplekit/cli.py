@@ -134,8 +134,9 @@ def _viscosity_note(args: argparse.Namespace, scene) -> str | None:
     from .scene import Scene, SceneError
     from .simulation import parse_setting
 
-    if any("viscosity" in parse_setting(s)[0] for s in args.set):
-        return None
+    keys = [parse_setting(s)[0] for s in args.set]
+    if not any(k.startswith(("time.", "domain.")) for k in keys) or any("viscosity" in k for k in keys):
+        return None  # neither Δt nor Δx changed (the file is not read again), or the viscosity is set
     try:
         file_scene = Scene.load(args.scene)
     except (SceneError, OSError):
@@ -143,16 +144,19 @@ def _viscosity_note(args: argparse.Namespace, scene) -> str | None:
     if file_scene.fluid is None or scene.fluid is None:
         return None
 
-    def physical(sc, phase: str) -> float:
-        return getattr(sc.fluid, f"{phase}_lattice_viscosity") * sc.domain.dx**2 / sc.time.dt
+    def physical(sc, phase: str) -> float:  # ν = ν_lattice Δx²/Δt
+        return sc.units().to_si(getattr(sc.fluid, f"{phase}_lattice_viscosity"), "viscosity")
 
     phases = ("water", "air") if scene.fluid.phases == 2 else ("water",)
     changed = [p for p in phases if abs(physical(scene, p) - physical(file_scene, p)) > 1e-9 * physical(file_scene, p)]
     if not changed:
         return None
-    keep = scene.time.dt / scene.domain.dx**2  # lattice ν = ν Δt / Δx² at this run's Δt and Δx
+    units = scene.units()  # the file's viscosities in this run's lattice units keep them
     now, then = physical(scene, changed[0]), physical(file_scene, changed[0])
-    sets = " ".join(f"--set fluid.{p}_lattice_viscosity={physical(file_scene, p) * keep:.6g}" for p in changed)
+    sets = " ".join(
+        f"--set fluid.{p}_lattice_viscosity={units.to_lattice(physical(file_scene, p), 'viscosity'):.6g}"
+        for p in changed
+    )
     also = f" (the {changed[1]}'s likewise)" if len(changed) > 1 else ""
     return (
         f"note: {args.scene} gives the fluid's viscosities as lattice numbers, so at time.dt = {scene.time.dt:g} s "

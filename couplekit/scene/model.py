@@ -2274,34 +2274,28 @@ def _check_water_outlets(domain: Domain, time: Time, fluid: Fluid | None, inflow
         problems.append(Problem(f"inflows[{i}].velocity", what, fix))
 
 
+def depth_range(lo, hi, down) -> tuple[float, float]:
+    """(shallowest, deepest) of the box [``lo``, ``hi``]'s corners along the unit vector ``down`` (gravity's
+    direction): a body's top and bottom, a domain's ceiling and floor."""
+    depth = [float(np.dot((x, y, z), down)) for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
+    return min(depth), max(depth)
+
+
 def _speed_estimate(domain: Domain, time: Time | dict, bodies, inflows, _cache) -> tuple[float, str]:
     g = np.asarray(domain.gravity, dtype=np.float64)
     gmag = float(np.linalg.norm(g))
     down = g / gmag if gmag > 0 else np.array([0.0, 0.0, -1.0])
-    size = np.asarray(domain.size)
-    floor = float(
-        max(np.dot(np.array([x, y, z]), down) for x in (0, size[0]) for y in (0, size[1]) for z in (0, size[2]))
-    )
+    ceiling, floor = depth_range((0.0, 0.0, 0.0), domain.size, down)
     best, why = 0.0, "nothing moves"
     for b in bodies:
         if b.kind == "obstacle":
             continue
-        lo, hi = b.geometry.bounds(domain)
-        top = float(
-            min(
-                np.dot(np.array([x, y, z]), down)
-                for x in (lo[0], hi[0])
-                for y in (lo[1], hi[1])
-                for z in (lo[2], hi[2])
-            )
-        )
+        top, _ = depth_range(*b.geometry.bounds(domain), down)
         drop = max(0.0, floor - top)
         s = float(np.linalg.norm(b.velocity)) + math.sqrt(2 * gmag * drop)
         if s > best:
             best, why = s, f"body {b.name!r}: |v0| + sqrt(2 g h) with a fall of h = {drop:.4g} m"
-    height = float(
-        np.ptp([np.dot(np.array([x, y, z]), down) for x in (0, size[0]) for y in (0, size[1]) for z in (0, size[2])])
-    )
+    height = floor - ceiling
     for i, inf in enumerate(inflows):
         s = float(np.linalg.norm(inf.velocity)) + math.sqrt(2 * gmag * height)
         if s > best:
