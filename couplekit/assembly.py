@@ -471,6 +471,70 @@ def narrow_interface_caution(scene: Scene) -> list[str]:
     ]
 
 
+EXAMPLE_MOBILITY = 0.02
+"""The phase-field mobility (lattice) every shipped example and validation runs at (the scene default)."""
+
+EXAMPLE_INTERFACE_WIDTH = 4.0
+"""The interface width (cells) every shipped example but Fig. 1's small variant (6) runs at (the scene default)."""
+
+MOBILITY_IMPACT_LIMITS: dict[float, tuple[float, float]] = {
+    2.5: (1.0, 2.0),
+    3.0: (2.75, 4.0),
+    4.0: (4.0, 5.5),
+    5.0: (4.0, 8.0),
+    6.0: (8.0, 11.0),
+    8.0: (8.0, 11.0),
+}
+"""Interface width (cells) → (largest u/M that ran, smallest u/M that diverged), u the lattice speed and M the
+lattice mobility, for a water ball of radius 6 cells thrown at a wall through still air at 800:1 (the scenes'
+fluid; session 32, tests/fluid/test_mobility_limit.py has the whole map). :func:`mobility_caution` reads the
+second number at the widest measured width not above the scene's."""
+
+
+def mobility_caution(scene: Scene) -> list[str]:
+    """A phase-field mobility below the examples' (:data:`EXAMPLE_MOBILITY`), or an interface narrower than theirs
+    (:data:`EXAMPLE_INTERFACE_WIDTH`, down to the 2.5 cells below which :func:`narrow_interface_caution` speaks), at
+    a density ratio above :data:`NARROW_INTERFACE_RATIO`, in a scene whose expected lattice speed u makes u/M at
+    least the ratio at which a moving interface was measured to diverge (:data:`MOBILITY_IMPACT_LIMITS`).
+
+    Why: the conservative phase field keeps its tanh profile by the mobility's sharpening flux, ∝ M/ξ; a flow that
+    strains the interface faster than that (an impact squeezing the air between water and a wall) tears the
+    profile, φ leaves [0, 1] and the 800:1 density jump diverges within a few dozen steps. Measured (session 32,
+    the ball of :data:`MOBILITY_IMPACT_LIMITS`, 600 steps): at width 4 it ran to u/M = 4 at M = 0.04, 0.02, 0.01
+    and 0.005 and diverged from 5.5 (M = 0.02, u = 0.11) and 8 (M = 0.01, 0.005); at M = 0.0025 it diverged even
+    at u = 0.02. A ball moving through open air tolerates about twice the ratio (width 4: ran to 8, diverged at
+    11). On cases not measured for it, Fig. 6's raindrop (small variant, u/M = 7.6 expected at M = 0.02 and width 4,
+    where it runs) diverged by step 70 at M = 0.01 and 0.0075 and at width 3, and at Δt/4 with M = 0.005.
+    The examples' own (M, width) = (0.02, 4) run up to u/M = 8.1 expected (estimates are upper bounds: the
+    raindrop's impact peaks at 0.124, u/M = 6.2), so they and wider, more mobile interfaces are not cautioned."""
+    fl = scene.fluid
+    if fl.phases != 2 or fl.water_density / fl.air_density <= NARROW_INTERFACE_RATIO:
+        return []
+    width, mobility = fl.interface_width, fl.mobility
+    if width < min(MOBILITY_IMPACT_LIMITS) or (mobility >= EXAMPLE_MOBILITY and width >= EXAMPLE_INTERFACE_WIDTH):
+        return []
+    measured = max(w for w in MOBILITY_IMPACT_LIMITS if w <= width)
+    ran, diverged = MOBILITY_IMPACT_LIMITS[measured]
+    speed, source = scene.expected_max_speed()
+    u_lat = scene.units().to_lattice(speed, "velocity")
+    if u_lat / mobility < diverged:
+        return []
+    ratio = u_lat / mobility
+    departs = []
+    if mobility < EXAMPLE_MOBILITY:
+        departs.append(f"fluid.mobility = {mobility:g} (examples: {EXAMPLE_MOBILITY:g})")
+    if width < EXAMPLE_INTERFACE_WIDTH:
+        departs.append(f"fluid.interface_width = {width:g} (examples: {EXAMPLE_INTERFACE_WIDTH:g})")
+    return [
+        f"{' and '.join(departs)} with flow expected up to lattice speed {u_lat:.2g} ({source}): u/M = {ratio:.3g}, "
+        f"where a water ball hitting a wall through air at 800:1 diverged (width {measured:g}: ran to u/M = {ran:g}, "
+        f"diverged from {diverged:g}); the phase field cannot hold so sharp an interface against such a flow. Keep "
+        f"the examples' fluid.mobility = {EXAMPLE_MOBILITY:g} and fluid.interface_width = {EXAMPLE_INTERFACE_WIDTH:g} "
+        f"(they run such flows), or lower time.dt to <= {scene.time.dt * ran / ratio:.3g} s (u/M = {ran:g}; u/M "
+        "falls with dt) (docs/fluid-stability.md, 'The mobility a moving interface needs')"
+    ]
+
+
 def _small_drop_cautions(scene: Scene) -> list[str]:
     """A water body smaller than its own interface on every axis (under 2 interface widths across): the phase
     field's tanh profile (``build_fluid``) holds far more water than the body (a probe's sphere of 0.2 cell took
@@ -546,7 +610,8 @@ def _input_cautions(scene: Scene) -> list[str]:
     """Cautions about what a scene asks of the fluid beyond what was measured or what can have a steady state:
     a density ratio beyond :data:`MEASURED_DENSITY_RATIO`; a water body smaller than its interface
     (:func:`_small_drop_cautions`); a moving interface narrower than 2.5 cells at 800:1
-    (:func:`narrow_interface_caution`); multi-rate blocks that do not fit a frame (:func:`_multirate_frame_caution`);
+    (:func:`narrow_interface_caution`); a mobility or interface width below the examples' against a flow that
+    tears the interface (:func:`mobility_caution`); multi-rate blocks that do not fit a frame (:func:`_multirate_frame_caution`);
     a single-phase fluid let in through an inflow with no
     outflow face (the liquid has nowhere to go: its pressure rises for as long as the inflow runs); sand kept only
     one cell off the walls (:func:`_wall_layer_caution`); an absorption rate beyond the measured one
@@ -564,6 +629,7 @@ def _input_cautions(scene: Scene) -> list[str]:
     if fl.phases == 2:
         out += _small_drop_cautions(scene)
         out += narrow_interface_caution(scene)
+        out += mobility_caution(scene)
     out += _multirate_frame_caution(scene)
     out += _wall_layer_caution(scene)
     out += _absorption_caution(scene)

@@ -26,61 +26,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from couplekit.assembly import NARROW_INTERFACE_RATIO, NARROW_INTERFACE_SPEED, narrow_interface_caution
 from couplekit.scene import Scene
 from couplekit.scene.model import OUTLET_MIN_INTERFACE_WIDTH
-from couplekit.simulation import Simulation
-
-DX, DT, SHAPE = 0.01, 1e-3, (24, 24, 32)
-
-
-def _ball(width: float, speed: float, ratio: float = 800.0, radius: float = 6.0, max_speed: float | None = None):
-    """The moving ball as a scene dict (``speed`` in lattice units)."""
-    size = [n * DX for n in SHAPE]
-    return {
-        "scene": {"name": "moving_ball"},
-        "domain": {
-            "size": size,
-            "dx": DX,
-            "gravity": [0.0, 0.0, 0.0],
-            "boundary": {f: "periodic" for f in ("x_min", "x_max", "y_min", "y_max", "z_min", "z_max")},
-        },
-        "time": {
-            "dt": DT,
-            "frame_duration": DT,
-            "frames": 1,
-            "max_speed": (1.5 * speed if max_speed is None else max_speed) * DX / DT,
-        },
-        "fluid": {"phases": 2, "water_density": 1000.0, "air_density": 1000.0 / ratio, "interface_width": width},
-        "bodies": [
-            {
-                "kind": "water",
-                "velocity": [speed * DX / DT, 0.0, 0.0],
-                "geometry": {
-                    "type": "sphere",
-                    "center": [0.4 * size[0], size[1] / 2, size[2] / 2],
-                    "radius": radius * DX,
-                },
-            }
-        ],
-        "outputs": {"preview": False},
-    }
-
-
-def _steps_to_diverge(d: dict, steps: int = 1000) -> tuple[int | None, float, float]:
-    """(the block of 20 steps by which the run diverged or None, peak lattice speed, the last one)."""
-    sim = Simulation(Scene.from_dict(d), backend="cpu", threads=1, log=None)
-    peak = s = 0.0
-    for k in range(steps // 20):
-        sim.step(20)
-        s = sim.fluid.diagnostics()["max_lattice_speed"]
-        if not np.isfinite(s) or s > 0.5:
-            return 20 * (k + 1), peak, s
-        peak = max(peak, s)
-    return None, peak, s
+from tests.fluid.moving_ball import ball as _ball
+from tests.fluid.moving_ball import steps_to_diverge as _steps_to_diverge
 
 
 @pytest.mark.parametrize(
