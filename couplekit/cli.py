@@ -7,7 +7,7 @@ CuPy/GPU status, kernel cache; ``--selfcheck`` also builds and runs the self-che
 ``run`` refuses it on any machine (a memory estimate beyond 16 TiB; ``run``'s message). What ``run`` refuses on
 this machine (the estimate against the host's available memory, as ``run`` compares it on the cpu and numpy
 backends; on cuda it compares with free GPU memory) or for now (a coupling switch) is noted, exit 0; set-ups
-admitted but measured to diverge (:func:`couplekit.assembly.stability_cautions`) are printed as ``caution:`` lines,
+admitted but measured to diverge (:func:`couplekit.cautions.stability_cautions`) are printed as ``caution:`` lines,
 exit 0.
 
 ``couplekit run SCENE [--frames N] [--out DIR] [--backend B] [--resume CKPT] [--scheduler SPEC]``: run a scene
@@ -170,7 +170,8 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     """Exit 0 valid, 2 invalid, 3 refused with ``run``'s message and exit code: an effect the coupling cannot
     switch off yet, or a memory estimate beyond what any machine holds.  What ``run`` refuses on this machine
     only (its memory) is noted with ``run``'s message, exit 0: the same file validates alike on every host."""
-    from .assembly import CouplingUnavailableError, check_odd_ramp_gaps, check_run, stability_cautions
+    from .assembly import CouplingUnavailableError, check_odd_ramp_gaps, check_run
+    from .cautions import stability_cautions
     from .scene import SceneError
     from .simulation import InsufficientMemoryError, _gib
     from .sweep.keys import KeyPathError

@@ -313,7 +313,7 @@ def test_a_liquid_let_into_a_closed_box_and_an_extreme_density_ratio_are_caution
     closed["bodies"] = [b for b in closed["bodies"] if b["kind"] != "water"]
     closed["inflows"][0]["kind"] = "water"
     closed["domain"]["boundary"] = {"x_min": "inflow"}
-    from couplekit.assembly import stability_cautions
+    from couplekit.cautions import stability_cautions
 
     assert any("no face is an outflow" in c for c in stability_cautions(Scene.from_dict(closed)))
     ratio = tiny_fluid()

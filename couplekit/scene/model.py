@@ -2197,7 +2197,7 @@ def water_outlet_speed_limit(interface_width: float, across_cells: int, air_latt
       2 cells by step 300).
     * ξ < 2.5: refused. Below 2.5 cells the interface at 800:1 is under-resolved independently of outlets: a
       water ball moving through still air in a periodic box with the scenes' fluid
-      (:func:`couplekit.assembly.narrow_interface_caution`) diverges at 0.02 at ξ = 2 and at 0.04 at ξ = 2.25;
+      (:func:`couplekit.cautions.narrow_interface_caution`) diverges at 0.02 at ξ = 2 and at 0.04 at ξ = 2.25;
       outlets at ξ = 2 diverge at 0.02 within 1500 steps (2-8 cells, by steps 200-1200; with the viscous air at
       0.01), 2 cells at ξ = 2.25 at 0.02 by step 1150.
 

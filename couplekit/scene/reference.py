@@ -166,11 +166,11 @@ and refuses, with `run`'s message and exit 3, the coupling switch and a scene no
 beyond 16 TiB, e.g. a 10¹⁵-cell grid); what `run` refuses on this machine only, for its memory, it notes with
 `run`'s message and exit 0, so that a file validates alike on every host (a paper-scale scene validates on a
 laptop before it runs on a GPU). What was measured to diverge but is admitted, because the paper asks for
-it, both print as a `caution:` line (exit 0; `couplekit.assembly.stability_cautions`): the paper's collision
+it, both print as a `caution:` line (exit 0; `couplekit.cautions.stability_cautions`): the paper's collision
 (`fluid.odd_lambda = 0`, or a Λ too small to act) below lattice viscosity 5e-4 where no-slip walls meet at
 edges (docs/fluid-stability.md); so is what was measured to come out wrong: sand that falls onto the water and
 meets it at a lattice speed U Δt/Δx below 0.01, the slowest the examples were checked at (at a smaller time step
-for its Δx sand at the water surface is pumped back out of it: `couplekit.assembly.sand_entry_caution`), and the
+for its Δx sand at the water surface is pumped back out of it: `couplekit.cautions.sand_entry_caution`), and the
 other cautions `stability_cautions` lists. `run --frames` and `--threads` must be 1 or more (exit 2). A closed standard output
 (`couplekit validate scene.toml | head -1`) ends either command quietly, exit 141.
 """

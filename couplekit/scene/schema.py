@@ -350,7 +350,7 @@ SECTIONS: dict[str, list[Key]] = {
             "float",
             0.02,
             "phase-field mobility M; below 0.02 (the examples') a flow expected faster than a measured u/M "
-            "is cautioned: a moving interface at 800:1 tears (couplekit.assembly.mobility_caution)",
+            "is cautioned: a moving interface at 800:1 tears (couplekit.cautions.mobility_caution)",
             "lattice",
             lo=0.0,
             lo_open=True,

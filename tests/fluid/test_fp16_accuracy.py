@@ -129,6 +129,6 @@ def test_gravity_is_rounded_away_where_the_flow_is_faster_than_g_over_2_to_the_m
     16 cells (g = 6.25e-6) and 0.0032 at 32 (g = 1.56e-6): measured centre speed / closed form, fp32 0.9963 and
     0.9978, fp16 0.8107 and 0.4516 (the stall grows with resolution, as g shrinks). Asserted so that the
     limitation stays visible (fp16 below 0.9 and 0.6, fp32 within 1 %); validation cautions fp16 scenes whose
-    expected speed is above g / 2^-11 (couplekit.assembly._fp16_gravity_caution)."""
+    expected speed is above g / 2^-11 (couplekit.cautions._fp16_gravity_caution)."""
     assert abs(_channel_centre_speed(cpu, "fp32", h) - 1.0) < 0.01
     assert _channel_centre_speed(cpu, "fp16", h) < fp16_below

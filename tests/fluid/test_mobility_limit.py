@@ -1,4 +1,4 @@
-"""How much mobility a moving interface needs at 800:1 (session 32): `couplekit.assembly.mobility_caution`.
+"""How much mobility a moving interface needs at 800:1 (session 32): `couplekit.cautions.mobility_caution`.
 
 The conservative phase field keeps its profile by the mobility's sharpening flux (∝ M/ξ); a flow that strains the
 interface faster tears it, φ leaves [0, 1] and the density jump diverges. Measured on the water ball of
@@ -40,7 +40,7 @@ from pathlib import Path
 
 import pytest
 
-from couplekit.assembly import EXAMPLE_MOBILITY, MOBILITY_IMPACT_LIMITS, mobility_caution, stability_cautions
+from couplekit.cautions import EXAMPLE_MOBILITY, MOBILITY_IMPACT_LIMITS, mobility_caution, stability_cautions
 from couplekit.scene import Scene
 from couplekit.simulation import Simulation, SimulationDiverged, with_settings
 from tests.fluid.moving_ball import ball, steps_to_diverge

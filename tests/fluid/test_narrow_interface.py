@@ -17,7 +17,7 @@ width (cells)  800:1                                   400:1, 200:1
 So below 2.5 cells a moving interface at 800:1 is under-resolved whether or not an outlet makes it: water outlets
 are refused there (couplekit.scene.model.OUTLET_MIN_INTERFACE_WIDTH, tests/fluid/test_inflow_region.py) and any
 other two-phase scene whose expected flow is faster than lattice 0.01 gets a caution
-(couplekit.assembly.narrow_interface_caution). The divergence at width 2 is pinned here: whoever makes it run
+(couplekit.cautions.narrow_interface_caution). The divergence at width 2 is pinned here: whoever makes it run
 should lower both limits. A scene the limits were not measured on agrees: Fig. 16's water-only dam break diverges
 at width 2 (by step 800 of 960) and runs to its end at 2.5.
 """
@@ -28,7 +28,7 @@ from pathlib import Path
 
 import pytest
 
-from couplekit.assembly import NARROW_INTERFACE_RATIO, NARROW_INTERFACE_SPEED, narrow_interface_caution
+from couplekit.cautions import NARROW_INTERFACE_RATIO, NARROW_INTERFACE_SPEED, narrow_interface_caution
 from couplekit.scene import Scene
 from couplekit.scene.model import OUTLET_MIN_INTERFACE_WIDTH
 from tests.fluid.moving_ball import ball as _ball

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from sim_scenes import tiny_coupled_moving, tiny_sand
 
-from couplekit.assembly import stability_cautions
+from couplekit.cautions import stability_cautions
 from couplekit.scene import Scene, SceneError
 from couplekit.simulation import Simulation
 

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from couplekit.assembly import stability_cautions
+from couplekit.cautions import stability_cautions
 from couplekit.cli import main
 from couplekit.scene import Scene
 from couplekit.simulation import Simulation
@@ -284,10 +284,10 @@ def _with_dt(name: str, divide: float) -> Scene:
 )
 def test_sand_falling_onto_water_at_a_small_time_step_is_named(name, divide, bodies, lattice):
     """Fig. 8's and Fig. 13's small variants at half (a quarter of) their time step, where their sand was measured
-    to stay above the water or come back out of it (couplekit.assembly.sand_entry_caution): one caution naming the
+    to stay above the water or come back out of it (couplekit.cautions.sand_entry_caution): one caution naming the
     bodies, their lattice entry speed and the time step that brings it to the examples' 0.01; none at the file's
     time step (0.0102 and 0.0176)."""
-    from couplekit.assembly import SAND_ENTRY_LATTICE_SPEED, sand_entry_caution, sand_entry_speeds
+    from couplekit.cautions import SAND_ENTRY_LATTICE_SPEED, sand_entry_caution, sand_entry_speeds
 
     scene = _with_dt(name, divide)
     (c,) = sand_entry_caution(scene)
@@ -302,7 +302,7 @@ def test_the_pumping_slab_is_named_where_it_rises_and_not_where_it_sinks():
     """The caution agrees with tests/coupling/test_surface_pumping.py: its slab, 2 mm above the pool, meets the
     water at 0.198 m/s, lattice 0.0010 at Δt = 5e-5 s (it comes 22 mm out of the water: the strict xfail) and
     0.0115 at 5.8e-4 s (it sinks and floats: the control)."""
-    from couplekit.assembly import sand_entry_caution
+    from couplekit.cautions import sand_entry_caution
 
     sys.path.insert(0, str(ROOT / "tests" / "coupling"))
     from test_surface_pumping import _slab_scene
@@ -315,7 +315,7 @@ def test_the_pumping_slab_is_named_where_it_rises_and_not_where_it_sinks():
 def test_sand_that_does_not_fall_onto_water_gets_no_entry_caution():
     """Only sand released above a water body's top, under it along gravity: not sand resting on the floor under
     the water, not sand above dry floor beside the pool, not a single-phase fluid, not without gravity."""
-    from couplekit.assembly import sand_entry_caution, sand_entry_speeds
+    from couplekit.cautions import sand_entry_caution, sand_entry_speeds
 
     sys.path.insert(0, str(ROOT / "tests" / "coupling"))
     from test_surface_pumping import _slab_scene
