@@ -50,15 +50,17 @@
 #define CK_TWO_PHASE 1
 #endif
 
-// every padded cell (X, Y, Z) with its source node (ix, iy, iz): CELL(X, Y, Z, ix, iy, iz).  The GPU a thread per
-// cell; the host by padded rows in parallel, a row's interior cells a vector loop over consecutive nodes (the
-// source index of y and z taken once per row) and its two ghost cells their x source node (per cell, the GPU's
-// form took the three source indices' branches in every cell and ran scalar).  Uses nx..nz, px..pz, n.
+// every padded cell (X, Y, Z) with its source node (ix, iy, iz) and whether it is an interior cell (inner):
+// CELL(X, Y, Z, ix, iy, iz, inner).  The GPU a thread per cell; the host by padded rows in parallel, a row's
+// interior cells a vector loop over consecutive nodes (the source index of y and z taken once per row, inner a
+// literal per loop: a test in the loop kept the retention variant scalar) and its two ghost cells their x source
+// node (per cell, the GPU's form took the three source indices' branches in every cell and ran scalar).  Uses
+// nx..nz, px..pz, n.
 #if CK_ON_GPU
 #define CPL_FOR_PADDED_CELLS(CELL)                                                                     \
     FOR_EACH_CELL(X, Y, Z, nx + 2, ny + 2, nz + 2) {                                                   \
         CELL(X, Y, Z, coupling_source_index(X, nx, px), coupling_source_index(Y, ny, py),              \
-             coupling_source_index(Z, nz, pz))                                                        \
+             coupling_source_index(Z, nz, pz), X >= 1 && X <= nx && Y >= 1 && Y <= ny && Z >= 1 && Z <= nz) \
     }
 #else
 #define CPL_FOR_PADDED_CELLS(CELL)                                                                     \
@@ -66,10 +68,15 @@
     for (int Z = 0; Z < nz + 2; ++Z)                                                                   \
         for (int Y = 0; Y < ny + 2; ++Y) {                                                             \
             const int iy = coupling_source_index(Y, ny, py), iz = coupling_source_index(Z, nz, pz);    \
-            CELL(0, Y, Z, coupling_source_index(0, nx, px), iy, iz)                                    \
-            CELL(nx + 1, Y, Z, coupling_source_index(nx + 1, nx, px), iy, iz)                          \
-            CK_PRAGMA(omp simd)                                                                        \
-            for (int X = 1; X <= nx; ++X) CELL(X, Y, Z, X - 1, iy, iz)                                 \
+            CELL(0, Y, Z, coupling_source_index(0, nx, px), iy, iz, 0)                                 \
+            CELL(nx + 1, Y, Z, coupling_source_index(nx + 1, nx, px), iy, iz, 0)                       \
+            if (Y >= 1 && Y <= ny && Z >= 1 && Z <= nz) {                                              \
+                CK_PRAGMA(omp simd)                                                                    \
+                for (int X = 1; X <= nx; ++X) CELL(X, Y, Z, X - 1, iy, iz, 1)                          \
+            } else {                                                                                   \
+                CK_PRAGMA(omp simd)                                                                    \
+                for (int X = 1; X <= nx; ++X) CELL(X, Y, Z, X - 1, iy, iz, 0)                          \
+            }                                                                                          \
         }                                                                                              \
     (void)n;
 #endif
@@ -97,7 +104,7 @@ KERNEL void coupling_fractions(const long long n, const float* RESTRICT grid_vol
 #else
 #define CPL_PHASE(image) 1.f
 #endif
-#define CPL_FRACTION_CELL(X, Y, Z, ix, iy, iz)                                                                 \
+#define CPL_FRACTION_CELL(X, Y, Z, ix, iy, iz, inner, mask)                                                    \
     {                                                                                                          \
         const long long node = (ix) + (long long)nx * ((iy) + (long long)ny * (iz));                           \
         const long long cell = (X) + PX * (long long)(Y) + PXY * (Z);                                          \
@@ -105,25 +112,35 @@ KERNEL void coupling_fractions(const long long n, const float* RESTRICT grid_vol
         const float es = coupling_sand_fraction(grid_vol[node], inv_cell_volume, eps_max); /* Eq. 25 */        \
         const float ph = CPL_PHASE(image);                                                                     \
         const float R = bound_in[node];                                                                        \
-        const float cap = r_max * (masked ? ck_fminf(es, retentive[node]) : es); /* retention capacity */     \
+        const float cap = r_max * ((mask) ? ck_fminf(es, retentive[node]) : es); /* retention capacity */    \
         const float free_water = free_share * (ck_fmaxf(ck_fminf(1.f - es - R, eps_prev[image]), 0.f) * ph);  \
         const float dR = ck_fminf(free_water, ck_fminf(absorption * cap * ph, cap - R)); /* Eq. 55 */         \
         const float Rn = R + dR;                                                /* Eq. 56 */                   \
         eps_fluid[cell] = 1.f - es - Rn;                                        /* Eq. 54 */                   \
-        if ((X) >= 1 && (X) <= nx && (Y) >= 1 && (Y) <= ny && (Z) >= 1 && (Z) <= nz) {                        \
+        if (inner) {                                                                                           \
             d_bound[node] = dR;                                                                                \
             bound_out[node] = Rn;                                                                              \
         }                                                                                                      \
     }
+#define CPL_FRACTION_MASKED(X, Y, Z, ix, iy, iz, inner) CPL_FRACTION_CELL(X, Y, Z, ix, iy, iz, inner, 1)
+#define CPL_FRACTION_UNMASKED(X, Y, Z, ix, iy, iz, inner) CPL_FRACTION_CELL(X, Y, Z, ix, iy, iz, inner, 0)
+    // masked a kernel argument, tested outside the loop: a load of retentive under a test kept the loop scalar
+    if (masked) {
+        CPL_FOR_PADDED_CELLS(CPL_FRACTION_MASKED)
+    } else {
+        CPL_FOR_PADDED_CELLS(CPL_FRACTION_UNMASKED)
+    }
+#undef CPL_FRACTION_MASKED
+#undef CPL_FRACTION_UNMASKED
 #else
-#define CPL_FRACTION_CELL(X, Y, Z, ix, iy, iz)                                                                 \
+#define CPL_FRACTION_CELL(X, Y, Z, ix, iy, iz, inner)                                                          \
     {                                                                                                          \
         const long long node = (ix) + (long long)nx * ((iy) + (long long)ny * (iz));                           \
         const float es = coupling_sand_fraction(grid_vol[node], inv_cell_volume, eps_max); /* Eq. 25 */        \
         eps_fluid[(X) + PX * (long long)(Y) + PXY * (Z)] = 1.f - es;                       /* Eq. 33 */        \
     }
-#endif
     CPL_FOR_PADDED_CELLS(CPL_FRACTION_CELL)
+#endif
 #undef CPL_FRACTION_CELL
 #undef CPL_PHASE
 #if !CK_RETENTION
@@ -154,7 +171,7 @@ KERNEL void coupling_sand_velocity(const long long n, const float* RESTRICT grid
     const int PX = nx + 2;
     const long long PXY = (long long)PX * (ny + 2);
     const long long N = PXY * (nz + 2);
-#define CPL_SAND_V_CELL(X, Y, Z, ix, iy, iz)                                          \
+#define CPL_SAND_V_CELL(X, Y, Z, ix, iy, iz, inner)                                      \
     {                                                                                 \
         const long long node = (ix) + (long long)nx * ((iy) + (long long)ny * (iz));  \
         const long long cell = (X) + PX * (long long)(Y) + PXY * (Z);                 \
