@@ -148,13 +148,14 @@ MOBILITY_IMPACT_LIMITS: dict[float, tuple[float, float]] = {
     2.5: (1.0, 2.0),
     3.0: (2.75, 4.0),
     4.0: (4.0, 5.5),
-    5.0: (4.0, 8.0),
+    5.0: (5.5, 8.0),
     6.0: (8.0, 11.0),
     8.0: (8.0, 11.0),
 }
-"""Interface width (cells) → (largest u/M that ran, smallest u/M that diverged), u the lattice speed and M the
-lattice mobility, for a water ball of radius 6 cells thrown at a wall through still air at 800:1 (the scenes'
-fluid; session 32, tests/fluid/test_mobility_limit.py has the whole map). :func:`mobility_caution` reads the
+"""Interface width (cells) → (u/M at or below which every run ran, the smallest u/M at which one diverged), u
+the lattice speed and M the lattice mobility, for a water ball of radius 6 cells thrown at a wall through still air at 800:1 (the scenes'
+fluid; session 32: tests/fluid/test_mobility_limit.py has the whole map, `python benchmarks/mobility_map.py`
+runs it again). :func:`mobility_caution` reads the
 second number at the widest measured width not above the scene's."""
 
 

@@ -60,6 +60,9 @@ REFUSALS = [
     ("odd_floor_ramp.py", ["wave", "--ramps", "none"], "--ramps", "give ramps >= 0"),
     ("kernel_build_report.py", ["--only", "nope.cu"], "--only", "unknown kernel source 'nope.cu'"),
     ("accuracy_vs_cost.py", ["--workers", "0"], "--workers", ">= 1"),
+    ("mobility_map.py", ["--widths", "1.5"], "--widths", ">= 2"),
+    ("mobility_map.py", ["--mobilities", "0,0.02"], "--mobilities", "> 0"),
+    ("mobility_map.py", ["--kinds", "wall,bogus"], "--kinds", "bogus"),
 ]
 
 
@@ -139,3 +142,15 @@ def test_collapse_study_runs_with_the_flip_blend(extra):
     assert proc.returncode == 0, proc.stderr[-2000:]
     out = json.loads(proc.stdout.strip().splitlines()[-1])
     assert out["transfer"] == "flip:1" and np.isfinite(out["runout"])
+
+
+def test_mobility_map_writes_its_table_and_plot(tmp_path):
+    """One point on each side of the limit (width 4, M = 0.005: u = 0.02 runs, 0.04 diverges by step 220,
+    measured): both recorded, and the plot written next to the JSON."""
+    out = tmp_path / "map.json"
+    proc = _run("mobility_map.py", "--kinds", "wall", "--widths", "4", "--mobilities", "0.005", "--speeds",
+                "0.02,0.04", "--out", str(out), timeout=120)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    runs = json.loads(out.read_text())["runs"]
+    assert [(r["speed"], r["ran"]) for r in runs] == [(0.02, True), (0.04, False)], runs
+    assert out.with_suffix(".png").stat().st_size > 1000

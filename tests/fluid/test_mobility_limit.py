@@ -2,24 +2,27 @@
 
 The conservative phase field keeps its profile by the mobility's sharpening flux (∝ M/ξ); a flow that strains the
 interface faster tears it, φ leaves [0, 1] and the density jump diverges. Measured on the water ball of
-tests/fluid/moving_ball.py, thrown at a wall (``at_wall``, 600 steps) or moving through open air (1000 steps),
-lattice speed u and mobility M (✓ ran, ✗ diverged; u/M in brackets):
+couplekit.fluid.interface_cases, thrown at a wall (``at_wall``, 600 steps) or moving through open air (1000 steps),
+lattice speed u and mobility M (✓ ran, ✗ diverged; u/M in brackets; `python benchmarks/mobility_map.py`, its
+results in benchmarks/results/mobility_map.json):
 
 ==========  =======================================================  ==========================================
 width       hitting a wall                                           through open air
 ==========  =======================================================  ==========================================
-2.5         M 0.02: ✓ 0.02 (1), ✗ 0.04 (2); M 0.01, 0.005: ✗ 0.02
+2.5         M 0.04: ✓ 0.08 (2), ✗ 0.11; 0.02: ✓ 0.02 (1), ✗ 0.04   M 0.04: ✓ 0.08, ✗ 0.11; 0.02: ✓ 0.04,
+            (2); 0.01 and below: ✗ 0.02 (2)                          ✗ 0.08 (4); 0.01: ✓ 0.02, ✗ 0.04 (4);
+                                                                     0.005: ✗ 0.02
 3           M 0.04: ✓ 0.11 (2.75); 0.02: ✓ 0.04, ✗ 0.08 (4);       M 0.04: ✓ 0.08; 0.02: ✓ 0.08, ✗ 0.11;
             0.01: ✓ 0.02, ✗ 0.04 (4); 0.005, 0.0025: ✗ 0.02 (4, 8)  0.01: ✓ 0.04, ✗ 0.08 (8); 0.005: ✗ 0.04
 4           M 0.04: ✓ 0.11; 0.02: ✓ 0.08 (4), ✗ 0.11 (5.5);         M 0.04, 0.02: ✓ 0.11; 0.01: ✓ 0.08 (8),
             0.01: ✓ 0.04, ✗ 0.08 (8); 0.005: ✓ 0.02, ✗ 0.04 (8);    ✗ 0.11 (11); 0.005: ✓ 0.04, ✗ 0.08 (16);
             0.0025: ✗ 0.02 (8)                                        0.0025: ✓ 0.02, ✗ 0.04 (16)
-5           M 0.01: ✓ 0.04, ✗ 0.08 (8); 0.005: ✓ 0.02, ✗ 0.04 (8);
-            0.0025: ✗ 0.02 (8)
+5           M 0.04, 0.02: ✓ 0.11 (5.5); 0.01: ✓ 0.04, ✗ 0.08 (8);   M 0.02, 0.04: ✓ 0.11; 0.01: ✓ 0.08, ✗ 0.11;
+            0.005: ✓ 0.02, ✗ 0.04 (8); 0.0025: ✗ 0.02 (8)           0.005, 0.0025: ✓ 0.04, ✗ 0.08 (16, 32)
 6           M 0.04, 0.02: ✓ 0.11; 0.01: ✓ 0.08 (8), ✗ 0.11 (11);   every M ≥ 0.005 ✓ to 0.11 (22);
             0.005: ✓ 0.04, ✗ 0.08 (16); 0.0025: ✓ 0.02, ✗ 0.04 (16) 0.0025: ✓ 0.08 (32), ✗ 0.11 (44)
-8           M 0.01: ✓ 0.08, ✗ 0.11 (11); 0.005: ✓ 0.04, ✗ 0.08;
-            0.0025: ✓ 0.04 (16), ✗ 0.08 (32)
+8           M 0.04, 0.02: ✓ 0.11; 0.01: ✓ 0.08, ✗ 0.11 (11);       as width 6
+            0.005: ✓ 0.04, ✗ 0.08; 0.0025: ✓ 0.04 (16), ✗ 0.08 (32)
 ==========  =======================================================  ==========================================
 
 So the limit is mostly a ratio u/M that grows with the width (width 4: a wall impact runs to 4 and diverges from
@@ -36,16 +39,18 @@ with M = 0.01 (u/M 7.6, cautioned: the caution is an upper bound).
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
 
 from couplekit.cautions import EXAMPLE_MOBILITY, MOBILITY_IMPACT_LIMITS, mobility_caution, stability_cautions
+from couplekit.fluid.interface_cases import ball, steps_to_diverge
 from couplekit.scene import Scene
 from couplekit.simulation import Simulation, SimulationDiverged, with_settings
-from tests.fluid.moving_ball import ball, steps_to_diverge
 
-RAINDROP = Path(__file__).resolve().parents[2] / "examples" / "fig06_raindrop_small.toml"
+ROOT = Path(__file__).resolve().parents[2]
+RAINDROP = ROOT / "examples" / "fig06_raindrop_small.toml"
 
 
 @pytest.mark.parametrize(
@@ -73,8 +78,19 @@ def test_a_water_ball_hitting_a_wall_needs_a_mobility_that_grows_with_its_speed(
         assert diverged is not None and diverged <= 300, diverged
 
 
-def test_the_limits_table_is_what_the_caution_reads():
-    """Each width's diverging ratio is above its running one, and neither falls as the interface widens."""
+def test_the_caution_reads_the_measured_map():
+    """:data:`MOBILITY_IMPACT_LIMITS` is what benchmarks/results/mobility_map.json measured for the wall impact:
+    per width the smallest u/M that diverged, and the largest u/M below it that ran (so every run at or below it
+    ran); neither falls as the interface widens."""
+    runs = json.loads((ROOT / "benchmarks" / "results" / "mobility_map.json").read_text())["runs"]
+    for width, (ran, diverged) in MOBILITY_IMPACT_LIMITS.items():
+        mine = [r for r in runs if r["kind"] == "wall" and r["width"] == width]
+        assert mine, f"width {width} not in the map"
+        first_diverged = min(r["speed"] / r["mobility"] for r in mine if not r["ran"])
+        last_ran = max(
+            r["speed"] / r["mobility"] for r in mine if r["ran"] and r["speed"] / r["mobility"] < first_diverged
+        )
+        assert (last_ran, first_diverged) == pytest.approx((ran, diverged)), width
     widths = sorted(MOBILITY_IMPACT_LIMITS)
     for w in widths:
         ran, diverged = MOBILITY_IMPACT_LIMITS[w]

@@ -29,10 +29,10 @@ from pathlib import Path
 import pytest
 
 from couplekit.cautions import NARROW_INTERFACE_RATIO, NARROW_INTERFACE_SPEED, narrow_interface_caution
+from couplekit.fluid.interface_cases import ball as _ball
+from couplekit.fluid.interface_cases import steps_to_diverge as _steps_to_diverge
 from couplekit.scene import Scene
 from couplekit.scene.model import OUTLET_MIN_INTERFACE_WIDTH
-from tests.fluid.moving_ball import ball as _ball
-from tests.fluid.moving_ball import steps_to_diverge as _steps_to_diverge
 
 
 @pytest.mark.parametrize(
