@@ -168,9 +168,9 @@ def mobility_caution(scene: Scene) -> list[str]:
     Why: the conservative phase field keeps its tanh profile by the mobility's sharpening flux, ∝ M/ξ; a flow that
     strains the interface faster than that (an impact squeezing the air between water and a wall) tears the
     profile, φ leaves [0, 1] and the 800:1 density jump diverges within a few dozen steps. Measured (session 32,
-    the ball of :data:`MOBILITY_IMPACT_LIMITS`, 600 steps): at width 4 it ran to u/M = 4 at M = 0.04, 0.02, 0.01
-    and 0.005 and diverged from 5.5 (M = 0.02, u = 0.11) and 8 (M = 0.01, 0.005); at M = 0.0025 it diverged even
-    at u = 0.02. A ball moving through open air tolerates about twice the ratio (width 4: ran to 8, diverged at
+    the ball of :data:`MOBILITY_IMPACT_LIMITS`, 600 steps): at width 4 every run up to u/M = 4 ran (M = 0.02,
+    0.01 and 0.005 each reached it) and runs diverged from 5.5 (M = 0.02, u = 0.11) and 8 (M = 0.01, 0.005); at
+    M = 0.0025 even u = 0.02 diverged. A ball moving through open air tolerates about twice the ratio (width 4: ran to 8, diverged at
     11). On cases not measured for it, Fig. 6's raindrop (small variant, u/M = 7.6 expected at M = 0.02 and width 4,
     where it runs) diverged by step 70 at M = 0.01 and 0.0075 and at width 3, and at Δt/4 with M = 0.005.
     The examples' own (M, width) = (0.02, 4) run up to u/M = 8.1 expected (estimates are upper bounds: the
@@ -185,9 +185,9 @@ def mobility_caution(scene: Scene) -> list[str]:
     ran, diverged = MOBILITY_IMPACT_LIMITS[measured]
     speed, source = scene.expected_max_speed()
     u_lat = scene.units().to_lattice(speed, "velocity")
-    if u_lat / mobility < diverged:
-        return []
     ratio = u_lat / mobility
+    if ratio < diverged:
+        return []
     departs = []
     if mobility < EXAMPLE_MOBILITY:
         departs.append(f"fluid.mobility = {mobility:g} (examples: {EXAMPLE_MOBILITY:g})")
