@@ -52,9 +52,10 @@
 
 // every padded cell (X, Y, Z) with its source node (ix, iy, iz) and whether it is an interior cell (inner):
 // CELL(X, Y, Z, ix, iy, iz, inner).  The GPU a thread per cell; the host by padded rows in parallel, a row's
-// interior cells a vector loop over consecutive nodes (the source index of y and z taken once per row, inner a
-// literal per loop: a test in the loop kept the retention variant scalar) and its two ghost cells their x source
-// node (per cell, the GPU's form took the three source indices' branches in every cell and ran scalar).  Uses
+// interior cells a vector loop over consecutive nodes (the source index of y and z taken once per row; inner a
+// literal per loop, rows versioned: the per-cell test kept the retention variant scalar, and a per-row flag
+// vectorised it with masked stores at twice the time, 0.23 against 0.12 ms on Fig. 10 small's grid) and its two
+// ghost cells their x source node (per cell, the GPU's form took the three source indices' branches in every cell and ran scalar).  Uses
 // nx..nz, px..pz, n.
 #if CK_ON_GPU
 #define CPL_FOR_PADDED_CELLS(CELL)                                                                     \
