@@ -78,6 +78,17 @@ def test_a_water_ball_hitting_a_wall_needs_a_mobility_that_grows_with_its_speed(
         assert diverged is not None and diverged <= 300, diverged
 
 
+@pytest.mark.parametrize("radius", [4.0, 8.0])
+def test_the_limit_is_the_same_for_a_smaller_and_a_larger_ball(radius):
+    """The ratio, not the ball's size in cells: at width 4 and M = 0.005 balls of radius 4 and 8 cells (6 in the
+    map) run at u = 0.02 and diverge at 0.04 (by step 220, measured for both; at M = 0.02, u = 0.08 both run and
+    at M = 0.01 they diverge, by steps 160 and 120). Only the verdict is asked: the 8-cell ball's splash in this box
+    peaks at 5× its speed."""
+    assert steps_to_diverge(ball(4.0, 0.02, mobility=0.005, at_wall=True, radius=radius), steps=600)[0] is None
+    diverged = steps_to_diverge(ball(4.0, 0.04, mobility=0.005, at_wall=True, radius=radius), steps=600)[0]
+    assert diverged is not None and diverged <= 300, diverged
+
+
 def test_the_caution_reads_the_measured_map():
     """:data:`MOBILITY_IMPACT_LIMITS` is what benchmarks/results/mobility_map.json measured for the wall impact:
     per width the smallest u/M that diverged, and the largest u/M below it that ran (so every run at or below it
